@@ -1,0 +1,329 @@
+"""The project's one camera type: batched pinhole cameras, OpenCV camera-to-world.
+
+Convention (used everywhere in curate):
+
+* world frame: whatever the source gave (COLMAP's frame, the transforms.json frame, ...);
+* camera frame: OpenCV axes, x right, y down, z forward (the viewing direction);
+* pose: ``c2w`` maps camera coordinates to world coordinates, ``X_w = R @ X_c + t``
+  with ``c2w = [[R, t], [0, 0, 0, 1]]``; the camera centre is ``t``;
+* intrinsics: pinhole ``fx, fy, cx, cy`` in pixels for an image of ``width x height``
+  pixels, pixel centres at half-integers (COLMAP's and OpenCV's convention), so a
+  point projects to ``u = fx * x / z + cx`` and is inside the image for
+  ``0 <= u < width, 0 <= v < height``;
+* lens distortion (OpenCV ``k1 k2 p1 p2``) is carried along for export but ignored
+  by visibility tests (a few pixels at the border do not change which nodes a
+  camera sees in any way that matters for selection).
+
+Every conversion from another convention is written once, here, and round-trip tested:
+COLMAP's ``cam_from_world`` (world-to-camera, quaternion ``w x y z``) and NeRF/OpenGL
+camera-to-world (x right, y up, z backward) as used by transforms.json.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+# OpenCV <-> OpenGL camera axes: flip y and z. The matrix is its own inverse.
+_CV_GL_FLIP = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def _as_f64(a, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.shape[1:] != shape_tail or arr.ndim != len(shape_tail) + 1:
+        raise ValueError(f"{name}: expected shape [N, {', '.join(map(str, shape_tail))}], got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return arr
+
+
+@dataclass(frozen=True)
+class Cameras:
+    """N pinhole cameras with OpenCV camera-to-world poses.
+
+    Attributes:
+        c2w: [N, 4, 4] float64, OpenCV camera-to-world.
+        fx, fy, cx, cy: [N] float64 intrinsics in pixels.
+        width, height: [N] int64 image size in pixels.
+        dist: [N, 4] float64 OpenCV distortion ``k1 k2 p1 p2`` (zeros: pinhole).
+        names: N image names (file names relative to the photo folder), may be "".
+    """
+
+    c2w: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    dist: np.ndarray = field(default=None)  # type: ignore[assignment]
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        c2w = np.asarray(self.c2w, dtype=np.float64)
+        if c2w.ndim == 3 and c2w.shape[1:] == (3, 4):
+            bottom = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (c2w.shape[0], 1, 4))
+            c2w = np.concatenate([c2w, bottom], axis=1)
+        c2w = _as_f64(c2w, (4, 4), "c2w")
+        n = c2w.shape[0]
+        vals = {}
+        for k in ("fx", "fy", "cx", "cy"):
+            v = np.broadcast_to(np.asarray(getattr(self, k), dtype=np.float64), (n,)).copy()
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"{k}: contains NaN or inf")
+            vals[k] = v
+        if np.any(vals["fx"] <= 0) or np.any(vals["fy"] <= 0):
+            raise ValueError("focal lengths must be positive")
+        for k in ("width", "height"):
+            v = np.broadcast_to(np.asarray(getattr(self, k)), (n,)).astype(np.int64)
+            if np.any(v <= 0):
+                raise ValueError(f"{k} must be positive")
+            vals[k] = v
+        dist = np.zeros((n, 4)) if self.dist is None else np.broadcast_to(
+            np.asarray(self.dist, dtype=np.float64), (n, 4)).copy()
+        names = tuple(self.names) if len(self.names) else ("",) * n
+        if len(names) != n:
+            raise ValueError(f"names: expected {n}, got {len(names)}")
+        object.__setattr__(self, "c2w", c2w)
+        for k, v in vals.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "dist", dist)
+        object.__setattr__(self, "names", names)
+
+    # ------------------------------------------------------------------ basics
+    def __len__(self) -> int:
+        return self.c2w.shape[0]
+
+    def __getitem__(self, idx) -> "Cameras":
+        """A subset: ``idx`` is an int, slice, index array or boolean mask."""
+        if isinstance(idx, (int, np.integer)):
+            idx = [int(idx)]
+        idx = np.arange(len(self))[idx]
+        return Cameras(self.c2w[idx], self.fx[idx], self.fy[idx], self.cx[idx], self.cy[idx],
+                       self.width[idx], self.height[idx], self.dist[idx],
+                       tuple(self.names[i] for i in idx))
+
+    @staticmethod
+    def concat(parts: Sequence["Cameras"]) -> "Cameras":
+        if not parts:
+            return Cameras.empty()
+        return Cameras(*(np.concatenate([getattr(p, k) for p in parts])
+                         for k in ("c2w", "fx", "fy", "cx", "cy", "width", "height", "dist")),
+                       names=tuple(n for p in parts for n in p.names))
+
+    @staticmethod
+    def empty() -> "Cameras":
+        return Cameras(np.zeros((0, 4, 4)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0),
+                       np.zeros(0, np.int64), np.zeros(0, np.int64))
+
+    @property
+    def rotations(self) -> np.ndarray:
+        """[N, 3, 3] camera-to-world rotations (columns: camera x, y, z axes in world)."""
+        return self.c2w[:, :3, :3]
+
+    @property
+    def centres(self) -> np.ndarray:
+        """[N, 3] camera centres in world coordinates."""
+        return self.c2w[:, :3, 3]
+
+    @property
+    def view_dirs(self) -> np.ndarray:
+        """[N, 3] unit viewing directions (camera +z) in world coordinates."""
+        d = self.c2w[:, :3, 2]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @property
+    def K(self) -> np.ndarray:
+        """[N, 3, 3] intrinsic matrices."""
+        k = np.zeros((len(self), 3, 3))
+        k[:, 0, 0], k[:, 1, 1], k[:, 0, 2], k[:, 1, 2], k[:, 2, 2] = self.fx, self.fy, self.cx, self.cy, 1
+        return k
+
+    def w2c(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-to-camera ``(R [N, 3, 3], t [N, 3])`` with ``X_c = R @ X_w + t``."""
+        return w2c_from_c2w(self.c2w)
+
+    def scaled_images(self, factor: float) -> "Cameras":
+        """The same cameras for images resized by ``factor`` (e.g. 0.25 for 1/4 size).
+
+        Sizes are rounded; focal lengths and principal points follow the actual
+        ratio per axis so projections stay exact for the resized image.
+        """
+        w = np.maximum(1, np.round(self.width * factor)).astype(np.int64)
+        h = np.maximum(1, np.round(self.height * factor)).astype(np.int64)
+        sx, sy = w / self.width, h / self.height
+        return Cameras(self.c2w, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, w, h,
+                       self.dist, self.names)
+
+    def transformed(self, scale: float, R: np.ndarray | None = None, t: np.ndarray | None = None) -> "Cameras":
+        """Apply the world similarity ``X' = scale * R @ X + t`` to every pose."""
+        R = np.eye(3) if R is None else np.asarray(R, np.float64)
+        t = np.zeros(3) if t is None else np.asarray(t, np.float64)
+        c2w = self.c2w.copy()
+        c2w[:, :3, :3] = R @ self.rotations
+        c2w[:, :3, 3] = scale * self.centres @ R.T + t
+        return Cameras(c2w, self.fx, self.fy, self.cx, self.cy, self.width, self.height, self.dist, self.names)
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pinhole projection of world points into every camera.
+
+        Args:
+            points: [M, 3] world points.
+        Returns:
+            uv: [N, M, 2] pixel coordinates (undefined where depth <= 0),
+            depth: [N, M] camera-frame z.
+        """
+        R, t = self.w2c()
+        pc = np.einsum("nij,mj->nmi", R, np.asarray(points, np.float64)) + t[:, None, :]
+        z = pc[..., 2]
+        safe = np.where(np.abs(z) > 0, z, 1.0)
+        u = self.fx[:, None] * pc[..., 0] / safe + self.cx[:, None]
+        v = self.fy[:, None] * pc[..., 1] / safe + self.cy[:, None]
+        return np.stack([u, v], axis=-1), z
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (the project's own camera file, ``cameras.json``)."""
+        return {
+            "convention": "opencv_c2w",
+            "cameras": [
+                {"name": self.names[i], "c2w": self.c2w[i].tolist(),
+                 "fx": float(self.fx[i]), "fy": float(self.fy[i]), "cx": float(self.cx[i]), "cy": float(self.cy[i]),
+                 "width": int(self.width[i]), "height": int(self.height[i]), "dist": self.dist[i].tolist()}
+                for i in range(len(self))
+            ],
+        }
+
+    @staticmethod
+    def from_dict(d: dict) -> "Cameras":
+        if d.get("convention", "opencv_c2w") != "opencv_c2w":
+            raise ValueError(f"unsupported camera convention {d.get('convention')!r}")
+        cams = d["cameras"]
+        if not cams:
+            return Cameras.empty()
+        col = lambda k: np.array([c[k] for c in cams], dtype=np.float64)  # noqa: E731
+        return Cameras(col("c2w"), col("fx"), col("fy"), col("cx"), col("cy"),
+                       col("width").astype(np.int64), col("height").astype(np.int64),
+                       np.array([c.get("dist", [0, 0, 0, 0]) for c in cams], np.float64),
+                       tuple(c.get("name", "") for c in cams))
+
+    def save(self, path) -> None:
+        import json
+        from pathlib import Path
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+
+    @staticmethod
+    def load(path) -> "Cameras":
+        import json
+        from pathlib import Path
+        return Cameras.from_dict(json.loads(Path(path).read_text()))
+
+
+# ---------------------------------------------------------------------- conversions
+def c2w_from_w2c(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """World-to-camera ``R [N, 3, 3], t [N, 3]`` (``X_c = R X_w + t``) -> camera-to-world [N, 4, 4]."""
+    R = np.asarray(R, np.float64).reshape(-1, 3, 3)
+    t = np.asarray(t, np.float64).reshape(-1, 3)
+    out = np.zeros((R.shape[0], 4, 4))
+    Rt = np.transpose(R, (0, 2, 1))
+    out[:, :3, :3] = Rt
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", Rt, t)
+    out[:, 3, 3] = 1.0
+    return out
+
+
+def w2c_from_c2w(c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-world [N, 4, 4] -> world-to-camera ``(R [N, 3, 3], t [N, 3])``."""
+    c2w = np.asarray(c2w, np.float64).reshape(-1, 4, 4)
+    R = np.transpose(c2w[:, :3, :3], (0, 2, 1))
+    t = -np.einsum("nij,nj->ni", R, c2w[:, :3, 3])
+    return R, t
+
+
+def opengl_from_opencv(c2w: np.ndarray) -> np.ndarray:
+    """OpenCV camera-to-world [N, 4, 4] -> OpenGL/NeRF camera-to-world (y up, z backward)."""
+    return np.asarray(c2w, np.float64) @ _CV_GL_FLIP
+
+
+def opencv_from_opengl(c2w: np.ndarray) -> np.ndarray:
+    """OpenGL/NeRF camera-to-world [N, 4, 4] -> OpenCV camera-to-world."""
+    return np.asarray(c2w, np.float64) @ _CV_GL_FLIP
+
+
+def rotmat_from_quat(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions [N, 4] in COLMAP order ``w x y z`` -> rotation matrices [N, 3, 3]."""
+    q = np.asarray(q, np.float64).reshape(-1, 4)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], axis=1).reshape(-1, 3, 3)
+
+
+def quat_from_rotmat(R: np.ndarray) -> np.ndarray:
+    """Rotation matrices [N, 3, 3] -> unit quaternions [N, 4] ``w x y z`` with ``w >= 0``.
+
+    Uses the largest-diagonal branch for each matrix, stable near 180 degrees.
+    """
+    R = np.asarray(R, np.float64).reshape(-1, 3, 3)
+    q = np.zeros((R.shape[0], 4))
+    tr = np.trace(R, axis1=1, axis2=2)
+    diag = np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)
+    best = np.argmax(diag, axis=1)
+    for i in range(R.shape[0]):
+        m = R[i]
+        if best[i] == 0:
+            s = 2.0 * np.sqrt(max(1.0 + tr[i], 1e-300))
+            q[i] = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+        elif best[i] == 1:
+            s = 2.0 * np.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 1e-300))
+            q[i] = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+        elif best[i] == 2:
+            s = 2.0 * np.sqrt(max(1.0 - m[0, 0] + m[1, 1] - m[2, 2], 1e-300))
+            q[i] = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+        else:
+            s = 2.0 * np.sqrt(max(1.0 - m[0, 0] - m[1, 1] + m[2, 2], 1e-300))
+            q[i] = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 0] < 0] *= -1
+    return q
+
+
+def c2w_from_colmap(qvec_wxyz: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    """COLMAP ``cam_from_world`` (quaternion ``w x y z`` [N, 4], translation [N, 3]) -> OpenCV c2w [N, 4, 4]."""
+    return c2w_from_w2c(rotmat_from_quat(qvec_wxyz), tvec)
+
+
+def colmap_from_c2w(c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV c2w [N, 4, 4] -> COLMAP ``cam_from_world`` as (quaternion ``w x y z`` [N, 4], translation [N, 3])."""
+    R, t = w2c_from_c2w(c2w)
+    return quat_from_rotmat(R), t
+
+
+def look_at(centres: np.ndarray, targets: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """OpenCV c2w [N, 4, 4] for cameras at ``centres`` [N, 3] looking at ``targets`` [N, 3].
+
+    The image's "down" (+y) points along ``-up`` as far as possible; a view straight
+    along ``up`` falls back to another reference axis (no NaN).
+    """
+    centres = np.atleast_2d(np.asarray(centres, np.float64))
+    targets = np.broadcast_to(np.asarray(targets, np.float64), centres.shape)
+    z = targets - centres
+    zn = np.linalg.norm(z, axis=1, keepdims=True)
+    if np.any(zn == 0):
+        raise ValueError("look_at: a camera centre equals its target")
+    z = z / zn
+    up = np.broadcast_to(np.asarray(up, np.float64), centres.shape)
+    x = np.cross(z, up)
+    bad = np.linalg.norm(x, axis=1) < 1e-9
+    if np.any(bad):
+        alt = np.where(np.abs(z[bad, 0:1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        x[bad] = np.cross(z[bad], alt)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    out = np.zeros((centres.shape[0], 4, 4))
+    out[:, :3, 0], out[:, :3, 1], out[:, :3, 2], out[:, :3, 3], out[:, 3, 3] = x, y, z, centres, 1.0
+    return out

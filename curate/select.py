@@ -1,0 +1,114 @@
+"""Selection of a subset of a camera pool: the energy (greedy) and the baselines behind one call.
+
+:func:`select` takes a pool of cameras, a node grid, a budget and a
+:class:`SelectConfig`, and returns a :class:`Selection`. Scoring an existing set is
+:func:`score_cameras`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .cameras import Cameras
+from .energy import EnergyConfig, EnergyTerms
+from .grid import NodeGrid
+
+log = logging.getLogger(__name__)
+
+METHODS = ("energy", "random", "fvs", "hemisphere")
+
+
+@dataclass(frozen=True)
+class SelectConfig:
+    """How to choose a subset."""
+
+    method: str = "energy"
+    """One of "energy" (greedy on the energy), "random", "fvs" (farthest-view sampling), "hemisphere"."""
+    energy: EnergyConfig = field(default_factory=EnergyConfig)
+    """Energy parameters (method "energy", and the energy reported for every method)."""
+    seed: int = 0
+    """Seed of the random baseline."""
+    fvs_rot_weight: float = 0.0
+    """Farthest-view sampling: weight of the viewing-direction angle against centre distance."""
+    device: str | None = None
+    """Torch device for the visibility test (None: CUDA when available, else CPU)."""
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+
+
+@dataclass
+class Selection:
+    """A chosen subset.
+
+    Attributes:
+        method: the method's name.
+        chosen: pool indices in the order chosen (``initial`` excluded).
+        initial: pool indices taken as already chosen.
+        energy: [len(chosen)] E of ``initial + chosen[:i+1]`` after each step.
+        angular, frequency: the two parts of ``energy`` after each step.
+        seconds: wall time of the selection (visibility included).
+    """
+
+    method: str
+    chosen: list[int]
+    initial: list[int] = field(default_factory=list)
+    energy: list[float] = field(default_factory=list)
+    angular: list[float] = field(default_factory=list)
+    frequency: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {"method": self.method, "chosen": self.chosen, "initial": self.initial, "energy": self.energy,
+                "angular": self.angular, "frequency": self.frequency, "seconds": self.seconds}
+
+
+def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
+           progress: bool = False) -> Selection:
+    """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).
+
+    The energy curve is filled for every method (for baselines, it is evaluated after
+    the choice, so they can be compared on the same footing).
+    """
+    from .baselines import farthest_view, hemisphere_subset, random_subset
+    from .greedy import greedy_select, trace_energy
+    from .visibility import build_pair_index
+
+    t0 = time.perf_counter()
+    initial = [int(k) for k in dict.fromkeys(initial)]
+    index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
+    if cfg.method == "energy":
+        tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
+        sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
+    else:
+        if cfg.method == "random":
+            chosen = random_subset(len(cams), budget, cfg.seed, initial)
+        elif cfg.method == "fvs":
+            chosen = farthest_view(cams, budget, initial, cfg.fvs_rot_weight)
+        else:
+            chosen = hemisphere_subset(cams, budget, initial=initial)
+        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
+        sel = Selection(cfg.method, chosen, initial, e, a, f)
+    sel.seconds = time.perf_counter() - t0
+    log.info("select %s: %d cameras of %d in %.2fs", cfg.method, len(sel.chosen), len(cams), sel.seconds)
+    return sel
+
+
+def score_cameras(cams: Cameras, grid: NodeGrid, cfg: EnergyConfig = EnergyConfig(), per_node: bool = False,
+                  device: str | None = None) -> EnergyTerms:
+    """E of the whole set ``cams`` over the grid's active nodes."""
+    from .energy import energy_from_hist, histogram
+    from .visibility import build_pair_index
+
+    index = build_pair_index(cams, grid.nodes(), cfg.bins, device=device)
+    return energy_from_hist(histogram(index), len(cams), cfg, per_node)
+
+
+def as_array(sel: Selection) -> np.ndarray:
+    """[len(initial) + len(chosen)] every selected pool index."""
+    return np.asarray(sel.initial + sel.chosen, np.int64)
