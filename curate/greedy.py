@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .energy import EnergyConfig, energy_of_subset, pow_gamma
-from .visibility import PairIndex
+from .visibility import PairIndex, chunked_bincount
 
 log = logging.getLogger(__name__)
 
@@ -89,8 +89,8 @@ class GreedyState:
         # Per-candidate sums of gains over the nodes it observes.
         # Initially every node's gain is its bin's share and every frequency gain is 1.
         if self.track:
-            self.SA = np.bincount(index.cam, weights=self.shares[index.nb % B], minlength=K).astype(np.float64)
-            self.SF = np.bincount(index.cam, minlength=K).astype(np.float64)
+            self.SA = chunked_bincount(index.cam, K, lambda s, e: self.shares[index.nb[s:e] % B])
+            self.SF = chunked_bincount(index.cam, K).astype(np.float64)
 
     # -------------------------------------------------------------- values
     def energy(self) -> tuple[float, float, float]:

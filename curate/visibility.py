@@ -231,8 +231,26 @@ def build_pair_index(cams: Cameras, nodes: np.ndarray, bins: DirectionBins,
     indptr = np.zeros(M + 1, np.int64)
     np.cumsum(counts, out=indptr[1:])
     cam_indptr = np.zeros(K + 1, np.int64)
-    np.cumsum(np.bincount(cam, minlength=K), out=cam_indptr[1:])
+    np.cumsum(chunked_bincount(cam, K), out=cam_indptr[1:])
     return PairIndex(M, K, B, indptr, cam, nb, cam_indptr, _camera_major(cam, cam_indptr))
+
+
+def chunked_bincount(x: np.ndarray, minlength: int, weights=None, chunk: int = 1 << 22) -> np.ndarray:
+    """``np.bincount`` over a large small-int array without its [P] int64 copy.
+
+    Args:
+        x: [P] non-negative ints (any int dtype).
+        minlength: output length.
+        weights: None, or a function ``(start, stop) -> [stop - start] float64`` giving the
+            weights of ``x[start:stop]`` (so they are never materialised whole).
+    Returns:
+        [minlength] float64 when weighted, int64 otherwise.
+    """
+    out = np.zeros(minlength, np.float64 if weights is not None else np.int64)
+    for s in range(0, x.size, chunk):
+        e = min(s + chunk, x.size)
+        out += np.bincount(x[s:e], weights=None if weights is None else weights(s, e), minlength=minlength)
+    return out
 
 
 def _generic_pairs(cams: Cameras, nodes: np.ndarray, bins: DirectionBins, visibility: Visibility,
