@@ -36,6 +36,7 @@ from .visibility import PairIndex, chunked_bincount
 log = logging.getLogger(__name__)
 
 TIE_RTOL = 1e-11
+PAIR_CHUNK = 1 << 22  # pairs updated at once in a step (bounds scratch memory)
 
 
 def argmax_lowest(scores: np.ndarray, available: np.ndarray) -> int:
@@ -140,17 +141,25 @@ class GreedyState:
         if not self.track:
             return
         new_gain -= old_gain                                           # [k, B] gain changes
-        # Every (node, candidate) pair at the touched nodes: concatenated node ranges.
+        # Every (node, candidate) pair at the touched nodes: concatenated node ranges,
+        # in chunks of about PAIR_CHUNK pairs so scratch memory stays bounded.
         starts, lens = idx.indptr[nodes], idx.indptr[nodes + 1] - idx.indptr[nodes]
         csum = np.cumsum(lens)
-        offs = np.arange(int(csum[-1]), dtype=np.int64)
-        offs += np.repeat(starts - csum + lens, lens)
-        pc = idx.cam[offs]
-        # Pair cell node*B + b -> row of the touched-node tables: local*B + b.
-        cell = np.repeat((np.arange(nodes.size) - nodes) * B, lens)
-        cell += idx.nb[offs]
-        self.SA += np.bincount(pc, weights=new_gain.ravel()[cell], minlength=idx.n_cams)
-        self.SF += np.bincount(pc, weights=np.repeat(new_f - old_f, lens), minlength=idx.n_cams)
+        cuts = np.searchsorted(csum, np.arange(PAIR_CHUNK, int(csum[-1]), PAIR_CHUNK), side="left")
+        dF_node = new_f - old_f
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, nodes.size]):
+            if a == b:
+                continue
+            L = lens[a:b]
+            cs = np.cumsum(L)
+            offs = np.arange(int(cs[-1]), dtype=np.int64)
+            offs += np.repeat(starts[a:b] - cs + L, L)
+            pc = idx.cam[offs]
+            # Pair cell node*B + b -> row of the touched-node tables: local*B + b.
+            cell = np.repeat((np.arange(a, b) - nodes[a:b]) * B, L)
+            cell += idx.nb[offs]
+            self.SA += np.bincount(pc, weights=new_gain.ravel()[cell], minlength=idx.n_cams)
+            self.SF += np.bincount(pc, weights=np.repeat(dF_node[a:b], L), minlength=idx.n_cams)
 
 
 def greedy_select(index: PairIndex, budget: int, cfg: EnergyConfig = EnergyConfig(), initial=(),

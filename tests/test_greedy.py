@@ -117,3 +117,14 @@ def test_greedy_empty_pool_and_zero_budget():
     assert greedy_select(idx, 5, cfg).chosen == []
     _, _, idx = make_index(n=5, res=3)
     assert greedy_select(idx, 0, cfg).chosen == []
+
+
+def test_chunked_step_updates_match(monkeypatch):
+    import curate.greedy as greedy
+    cfg = EnergyConfig()
+    _, _, idx = make_index(n=80, res=8, seed=1)
+    whole = greedy_select(idx, 15, cfg)
+    monkeypatch.setattr(greedy, "PAIR_CHUNK", 37)  # many small chunks per step
+    chunked = greedy_select(idx, 15, cfg)
+    assert chunked.chosen == whole.chosen == greedy_select_bruteforce(idx, 15, cfg).chosen
+    assert np.allclose(chunked.energy, whole.energy, rtol=1e-12)
