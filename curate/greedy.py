@@ -70,38 +70,40 @@ class GreedyTrace:
     setup_seconds: float = 0.0
 
 
-class GreedyState:
-    """Incremental state of the energy for a growing camera set over a :class:`PairIndex`."""
+class NodeState:
+    """Per-node state of the energy for a camera set that grows one camera at a time.
 
-    def __init__(self, index: PairIndex, cfg: EnergyConfig, track_candidates: bool = True):
-        """``track_candidates=False`` keeps only E of the set (no per-candidate scores)."""
-        self.index, self.cfg, self.track = index, cfg, track_candidates
+    Attributes:
+        hist: [M, B] views per node and direction bin; n: [M] views per node; N: cameras.
+        tv: [M] TV per node; A = sum_p (1 - TV_p); S = sum_p n_p ** gamma.
+        gain: [M, B] angular gain of one more view of node p in bin b, ``TV_p - TV_p'(b)``.
+        fgain: [M] ``(n_p + 1) ** gamma - n_p ** gamma``.
+    """
+
+    def __init__(self, n_nodes: int, cfg: EnergyConfig):
+        self.cfg = cfg
         self.shares = cfg.bins.shares()
-        M, B, K = index.n_nodes, index.n_bins, index.n_cams
-        self.hist = np.zeros((M, B), np.int32)      # [M, B] views per node and bin
-        self.n = np.zeros(M, np.int64)              # [M] views per node
-        self.N = 0                                   # cameras in the set
-        self.tv = np.ones(M)                         # [M] TV per node
-        self.A = 0.0                                 # sum_p (1 - TV_p)
-        self.S = 0.0                                 # sum_p n_p ** gamma
-        self.gain = np.broadcast_to(self.shares, (M, B)).copy()  # [M, B] angular gain of one more view
-        self.fgain = np.ones(M)                      # [M] (n+1)^g - n^g
-        self.taken = np.zeros(K, bool)
-        # Per-candidate sums of gains over the nodes it observes.
-        # Initially every node's gain is its bin's share and every frequency gain is 1.
-        if self.track:
-            self.SA = chunked_bincount(index.cam, K, lambda s, e: self.shares[index.nb[s:e] % B])
-            self.SF = chunked_bincount(index.cam, K).astype(np.float64)
+        M, B = n_nodes, cfg.bins.n_bins
+        self.hist = np.zeros((M, B), np.int32)
+        self.n = np.zeros(M, np.int64)
+        self.N = 0
+        self.tv = np.ones(M)
+        self.A = 0.0
+        self.S = 0.0
+        self.gain = np.broadcast_to(self.shares, (M, B)).copy()
+        self.fgain = np.ones(M)
 
-    # -------------------------------------------------------------- values
     def energy(self) -> tuple[float, float, float]:
         """(E, angular, frequency) of the current set."""
         freq = self.S / float(self.N) ** self.cfg.gamma if self.N > 0 else 0.0
         return self.A + freq, self.A, freq
 
-    def scores(self) -> np.ndarray:
-        """[K] E(C + {c}) for every candidate c (taken ones included, meaningless for them)."""
-        return self.A + self.SA + (self.S + self.SF) / float(self.N + 1) ** self.cfg.gamma
+    def scores_of(self, index: PairIndex) -> np.ndarray:
+        """[K] E(C + {c}) for each camera c of another index over the same nodes (one pass over its pairs)."""
+        B = index.n_bins
+        SA = chunked_bincount(index.cam, index.n_cams, lambda s, e: self.gain.ravel()[index.nb[s:e]])
+        SF = chunked_bincount(index.cam, index.n_cams, lambda s, e: self.fgain[index.nb[s:e] // B])
+        return self.A + SA + (self.S + SF) / float(self.N + 1) ** self.cfg.gamma
 
     def _rows(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gain rows [k, B] and frequency gains [k] for the current counts at ``nodes``."""
@@ -118,16 +120,15 @@ class GreedyState:
         fg = pow_gamma(n1, self.cfg.gamma) - pow_gamma(n1 - 1, self.cfg.gamma)
         return gain, fg
 
-    # -------------------------------------------------------------- update
-    def add(self, k: int) -> None:
-        """Add candidate k to the set and update every candidate's score sums."""
-        idx = self.index
-        B = idx.n_bins
-        nodes, bins = idx.camera_pairs(k)
-        self.taken[k] = True
+    def add(self, nodes: np.ndarray, bins: np.ndarray):
+        """Add one camera observing ``nodes`` [k] (ascending, distinct) in direction ``bins`` [k].
+
+        Returns:
+            (dgain [k, B], dfgain [k]): how the gain rows of those nodes changed.
+        """
         self.N += 1
         if nodes.size == 0:
-            return
+            return np.zeros((0, self.hist.shape[1])), np.zeros(0)
         old_gain, old_f = self.gain[nodes], self.fgain[nodes]
         self.S += float(old_f.sum())
         # The new TV of each touched node is the TV'(b*) its gain row already holds.
@@ -138,15 +139,47 @@ class GreedyState:
         self.n[nodes] += 1
         new_gain, new_f = self._rows(nodes)
         self.gain[nodes], self.fgain[nodes] = new_gain, new_f
-        if not self.track:
+        new_gain -= old_gain
+        return new_gain, new_f - old_f
+
+
+class GreedyState:
+    """:class:`NodeState` plus, for every candidate of a :class:`PairIndex`, the sums of the
+    gains over the nodes it observes, kept up to date as cameras are added."""
+
+    def __init__(self, index: PairIndex, cfg: EnergyConfig, track_candidates: bool = True):
+        """``track_candidates=False`` keeps only E of the set (no per-candidate scores)."""
+        self.index, self.cfg, self.track = index, cfg, track_candidates
+        self.nodes = NodeState(index.n_nodes, cfg)
+        self.taken = np.zeros(index.n_cams, bool)
+        if self.track:  # initially every gain is its bin's share, every frequency gain 1
+            K, B, shares = index.n_cams, index.n_bins, self.nodes.shares
+            self.SA = chunked_bincount(index.cam, K, lambda s, e: shares[index.nb[s:e] % B])
+            self.SF = chunked_bincount(index.cam, K).astype(np.float64)
+
+    def energy(self) -> tuple[float, float, float]:
+        """(E, angular, frequency) of the current set."""
+        return self.nodes.energy()
+
+    def scores(self) -> np.ndarray:
+        """[K] E(C + {c}) for every candidate c (taken ones included, meaningless for them)."""
+        st = self.nodes
+        return st.A + self.SA + (st.S + self.SF) / float(st.N + 1) ** self.cfg.gamma
+
+    def add(self, k: int) -> None:
+        """Add candidate k to the set and update every candidate's score sums."""
+        idx = self.index
+        B = idx.n_bins
+        nodes, bins = idx.camera_pairs(k)
+        self.taken[k] = True
+        dgain, dF_node = self.nodes.add(nodes, bins)
+        if not self.track or nodes.size == 0:
             return
-        new_gain -= old_gain                                           # [k, B] gain changes
         # Every (node, candidate) pair at the touched nodes: concatenated node ranges,
         # in chunks of about PAIR_CHUNK pairs so scratch memory stays bounded.
         starts, lens = idx.indptr[nodes], idx.indptr[nodes + 1] - idx.indptr[nodes]
         csum = np.cumsum(lens)
         cuts = np.searchsorted(csum, np.arange(PAIR_CHUNK, int(csum[-1]), PAIR_CHUNK), side="left")
-        dF_node = new_f - old_f
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, nodes.size]):
             if a == b:
                 continue
@@ -158,7 +191,7 @@ class GreedyState:
             # Pair cell node*B + b -> row of the touched-node tables: local*B + b.
             cell = np.repeat((np.arange(a, b) - nodes[a:b]) * B, L)
             cell += idx.nb[offs]
-            self.SA += np.bincount(pc, weights=new_gain.ravel()[cell], minlength=idx.n_cams)
+            self.SA += np.bincount(pc, weights=dgain.ravel()[cell], minlength=idx.n_cams)
             self.SF += np.bincount(pc, weights=np.repeat(dF_node[a:b], L), minlength=idx.n_cams)
 
 

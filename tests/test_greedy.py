@@ -128,3 +128,21 @@ def test_chunked_step_updates_match(monkeypatch):
     chunked = greedy_select(idx, 15, cfg)
     assert chunked.chosen == whole.chosen == greedy_select_bruteforce(idx, 15, cfg).chosen
     assert np.allclose(chunked.energy, whole.energy, rtol=1e-12)
+
+
+def test_node_state_scores_fresh_candidates_exactly():
+    """Progressive placement scores a fresh batch of candidates against a fixed set."""
+    from curate.greedy import NodeState
+    cfg = EnergyConfig()
+    cams = random_pool(50, seed=6)
+    nodes = NodeGrid([-1, -1, -1], [1, 1, 1], 6).nodes()
+    chosen, fresh = cams[:10], cams[10:]
+    st_ = NodeState(len(nodes), cfg)
+    ci = build_pair_index(chosen, nodes, cfg.bins)
+    for k in range(len(chosen)):
+        st_.add(*ci.camera_pairs(k))
+    fi = build_pair_index(fresh, nodes, cfg.bins)
+    s = st_.scores_of(fi)
+    for j in (0, 7, 39):
+        ref = compute_energy(cams[list(range(10)) + [10 + j]], nodes, cfg).energy
+        assert abs(s[j] - ref) <= 1e-9 * ref
