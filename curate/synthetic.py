@@ -132,6 +132,21 @@ class Scene:
             depths.append(depth)
         return rgbs, depths
 
+    def depth(self, cams: Cameras) -> np.ndarray:
+        """[N, H, W] float32 camera-frame depth of every camera (all of one size), one batched cast."""
+        if len(cams) == 0:
+            return np.zeros((0, 1, 1), np.float32)
+        W, H = int(cams.width[0]), int(cams.height[0])
+        if np.any(cams.width != W) or np.any(cams.height != H):
+            raise ValueError("depth(): all cameras must have one image size")
+        uu, vv = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
+        x = (uu.ravel()[None] - cams.cx[:, None]) / cams.fx[:, None]              # [N, H*W]
+        y = (vv.ravel()[None] - cams.cy[:, None]) / cams.fy[:, None]
+        d = np.stack([x, y, np.ones_like(x)], -1) @ np.transpose(cams.rotations, (0, 2, 1))  # [N, H*W, 3]
+        o = np.broadcast_to(cams.centres[:, None, :], d.shape)
+        t = self.cast(o.reshape(-1, 3), d.reshape(-1, 3))["t_hit"]
+        return t.reshape(len(cams), H, W).astype(np.float32)
+
     def _render_one(self, cam: Cameras, ss: int):
         W, H = int(cam.width[0]), int(cam.height[0])
         off = (np.arange(ss) + 0.5) / ss
