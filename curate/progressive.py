@@ -176,3 +176,36 @@ def scene_oracle(scene, probe: tuple[int, int] = (32, 24)):
         return scene.depth(small).reshape(len(cams), -1).min(1)
 
     return occupied, min_depth
+
+
+def grid_oracle(box_min, box_max, occ: np.ndarray, margin: float, steps: int = 12, probe: tuple[int, int] = (16, 12)):
+    """(occupied, min_depth) callables from a boolean occupancy volume ``occ`` [R, R, R] over a box.
+
+    Points outside the box count as occupied. ``min_depth`` marches ``probe``-sized rays
+    from each camera up to ``margin`` (``steps`` samples each) and returns the distance of
+    the first occupied sample along z, or ``margin`` when none is found within it (enough
+    for the rejection test, far cheaper than a full depth render).
+    """
+    lo, hi = np.asarray(box_min, float), np.asarray(box_max, float)
+    occ = np.asarray(occ, bool)
+    R = np.array(occ.shape)
+
+    def occupied(points):
+        p = np.asarray(points, float).reshape(-1, 3)
+        inside = np.all((p >= lo) & (p <= hi), axis=1)
+        ijk = np.clip(np.rint((p - lo) / np.where(hi > lo, hi - lo, 1) * (R - 1)).astype(int), 0, R - 1)
+        return ~inside | occ[ijk[:, 0], ijk[:, 1], ijk[:, 2]]
+
+    def min_depth(cams: Cameras):
+        W, H = probe
+        uu, vv = np.meshgrid((np.arange(W) + 0.5) / W, (np.arange(H) + 0.5) / H)
+        x = (uu.ravel()[None] * cams.width[:, None] - cams.cx[:, None]) / cams.fx[:, None]   # [N, W*H]
+        y = (vv.ravel()[None] * cams.height[:, None] - cams.cy[:, None]) / cams.fy[:, None]
+        d = np.stack([x, y, np.ones_like(x)], -1) @ np.transpose(cams.rotations, (0, 2, 1))
+        out = np.full(len(cams), float(margin))
+        for z in np.linspace(margin / steps, margin, steps)[::-1]:  # far to near: the nearest wins
+            hit = occupied((cams.centres[:, None, :] + z * d).reshape(-1, 3)).reshape(len(cams), -1).any(1)
+            out[hit] = z
+        return out
+
+    return occupied, min_depth
