@@ -84,3 +84,8 @@ def test_score_fox_capture():
     out = json.loads(run("score", str(path), "--res", "16", "--json").stdout)
     assert out["n_cameras"] == 67 and 0 < out["energy"] <= 2 * 16 ** 3
     assert 0 < out["observed_fraction"] <= 1
+
+
+def test_simulate_rejects_bad_size():
+    p = run("simulate", "--size", "10", "--out", "/tmp/never", check=False)
+    assert p.returncode == 2 and "WIDTHxHEIGHT" in p.stderr
