@@ -186,7 +186,8 @@ def cmd_simulate(args) -> int:
 
     w, h = args.size
     cfg = SimulateConfig(scene=args.scene, scene_seed=args.scene_seed, budget=args.budget, n_test=args.n_test,
-                         node_res=args.res, train_seconds=args.train_seconds, seed=args.seed,
+                         node_res=args.res, train_seconds=args.train_seconds,
+                         train_iters=args.train_iters or None, seed=args.seed,
                          placement=ProgressiveConfig(n_candidates=args.candidates, energy=EnergyConfig(gamma=args.gamma),
                                                      camera=CameraSpec(w, h)))
     if args.methods:
@@ -251,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--res", type=int, default=32, help="node grid resolution (default 32)")
     s.add_argument("--gamma", type=float, default=0.05)
     s.add_argument("--train-seconds", type=float, default=120.0, help="field training per method (default 120)")
+    s.add_argument("--train-iters", type=int, default=0, help="fixed training iterations instead of seconds")
     s.add_argument("--methods", default="", help="comma list (default ours,random,hemisphere,fvs)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", required=True)

@@ -1,0 +1,265 @@
+"""Ingest a folder of photos: find, decode, orient, downscale into working copies.
+
+Input formats: JPEG, PNG, TIFF (through Pillow) and camera RAW (``.dng .cr2 .cr3
+.nef .arw .orf .rw2 .raf .pef .srw .kdc``, through rawpy with the camera white
+balance, 8-bit sRGB output). EXIF orientation is applied (``ImageOps.exif_transpose``;
+rawpy applies the RAW's own flip), so a working copy is upright.
+
+Each good photo gets a *working copy* in ``out_dir`` whose longer side is at most
+``max_size`` pixels: JPEG (quality 95, EXIF kept so COLMAP can read focal length and
+GPS) for JPEG and RAW sources, PNG for PNG and TIFF sources. A JPEG that needs neither
+rotation nor resizing is copied byte for byte. Working names are the photo's path
+relative to the input folder with ``/`` replaced by ``__``, plus ``.jpg``/``.png``
+when the original extension differs (``a/IMG_1.CR2`` -> ``a__IMG_1.CR2.jpg``), so
+they are unique and traceable.
+
+Files that cannot be used (unsupported extension, empty, truncated, not an image,
+undecodable RAW) are *skipped* with a reason; the run goes on. The input folder is
+only ever read.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+PIL_EXTS = {".jpg", ".jpeg", ".png", ".tif", ".tiff"}
+RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw", ".kdc"}
+IMAGE_EXTS = PIL_EXTS | RAW_EXTS
+
+# EXIF tags
+_MAKE, _MODEL, _ORIENTATION = 271, 272, 274
+_EXIF_IFD, _GPS_IFD = 0x8769, 0x8825
+_FOCAL, _FOCAL35 = 37386, 41989
+
+
+@dataclass
+class PhotoRecord:
+    """One input file and what ingest made of it (JSON-ready through ``vars``)."""
+
+    original: str                      # absolute path of the input file
+    rel: str                           # path relative to the input folder
+    status: str = "kept"               # "kept" | "skipped" (later stages may set "dropped")
+    reason: str = ""                   # why skipped / dropped
+    working: str = ""                  # working-copy file name (in the working folder)
+    orig_width: int = 0                # decoded, oriented size of the original
+    orig_height: int = 0
+    width: int = 0                     # size of the working copy
+    height: int = 0
+    scale_x: float = 1.0               # width / orig_width
+    scale_y: float = 1.0               # height / orig_height
+    format: str = ""                   # "jpeg" | "png" | "tiff" | "raw"
+    orientation: int = 1               # EXIF orientation tag of the original (1 = upright)
+    make: str = ""
+    model: str = ""
+    focal_mm: float | None = None      # EXIF FocalLength
+    focal_35mm: float | None = None    # EXIF FocalLengthIn35mmFilm
+    has_gps: bool = False
+    extra: dict = field(default_factory=dict)  # quality metrics, registration, ... (filled later)
+
+
+def find_images(folder: str | Path, recursive: bool = False) -> tuple[list[Path], list[Path]]:
+    """Files of ``folder`` (sorted by relative path), split into (image-like, other).
+
+    Hidden files (name starting with ``.``) are ignored; directories are entered only
+    when ``recursive``.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"photo folder {folder} does not exist")
+    it = folder.rglob("*") if recursive else folder.iterdir()
+    files = sorted((p for p in it if p.is_file() and not any(
+        part.startswith(".") for part in p.relative_to(folder).parts)),
+        key=lambda p: p.relative_to(folder).as_posix())
+    imgs = [p for p in files if p.suffix.lower() in IMAGE_EXTS]
+    other = [p for p in files if p.suffix.lower() not in IMAGE_EXTS]
+    return imgs, other
+
+
+def _ratio(v) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+    return f if np.isfinite(f) and f > 0 else None
+
+
+def _exif_info(im) -> dict:
+    """Make, model, focal length (mm, 35 mm equivalent), GPS presence, orientation from a PIL image."""
+    out: dict = {}
+    try:
+        exif = im.getexif()
+    except Exception:  # noqa: BLE001 - broken EXIF must not stop ingest
+        return out
+    out["make"] = str(exif.get(_MAKE, "") or "").strip("\x00 ").strip()
+    out["model"] = str(exif.get(_MODEL, "") or "").strip("\x00 ").strip()
+    out["orientation"] = int(exif.get(_ORIENTATION, 1) or 1)
+    try:
+        ifd = exif.get_ifd(_EXIF_IFD)
+        out["focal_mm"] = _ratio(ifd.get(_FOCAL))
+        out["focal_35mm"] = _ratio(ifd.get(_FOCAL35))
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        gps = exif.get_ifd(_GPS_IFD)
+        out["has_gps"] = bool(gps.get(2)) and bool(gps.get(4))  # GPSLatitude and GPSLongitude
+    except Exception:  # noqa: BLE001
+        pass
+    return out
+
+
+def _to_rgb8(im) -> np.ndarray:
+    """PIL image of any mode -> [H, W, 3] uint8."""
+    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+        a = np.asarray(im).astype(np.float64)
+        top = 65535.0 if a.max() > 255 else 255.0
+        a = np.clip(a / top * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        return np.repeat(a[..., None], 3, axis=2)
+    if im.mode == "F":
+        a = np.asarray(im)
+        a = np.clip(a * (255.0 if a.max() <= 1.0 else 1.0) + 0.5, 0, 255).astype(np.uint8)
+        return np.repeat(a[..., None], 3, axis=2)
+    return np.asarray(im.convert("RGB"))
+
+
+def read_image(path: str | Path) -> tuple[np.ndarray, dict]:
+    """Decode one photo, upright.
+
+    Returns:
+        rgb: [H, W, 3] uint8 sRGB.
+        info: ``format``, ``orientation``, ``make``, ``model``, ``focal_mm``, ``focal_35mm``,
+            ``has_gps``, ``exif`` (raw EXIF bytes to carry into a JPEG copy, or b"").
+    Raises:
+        ValueError / OSError with a readable message when the file cannot be used.
+    """
+    from PIL import Image, ImageOps
+
+    path = Path(path)
+    if path.stat().st_size == 0:
+        raise ValueError("empty file (0 bytes)")
+    ext = path.suffix.lower()
+    if ext in RAW_EXTS:
+        import rawpy
+        try:
+            with rawpy.imread(str(path)) as raw:
+                rgb = raw.postprocess(use_camera_wb=True, output_bps=8, output_color=rawpy.ColorSpace.sRGB)
+        except Exception as e:  # noqa: BLE001 - rawpy raises its own LibRawError family
+            raise ValueError(f"RAW decode failed: {type(e).__name__}: {e}") from e
+        info = {"format": "raw", "exif": b""}
+        try:  # DNG and several RAWs are TIFF-based: Pillow may read their EXIF
+            with Image.open(path) as im:
+                info.update(_exif_info(im))
+                info["orientation"] = 1  # rawpy already applied the RAW's flip
+        except Exception:  # noqa: BLE001
+            pass
+        return np.ascontiguousarray(rgb), info
+    try:
+        with Image.open(path) as im:
+            fmt = (im.format or "").lower()
+            if fmt not in ("jpeg", "png", "tiff", "mpo"):
+                raise ValueError(f"unsupported image format {im.format!r}")
+            im.load()  # raises OSError on truncated data
+            info = {"format": "jpeg" if fmt == "mpo" else fmt}
+            info.update(_exif_info(im))
+            up = ImageOps.exif_transpose(im)
+            exif = up.getexif()
+            info["exif"] = exif.tobytes() if len(exif) else b""
+            rgb = _to_rgb8(up)
+    except ValueError:
+        raise
+    except Exception as e:  # noqa: BLE001 - UnidentifiedImageError, truncated, decoder errors
+        raise ValueError(f"cannot decode: {type(e).__name__}: {e}") from e
+    return rgb, info
+
+
+def working_name(rel: str, fmt: str) -> str:
+    """Working-copy file name for the photo at ``rel`` (relative posix path)."""
+    flat = rel.replace("/", "__")
+    want = ".png" if fmt in ("png", "tiff") else ".jpg"
+    ok = {".png"} if want == ".png" else {".jpg", ".jpeg"}
+    return flat if Path(flat).suffix.lower() in ok else flat + want
+
+
+def _resize(rgb: np.ndarray, max_size: int) -> np.ndarray:
+    from PIL import Image
+    h, w = rgb.shape[:2]
+    if max_size <= 0 or max(h, w) <= max_size:
+        return rgb
+    s = max_size / max(h, w)
+    nw, nh = max(1, round(w * s)), max(1, round(h * s))
+    return np.asarray(Image.fromarray(rgb).resize((nw, nh), Image.LANCZOS))
+
+
+def ingest_one(path: Path, folder: Path, out_dir: Path, max_size: int) -> tuple[PhotoRecord, np.ndarray | None]:
+    """Read one photo and write its working copy. Returns the record and the working image [H, W, 3]."""
+    from PIL import Image
+
+    rel = path.relative_to(folder).as_posix()
+    rec = PhotoRecord(original=str(path.resolve()), rel=rel)
+    try:
+        rgb, info = read_image(path)
+    except (OSError, ValueError) as e:
+        rec.status, rec.reason = "skipped", str(e)
+        return rec, None
+    rec.format = info["format"]
+    for k in ("orientation", "make", "model", "focal_mm", "focal_35mm", "has_gps"):
+        if k in info:
+            setattr(rec, k, info[k])
+    rec.orig_height, rec.orig_width = rgb.shape[:2]
+    small = _resize(rgb, max_size)
+    rec.height, rec.width = small.shape[:2]
+    rec.scale_x, rec.scale_y = rec.width / rec.orig_width, rec.height / rec.orig_height
+    rec.working = working_name(rel, rec.format)
+    dst = out_dir / rec.working
+    if rec.format == "jpeg" and small is rgb and rec.orientation == 1:
+        shutil.copyfile(path, dst)  # nothing to change: keep the original bytes
+    elif dst.suffix.lower() == ".png":
+        Image.fromarray(small).save(dst, format="PNG", compress_level=1)
+    else:
+        kw = {"exif": info["exif"]} if info.get("exif") else {}
+        Image.fromarray(small).save(dst, format="JPEG", quality=95, **kw)
+    return rec, small
+
+
+def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recursive: bool = False,
+           num_threads: int = 2, on_image=None, progress: bool = True) -> list[PhotoRecord]:
+    """Ingest every file of ``folder`` into working copies in ``out_dir``.
+
+    Args:
+        on_image: optional ``callback(record, rgb [H, W, 3] uint8)`` for every kept image
+            (quality metrics are computed through it, so each photo is decoded once).
+    Returns:
+        One record per file in the folder (kept or skipped), sorted by relative path.
+    """
+    from tqdm import tqdm
+
+    folder, out_dir = Path(folder), Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    imgs, other = find_images(folder, recursive)
+    records = [PhotoRecord(original=str(p.resolve()), rel=p.relative_to(folder).as_posix(), status="skipped",
+                           reason=f"unsupported extension {p.suffix!r}") for p in other]
+
+    def work(p: Path) -> PhotoRecord:
+        rec, rgb = ingest_one(p, folder, out_dir, max_size)
+        if rgb is not None and on_image is not None:
+            on_image(rec, rgb)
+        return rec
+
+    with ThreadPoolExecutor(max(1, num_threads)) as pool:
+        recs = list(tqdm(pool.map(work, imgs), total=len(imgs), desc="ingest", unit="img",
+                         disable=not progress, leave=False))
+    records += recs
+    records.sort(key=lambda r: r.rel)
+    n_skip = sum(r.status == "skipped" for r in records)
+    logger.info("ingest: %d photos read, %d files skipped", len(records) - n_skip, n_skip)
+    for r in records:
+        if r.status == "skipped":
+            logger.warning("skipped %s: %s", r.rel, r.reason)
+    return records

@@ -1,0 +1,183 @@
+"""SfM stage on real data (reduced sizes), pose import, skipping unchanged work."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from curate.align import pose_errors, umeyama
+from curate.cameras import Cameras, look_at
+from curate.sfm_io import load_sfm, original_cameras
+
+from test_ingest import make_mixed_folder, need, sha_tree
+
+pycolmap = pytest.importorskip("pycolmap")
+from curate.sfm import SfmConfig, import_poses, run_sfm  # noqa: E402
+
+
+def small_cfg(**kw) -> SfmConfig:
+    return SfmConfig(**{"max_image_size": 480, "progress": False, **kw})
+
+
+@pytest.fixture(scope="module")
+def fox_run(tmp_path_factory):
+    photos = need("fox/images")
+    run = tmp_path_factory.mktemp("fox_run")
+    run_sfm(small_cfg(), photos, run)
+    return run
+
+
+# ------------------------------------------------------------------ align utilities
+def test_umeyama_recovers_similarity():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(20, 3))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    R = q * np.sign(np.linalg.det(q))
+    dst = 2.5 * src @ R.T + [1, -2, 3]
+    s, R2, t = umeyama(src, dst)
+    assert s == pytest.approx(2.5) and np.allclose(R2, R) and np.allclose(t, [1, -2, 3])
+
+
+def test_pose_errors_zero_for_similar_copy():
+    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(12, 0.5)], 1)
+    ref = Cameras(look_at(c, np.zeros((12, 3))), 500, 500, 320, 240, 640, 480, names=tuple(f"{i}.jpg" for i in range(12)))
+    R = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])
+    est = Cameras(ref.transformed(0.3, R, [5, 0, 0]).c2w, 500, 500, 320, 240, 640, 480,
+                  names=tuple(f"images/{i}.png" for i in range(12)))
+    e = pose_errors(est, ref)
+    assert e["n_matched"] == 12 and e["rotation_deg_median"] < 1e-6 and e["centre_rel_median"] < 1e-9
+
+
+# ------------------------------------------------------------------ mixed folder: bad files, input untouched, skip
+def test_sfm_on_mixed_folder_and_skip_unchanged(tmp_path):
+    photos = make_mixed_folder(tmp_path / "photos", n_good=10, size=400)
+    before = sha_tree(photos)
+    run = tmp_path / "run"
+    out = run_sfm(small_cfg(max_image_size=400), photos, run)
+    assert sha_tree(photos) == before
+    rec = json.loads((out / "images.json").read_text())
+    st = {r["rel"]: r for r in rec["photos"]}
+    for bad in ("zz_truncated.jpg", "zz_text.jpg", "zz_empty.jpg", "notes.txt"):
+        assert st[bad]["status"] == "skipped" and st[bad]["reason"]
+    res = load_sfm(run)
+    assert len(res.cameras) >= 10, rec["summary"]
+    assert res.points.shape[1] == 3 and len(res.points) > 100
+    for f in ("sparse/0/cameras.bin", "sparse/0/images.bin", "transforms.json", "cameras.json", "points_rgb.npy",
+              "normalization.json", "colmap.log", "stage.json"):
+        assert (out / f).is_file(), f
+    assert (out / "colmap.log").stat().st_size > 0
+    # normalisation maps the scene into the unit box
+    s, c = res.normalization["scale"], np.array(res.normalization["centre"])
+    assert np.all(np.abs(s * (res.cameras.centres - c)) <= 1 + 1e-9)
+    # original-photo cameras: the originals here are 225x400, same as the working copies
+    oc, paths = original_cameras(res.cameras, res.records)
+    assert set(oc.height) == {400} and all(Path(p).is_file() for p in paths)
+    # same inputs and options: skipped at once, record untouched
+    stage = (out / "stage.json").read_text()
+    t = time.perf_counter()
+    run_sfm(small_cfg(max_image_size=400), photos, run)
+    assert time.perf_counter() - t < 5 and (out / "stage.json").read_text() == stage
+    # an option that changes the result: reruns
+    run_sfm(small_cfg(max_image_size=400, max_num_features=2048), photos, run)
+    new = json.loads((out / "stage.json").read_text())
+    assert new["key"] != json.loads(stage)["key"] and new["config"]["max_num_features"] == 2048
+    # a changed photo: reruns
+    (photos / "notes.txt").write_text("changed\n")
+    key = new["key"]
+    run_sfm(small_cfg(max_image_size=400, max_num_features=2048), photos, run)
+    assert json.loads((out / "stage.json").read_text())["key"] != key
+
+
+def test_refuses_run_folder_inside_photos(tmp_path):
+    (tmp_path / "a.jpg").write_bytes(b"")
+    with pytest.raises(ValueError, match="inside the photo folder"):
+        run_sfm(small_cfg(), tmp_path, tmp_path / "run")
+
+
+def test_too_few_photos_is_an_error_with_records(tmp_path):
+    photos = make_mixed_folder(tmp_path / "photos", n_good=1)
+    (photos / "extra.png").unlink()
+    with pytest.raises(RuntimeError, match="usable photos"):
+        run_sfm(small_cfg(), photos, tmp_path / "run")
+    j = json.loads((tmp_path / "run" / "sfm" / "images.json").read_text())
+    assert j["summary"]["kept"] == 1 and j["summary"]["skipped"] == 4
+    assert not (tmp_path / "run" / "sfm" / "stage.json").exists()
+
+
+# ------------------------------------------------------------------ fox: accuracy, import
+def test_fox_sfm_matches_published_poses(fox_run):
+    from curate.transforms_json import read_transforms
+    ref, _ = read_transforms(need("fox") / "transforms.json")
+    res = load_sfm(fox_run)
+    assert len(res.cameras) >= 0.95 * len(ref)
+    e = pose_errors(res.cameras, ref)
+    assert e["rotation_deg_median"] <= 1.0, e
+    assert e["centre_rel_median"] <= 0.02, e
+    st = json.loads((fox_run / "sfm" / "stage.json").read_text())
+    assert st["stats"]["matcher"] == "exhaustive" and st["stats"]["camera_mode"] == "single"
+    assert set(st["timings"]) >= {"ingest", "extract", "match", "map"}
+
+
+def test_import_transforms_json(tmp_path):
+    from curate.transforms_json import read_transforms
+    src = need("fox") / "transforms.json"
+    ref, files = read_transforms(src)
+    out = import_poses(small_cfg(), src, tmp_path / "run")
+    res = load_sfm(tmp_path / "run")
+    assert res.cameras.names == ref.names
+    for k in ("c2w", "fx", "fy", "cx", "cy", "width", "height", "dist"):
+        assert np.allclose(getattr(res.cameras, k), getattr(ref, k)), k
+    back, files2 = read_transforms(out / "transforms.json")
+    assert files2 == files and np.allclose(back.c2w, ref.c2w)
+    # the COLMAP model written for it holds the same cameras
+    res2 = import_poses(small_cfg(), out / "sparse" / "0", tmp_path / "run2")
+    c2 = load_sfm(tmp_path / "run2").cameras
+    # (COLMAP stores unit quaternions: the file's slightly non-orthonormal rotations come back to ~1e-7)
+    assert np.allclose(c2.c2w, ref.c2w, atol=1e-5) and np.allclose(c2.dist, ref.dist)
+    assert res2.is_dir()
+
+
+@pytest.mark.parametrize("fmt", ["binary", "text"])
+def test_import_colmap_model(fox_run, tmp_path, fmt):
+    model = fox_run / "sfm" / "sparse" / "0"
+    if fmt == "text":
+        rec = pycolmap.Reconstruction(model)
+        model = tmp_path / "text_model"
+        model.mkdir()
+        rec.write_text(model)
+        for f in model.glob("*.bin"):
+            f.unlink()
+    src = load_sfm(fox_run)
+    import_poses(small_cfg(), model, tmp_path / "run", photos=fox_run / "sfm" / "images")
+    res = load_sfm(tmp_path / "run")
+    assert res.cameras.names == src.cameras.names
+    for k in ("c2w", "fx", "fy", "cx", "cy", "dist"):
+        assert np.allclose(getattr(res.cameras, k), getattr(src.cameras, k), atol=1e-6), k
+    assert len(res.points) == len(src.points)
+    assert all(r["registered"] and Path(r["original"]).is_file() for r in res.records["photos"])
+    # a second import of the same source is skipped
+    t = time.perf_counter()
+    import_poses(small_cfg(), model, tmp_path / "run", photos=fox_run / "sfm" / "images")
+    assert time.perf_counter() - t < 2
+
+
+# ------------------------------------------------------------------ templering
+def test_templering_sfm_matches_ground_truth(tmp_path):
+    from curate.datasets import load_templering
+    folder = need("templering")
+    ref = load_templering(folder)
+    photos = tmp_path / "photos"  # only the PNGs (the folder also holds the calibration text files)
+    photos.mkdir()
+    for p in sorted(folder.glob("*.png")):
+        (photos / p.name).symlink_to(p)
+    run_sfm(small_cfg(), photos, tmp_path / "run")
+    res = load_sfm(tmp_path / "run")
+    assert len(res.cameras) >= 0.95 * len(ref), len(res.cameras)
+    e = pose_errors(res.cameras, ref)
+    assert e["rotation_deg_median"] <= 1.0, e
+    assert e["centre_rel_median"] <= 0.02, e
