@@ -80,7 +80,14 @@ class NodeState:
         fgain: [M] ``(n_p + 1) ** gamma - n_p ** gamma``.
     """
 
-    def __init__(self, n_nodes: int, cfg: EnergyConfig):
+    def __init__(self, n_nodes: int, cfg: EnergyConfig, backend: str = "auto"):
+        """``backend``: "numba" (compiled step), "numpy" (the reference), or "auto" (numba when importable)."""
+        if backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"backend must be auto, numba or numpy, got {backend!r}")
+        from .greedy_kernel import kernel
+        self.kernel = kernel() if backend != "numpy" else None
+        if backend == "numba" and self.kernel is None:
+            raise RuntimeError("backend 'numba' asked for, but numba is not importable")
         self.cfg = cfg
         self.shares = cfg.bins.shares()
         M, B = n_nodes, cfg.bins.n_bins
@@ -120,12 +127,35 @@ class NodeState:
         fg = pow_gamma(n1, self.cfg.gamma) - pow_gamma(n1 - 1, self.cfg.gamma)
         return gain, fg
 
+    def add_compiled(self, nodes: np.ndarray, bins: np.ndarray, index: PairIndex | None = None,
+                     SA: np.ndarray | None = None, SF: np.ndarray | None = None) -> None:
+        """:meth:`add` by the compiled kernel; with ``index``, also updates the candidate
+        sums ``SA``, ``SF`` [K] of its cameras in the same pass."""
+        self.N += 1
+        if nodes.size == 0:
+            return
+        track = index is not None
+        if not track:
+            index_arrays = (np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int64))
+            SA = SF = np.zeros(0)
+        else:
+            index_arrays = (index.indptr, index.cam, index.nb)
+        dA, dS = self.kernel(np.ascontiguousarray(nodes, np.int64), np.ascontiguousarray(bins, np.int64),
+                             self.hist, self.n, self.tv, self.gain, self.fgain, self.shares, float(self.cfg.gamma),
+                             *index_arrays, SA, SF, track)
+        self.A += dA
+        self.S += dS
+
     def add(self, nodes: np.ndarray, bins: np.ndarray):
         """Add one camera observing ``nodes`` [k] (ascending, distinct) in direction ``bins`` [k].
 
         Returns:
-            (dgain [k, B], dfgain [k]): how the gain rows of those nodes changed.
+            (dgain [k, B], dfgain [k]): how the gain rows of those nodes changed
+            (numpy step; None with the compiled one).
         """
+        if self.kernel is not None:
+            self.add_compiled(nodes, bins)
+            return None
         self.N += 1
         if nodes.size == 0:
             return np.zeros((0, self.hist.shape[1])), np.zeros(0)
@@ -147,10 +177,11 @@ class GreedyState:
     """:class:`NodeState` plus, for every candidate of a :class:`PairIndex`, the sums of the
     gains over the nodes it observes, kept up to date as cameras are added."""
 
-    def __init__(self, index: PairIndex, cfg: EnergyConfig, track_candidates: bool = True):
-        """``track_candidates=False`` keeps only E of the set (no per-candidate scores)."""
+    def __init__(self, index: PairIndex, cfg: EnergyConfig, track_candidates: bool = True, backend: str = "auto"):
+        """``track_candidates=False`` keeps only E of the set (no per-candidate scores);
+        ``backend`` as for :class:`NodeState`."""
         self.index, self.cfg, self.track = index, cfg, track_candidates
-        self.nodes = NodeState(index.n_nodes, cfg)
+        self.nodes = NodeState(index.n_nodes, cfg, backend)
         self.taken = np.zeros(index.n_cams, bool)
         if self.track:  # initially every gain is its bin's share, every frequency gain 1
             K, B, shares = index.n_cams, index.n_bins, self.nodes.shares
@@ -172,6 +203,12 @@ class GreedyState:
         B = idx.n_bins
         nodes, bins = idx.camera_pairs(k)
         self.taken[k] = True
+        if self.nodes.kernel is not None:
+            if self.track:
+                self.nodes.add_compiled(nodes, bins, idx, self.SA, self.SF)
+            else:
+                self.nodes.add_compiled(nodes, bins)
+            return
         dgain, dF_node = self.nodes.add(nodes, bins)
         if not self.track or nodes.size == 0:
             return
@@ -196,7 +233,7 @@ class GreedyState:
 
 
 def greedy_select(index: PairIndex, budget: int, cfg: EnergyConfig = EnergyConfig(), initial=(),
-                  progress: bool = False) -> GreedyTrace:
+                  progress: bool = False, backend: str = "auto") -> GreedyTrace:
     """Greedily add ``budget`` candidates (fewer if the pool runs out) to ``initial``.
 
     Args:
@@ -204,9 +241,10 @@ def greedy_select(index: PairIndex, budget: int, cfg: EnergyConfig = EnergyConfi
         budget: number of candidates to add.
         cfg: energy parameters.
         initial: candidate indices already taken (kept, not counted in the budget).
+        backend: "auto" (compiled step when numba is importable), "numba" or "numpy".
     """
     t0 = time.perf_counter()
-    st = GreedyState(index, cfg)
+    st = GreedyState(index, cfg, backend=backend)
     trace = GreedyTrace(initial=[int(k) for k in initial])
     for k in trace.initial:
         if not st.taken[k]:

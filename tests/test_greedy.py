@@ -18,20 +18,25 @@ def make_index(n=60, res=7, seed=0, cfg=EnergyConfig()):
     return cams, nodes, build_pair_index(cams, nodes, cfg.bins)
 
 
+BACKENDS = ["numpy", "numba"]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("cfg", [EnergyConfig(), EnergyConfig(gamma=0.5, binning="equal-area"),
                                  EnergyConfig(gamma=0.0, n_theta=3, n_phi=4), EnergyConfig(gamma=2.0)])
-def test_same_choices_as_bruteforce(cfg):
+def test_same_choices_as_bruteforce(cfg, backend):
     _, _, idx = make_index(cfg=cfg)
-    fast = greedy_select(idx, 12, cfg)
+    fast = greedy_select(idx, 12, cfg, backend=backend)
     slow = greedy_select_bruteforce(idx, 12, cfg)
     assert fast.chosen == slow.chosen
     assert np.allclose(fast.energy, slow.energy, rtol=1e-12)
 
 
-def test_scores_equal_from_scratch_every_step_and_energy_exact():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_scores_equal_from_scratch_every_step_and_energy_exact(backend):
     cfg = EnergyConfig()
     cams, nodes, idx = make_index(n=40, res=6, seed=3)
-    st_ = GreedyState(idx, cfg)
+    st_ = GreedyState(idx, cfg, backend=backend)
     chosen = []
     for step in range(15):
         ref = bruteforce_scores(idx, chosen, cfg)
@@ -51,12 +56,13 @@ def test_scores_equal_from_scratch_every_step_and_energy_exact():
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 10_000), n=st.integers(2, 40), res=st.integers(1, 6),
        gamma=st.sampled_from([0.0, 0.05, 0.3, 1.0]), budget=st.integers(1, 12),
-       n_init=st.integers(0, 3), binning=st.sampled_from(["paper", "equal-area"]))
-def test_incremental_equals_scratch_property(seed, n, res, gamma, budget, n_init, binning):
+       n_init=st.integers(0, 3), binning=st.sampled_from(["paper", "equal-area"]),
+       backend=st.sampled_from(BACKENDS))
+def test_incremental_equals_scratch_property(seed, n, res, gamma, budget, n_init, binning, backend):
     cfg = EnergyConfig(gamma=gamma, binning=binning)
     cams, nodes, idx = make_index(n=n, res=res, seed=seed, cfg=cfg)
     initial = list(range(min(n_init, n)))
-    tr = greedy_select(idx, budget, cfg, initial)
+    tr = greedy_select(idx, budget, cfg, initial, backend=backend)
     assert len(tr.chosen) == min(budget, n - len(initial))
     assert len(set(tr.chosen) | set(initial)) == len(tr.chosen) + len(initial)
     for i in range(len(tr.chosen)):
@@ -123,9 +129,9 @@ def test_chunked_step_updates_match(monkeypatch):
     import curate.greedy as greedy
     cfg = EnergyConfig()
     _, _, idx = make_index(n=80, res=8, seed=1)
-    whole = greedy_select(idx, 15, cfg)
+    whole = greedy_select(idx, 15, cfg, backend="numpy")
     monkeypatch.setattr(greedy, "PAIR_CHUNK", 37)  # many small chunks per step
-    chunked = greedy_select(idx, 15, cfg)
+    chunked = greedy_select(idx, 15, cfg, backend="numpy")
     assert chunked.chosen == whole.chosen == greedy_select_bruteforce(idx, 15, cfg).chosen
     assert np.allclose(chunked.energy, whole.energy, rtol=1e-12)
 
@@ -134,10 +140,15 @@ def test_node_state_scores_fresh_candidates_exactly():
     """Progressive placement scores a fresh batch of candidates against a fixed set."""
     from curate.greedy import NodeState
     cfg = EnergyConfig()
+    for backend in BACKENDS:
+        check_fresh_candidates(NodeState, cfg, backend)
+
+
+def check_fresh_candidates(NodeState, cfg, backend):
     cams = random_pool(50, seed=6)
     nodes = NodeGrid([-1, -1, -1], [1, 1, 1], 6).nodes()
     chosen, fresh = cams[:10], cams[10:]
-    st_ = NodeState(len(nodes), cfg)
+    st_ = NodeState(len(nodes), cfg, backend)
     ci = build_pair_index(chosen, nodes, cfg.bins)
     for k in range(len(chosen)):
         st_.add(*ci.camera_pairs(k))
@@ -146,3 +157,14 @@ def test_node_state_scores_fresh_candidates_exactly():
     for j in (0, 7, 39):
         ref = compute_energy(cams[list(range(10)) + [10 + j]], nodes, cfg).energy
         assert abs(s[j] - ref) <= 1e-9 * ref
+
+
+def test_compiled_and_numpy_steps_agree_on_a_larger_pool():
+    cfg = EnergyConfig()
+    _, _, idx = make_index(n=300, res=12, seed=9)
+    a = greedy_select(idx, 40, cfg, backend="numpy")
+    b = greedy_select(idx, 40, cfg, backend="numba")
+    assert a.chosen == b.chosen
+    assert np.allclose(a.energy, b.energy, rtol=1e-12)
+    with pytest.raises(ValueError):
+        greedy_select(idx, 1, cfg, backend="fortran")
