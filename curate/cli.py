@@ -95,16 +95,23 @@ def _grid(args, cams):
 
 
 def load_cameras(path: Path):
-    """Cameras from a transforms.json or the project's cameras.json; (cameras, image paths)."""
+    """Cameras from a transforms.json, the project's cameras.json, a COLMAP model folder
+    (binary or text, or a folder with sparse/0) or a run folder; (cameras, image paths)."""
     from .cameras import Cameras
     from .transforms_json import read_transforms
     if not path.exists():
         raise CliError(f"{path}: no such file or folder")
     if path.is_dir():
-        for name in ("transforms.json", "cameras.json"):
+        if any((path / f).is_file() for f in ("cameras.bin", "cameras.txt")) or (path / "sparse" / "0").is_dir():
+            from .sfm import read_cameras
+            try:
+                return read_cameras(path)
+            except (OSError, ValueError, RuntimeError) as e:
+                raise CliError(f"{path}: cannot read the COLMAP model ({e})")
+        for name in ("transforms.json", "cameras.json", "sfm/cameras.json"):
             if (path / name).is_file():
                 return load_cameras(path / name)
-        raise CliError(f"{path}: a folder without transforms.json or cameras.json")
+        raise CliError(f"{path}: a folder without a COLMAP model, transforms.json or cameras.json")
     try:
         data = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
@@ -222,7 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("score", help="score an existing capture with the energy (no NeRF needed)",
                        description="Score how well a set of cameras covers the scene box: prints the energy "
                        "and its two parts (angular uniformity, observation frequency).")
-    s.add_argument("input", help="transforms.json (or the project's cameras.json, or a folder holding one)")
+    s.add_argument("input", help="transforms.json, a COLMAP model folder (binary or text), the project's "
+                   "cameras.json, or a run folder")
     _add_energy_args(s)
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd_score)
@@ -230,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("select", help="choose a subset of a posed pool",
                        description="Choose a budget of cameras from a posed pool and write them as "
                        "transforms.json, selected.txt and selection.json in --out.")
-    s.add_argument("input", help="transforms.json (or cameras.json, or a folder holding one)")
+    s.add_argument("input", help="transforms.json, a COLMAP model folder, cameras.json, or a run folder")
     s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
     s.add_argument("--method", default="energy", choices=["energy", "random", "fvs", "hemisphere"])
     s.add_argument("--seed", type=int, default=0, help="seed of the random baseline")

@@ -383,6 +383,13 @@ def _read_source(source: Path, photos: Path | None):
     return cams, xyz, rgb, err, rec, files
 
 
+def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
+    """Cameras of a COLMAP model folder (binary or text, or a folder with ``sparse/0``) or a
+    transforms.json, without writing anything: (cameras, image paths)."""
+    cams, _, _, _, _, files = _read_source(Path(source), Path(photos) if photos is not None else None)
+    return cams, files
+
+
 def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
                  force: bool = False) -> Path:
     """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.

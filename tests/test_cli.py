@@ -89,3 +89,18 @@ def test_score_fox_capture():
 def test_simulate_rejects_bad_size():
     p = run("simulate", "--size", "10", "--out", "/tmp/never", check=False)
     assert p.returncode == 2 and "WIDTHxHEIGHT" in p.stderr
+
+
+def test_score_accepts_a_colmap_model(tmp_path, pool_json):
+    """The same cameras written as a COLMAP model (binary and text) score the same as the transforms.json."""
+    from curate.sfm import reconstruction_from_cameras
+    path, cams = pool_json
+    rec = reconstruction_from_cameras(cams)
+    (tmp_path / "bin").mkdir()
+    rec.write(str(tmp_path / "bin"))
+    (tmp_path / "txt").mkdir()
+    rec.write_text(str(tmp_path / "txt"))
+    ref = json.loads(run("score", str(path), "--box=-1,-1,-1,1,1,1", "--res", "8", "--json").stdout)
+    for d in ("bin", "txt"):
+        out = json.loads(run("score", str(tmp_path / d), "--box=-1,-1,-1,1,1,1", "--res", "8", "--json").stdout)
+        assert out["n_cameras"] == 30 and np.isclose(out["energy"], ref["energy"], rtol=1e-9)
