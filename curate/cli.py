@@ -185,6 +185,36 @@ def cmd_select(args) -> int:
     return 0
 
 
+def cmd_sfm(args) -> int:
+    import time
+    from .sfm_config import SfmConfig
+
+    try:
+        cfg = SfmConfig(max_image_size=args.max_size, recursive=args.recursive, matcher=args.matcher,
+                        camera_mode=args.camera_mode, drop_blurry=args.drop_blurry,
+                        drop_duplicates=not args.keep_duplicates, dense="off" if args.no_dense else "auto")
+    except ValueError as e:
+        raise CliError(str(e))
+    if not args.photos and not args.poses:
+        raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
+    t0 = time.perf_counter()
+    from .sfm import import_poses, run_sfm
+    try:
+        if args.poses:
+            out = import_poses(cfg, args.poses, args.out, photos=args.photos, force=args.force)
+        else:
+            out = run_sfm(cfg, args.photos, args.out, force=args.force)
+    except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
+        raise CliError(str(e))
+    rec = json.loads((out / "stage.json").read_text())
+    st = rec.get("stats", {})
+    n_cams = len(json.loads((out / "cameras.json").read_text())["cameras"])
+    print(f"sfm: {n_cams} cameras registered" + (f" of {st['n_kept']} kept photos" if "n_kept" in st else "")
+          + (f", {st['n_points']} points" if "n_points" in st else "")
+          + f" in {time.perf_counter() - t0:.1f}s -> {out}")
+    return 0
+
+
 def cmd_simulate(args) -> int:
     from dataclasses import replace
     from .progressive import ProgressiveConfig, CameraSpec
@@ -225,6 +255,24 @@ def build_parser() -> argparse.ArgumentParser:
                                 "Gaussian splatting (Kopanas & Drettakis 2023, extended).")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("sfm", help="calibrate a photo folder (COLMAP) or import known poses into a run folder",
+                       description="Find and decode the photos (JPEG, PNG, TIFF, camera RAW), flag blurry and "
+                       "near-duplicate ones, and run COLMAP (pycolmap) offline; or, with --poses, import a COLMAP "
+                       "model or a transforms.json instead. Writes RUN/sfm/ (see curate/sfm.py). The photo folder is "
+                       "never written to; an unchanged re-run is skipped.")
+    s.add_argument("photos", nargs="?", default=None, help="the photo folder (optional with --poses)")
+    s.add_argument("--out", required=True, help="run folder")
+    s.add_argument("--poses", default=None, help="import this COLMAP model folder or transforms.json instead of SfM")
+    s.add_argument("--max-size", type=int, default=1600, help="longer side of the working copies (default 1600)")
+    s.add_argument("--recursive", action="store_true", help="also take photos from sub-folders")
+    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
+    s.add_argument("--camera-mode", default="auto", choices=["auto", "single", "per_image"])
+    s.add_argument("--drop-blurry", action="store_true", help="drop blurry photos (default: flag them only)")
+    s.add_argument("--keep-duplicates", action="store_true", help="keep near-duplicate photos")
+    s.add_argument("--no-dense", action="store_true", help="skip dense MVS even with CUDA")
+    s.add_argument("--force", action="store_true", help="redo the stage even if its inputs did not change")
+    s.set_defaults(func=cmd_sfm)
 
     s = sub.add_parser("score", help="score an existing capture with the energy (no NeRF needed)",
                        description="Score how well a set of cameras covers the scene box: prints the energy "

@@ -104,3 +104,16 @@ def test_score_accepts_a_colmap_model(tmp_path, pool_json):
     for d in ("bin", "txt"):
         out = json.loads(run("score", str(tmp_path / d), "--box=-1,-1,-1,1,1,1", "--res", "8", "--json").stdout)
         assert out["n_cameras"] == 30 and np.isclose(out["energy"], ref["energy"], rtol=1e-9)
+
+
+def test_sfm_command_imports_poses_and_skips_unchanged(tmp_path):
+    src = shared_data("fox") / "transforms.json"
+    first = run("sfm", "--poses", str(src), "--out", str(tmp_path / "run"))
+    assert "67 cameras registered" in first.stdout
+    stage = (tmp_path / "run" / "sfm" / "stage.json").read_text()
+    run("sfm", "--poses", str(src), "--out", str(tmp_path / "run"))
+    assert (tmp_path / "run" / "sfm" / "stage.json").read_text() == stage  # unchanged inputs: skipped
+    out = json.loads(run("score", str(tmp_path / "run"), "--res", "8", "--json").stdout)
+    assert out["n_cameras"] == 67
+    p = run("sfm", "--out", str(tmp_path / "r2"), check=False)
+    assert p.returncode == 2 and "photo folder" in p.stderr
