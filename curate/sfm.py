@@ -51,7 +51,7 @@ from .cameras import Cameras
 from .sfm_config import SfmConfig
 from .sfm_io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
 from .sfm_prep import choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, write_outputs
-from .stage import finish_stage, is_fresh, stage_key, hash_files
+from .stage import begin_stage, finish_stage, hash_files, stage_key
 
 logger = logging.getLogger(__name__)
 
@@ -294,14 +294,10 @@ def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool
     out = _sfm_dir(run_dir)
     refuse_inside(out, photos)
     key = input_key(cfg, photos)
-    if not force and is_fresh(out, key):
+    if begin_stage(out, key, force):
         logger.info("sfm: up to date (%s), skipped", out)
         return out
     started = time.perf_counter()
-    (out / "stage.json").unlink(missing_ok=True)
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     timings: dict[str, float] = {}
     records, kept, t_ingest = prepare_photos(cfg, photos, out)
     timings.update(t_ingest)
@@ -406,14 +402,10 @@ def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos
     files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.is_file())
     key = stage_key({"mode": "import", "source": str(source), "photos": str(photos),
                      "normalize_percentile": cfg.normalize_percentile}, [hash_files(files)])
-    if not force and is_fresh(out, key):
+    if begin_stage(out, key, force):
         logger.info("sfm import: up to date (%s), skipped", out)
         return out
     started = time.perf_counter()
-    (out / "stage.json").unlink(missing_ok=True)
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     cams, xyz, rgb, err, rec, originals = _read_source(source, photos)
     if rec is None:
         rec = reconstruction_from_cameras(cams)

@@ -85,6 +85,24 @@ def is_fresh(stage_dir: str | Path, key: str) -> bool:
     return rec is not None and rec.get("key") == key
 
 
+def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
+    """True when the stage finished earlier with the same ``key`` (and ``force`` is off): skip it.
+
+    Otherwise the stage's folder is emptied (a stale or half-written run is removed,
+    its record first, so a crash in between never leaves a stale record) and False is
+    returned: run the stage, then :func:`finish_stage`.
+    """
+    import shutil
+    stage_dir = Path(stage_dir)
+    if not force and is_fresh(stage_dir, key):
+        return True
+    (stage_dir / STAGE_FILE).unlink(missing_ok=True)
+    if stage_dir.exists():
+        shutil.rmtree(stage_dir)
+    stage_dir.mkdir(parents=True)
+    return False
+
+
 def write_json_atomic(path: str | Path, obj: Any) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from curate.energy import EnergyConfig, compute_energy
+from curate.energy import compute_energy
 from curate.grid import NodeGrid
 from curate.progressive import CameraSpec, ProgressiveConfig, progressive_placement, random_cameras, scene_oracle
 from curate.synthetic import make_scene
