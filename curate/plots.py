@@ -40,7 +40,7 @@ def _fmt(v: float) -> str:
 class _Frame:
     """Maps data coordinates into a plot area with axes, ticks and labels."""
 
-    def __init__(self, xlim, ylim, width, height, title, xlabel, ylabel, equal=False):
+    def __init__(self, xlim, ylim, width, height, title, xlabel, ylabel, equal=False, xticks=True):
         self.w, self.h = width, height
         self.l, self.r, self.t, self.b = 58, 14, 28, 42
         x0, x1 = xlim
@@ -59,7 +59,7 @@ class _Frame:
                       f'viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="11">',
                       f'<text x="{width / 2}" y="16" text-anchor="middle" font-size="13" font-weight="bold">'
                       f'{html.escape(title)}</text>']
-        self._axes(xlabel, ylabel)
+        self._axes(xlabel, ylabel, xticks)
 
     def X(self, x):
         return self.l + (np.asarray(x, float) - self.x0) / (self.x1 - self.x0) * (self.w - self.l - self.r)
@@ -67,10 +67,10 @@ class _Frame:
     def Y(self, y):
         return self.h - self.b - (np.asarray(y, float) - self.y0) / (self.y1 - self.y0) * (self.h - self.t - self.b)
 
-    def _axes(self, xlabel, ylabel):
+    def _axes(self, xlabel, ylabel, xticks):
         p, L, R, T, B = self.parts, self.l, self.w - self.r, self.t, self.h - self.b
         p.append(f'<rect x="{L}" y="{T}" width="{R - L}" height="{B - T}" fill="none" stroke="#999"/>')
-        for t in _ticks(self.x0, self.x1):
+        for t in _ticks(self.x0, self.x1) if xticks else []:
             x = float(self.X(t))
             p.append(f'<line x1="{x:.1f}" y1="{B}" x2="{x:.1f}" y2="{B + 4}" stroke="#666"/>'
                      f'<text x="{x:.1f}" y="{B + 15}" text-anchor="middle">{_fmt(t)}</text>')
@@ -162,8 +162,8 @@ def bar_chart(names, values, errors=None, title: str = "", ylabel: str = "", wid
     lo = float(np.nanmin(v - e)) if v.size else 0.0
     hi = float(np.nanmax(v + e)) if v.size else 1.0
     base = lo - 0.15 * (hi - lo or 1.0)
-    f = _Frame((0, max(len(v), 1)), (base, hi + 0.05 * (hi - lo or 1.0)), width, height, title, "", ylabel)
-    f.parts = [p for p in f.parts if 'text-anchor="middle">' not in p or "font-size" in p or "rotate" in p]
+    f = _Frame((0, max(len(v), 1)), (base, hi + 0.05 * (hi - lo or 1.0)), width, height, title, "", ylabel,
+               xticks=False)  # bars are labelled by name instead
     for i, (n, val, err) in enumerate(zip(names, v, e)):
         x0, x1 = float(f.X(i + 0.15)), float(f.X(i + 0.85))
         yv, yb = float(f.Y(val)), float(f.Y(base))

@@ -11,8 +11,6 @@ import logging
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .cameras import Cameras
 from .energy import EnergyConfig, EnergyTerms
 from .grid import NodeGrid
@@ -108,7 +106,3 @@ def score_cameras(cams: Cameras, grid: NodeGrid, cfg: EnergyConfig = EnergyConfi
     index = build_pair_index(cams, grid.nodes(), cfg.bins, device=device)
     return energy_from_hist(histogram(index), len(cams), cfg, per_node)
 
-
-def as_array(sel: Selection) -> np.ndarray:
-    """[len(initial) + len(chosen)] every selected pool index."""
-    return np.asarray(sel.initial + sel.chosen, np.int64)
