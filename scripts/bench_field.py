@@ -117,8 +117,7 @@ def main(argv=None) -> dict:
                   "density_samples_per_ray": round(st.samples_per_ray, 1), "stop_reason": st.stop_reason,
                   "occupancy": st.occupancy[-1:] if st.occupancy else None},
         "config": cfg.to_dict(), "wall_seconds": round(time.perf_counter() - t0, 1),
-        "note": "one training run evaluated at checkpoints; evaluation time excluded from train_seconds; "
-                "2-core CPU shared with other jobs (timings pessimistic)",
+        "note": "one training run evaluated at checkpoints; evaluation time excluded from train_seconds",
         "run_dir": str(out),
     }
     (out / "bench.json").write_text(json.dumps(res, indent=1))
