@@ -204,10 +204,7 @@ class GreedyState:
         nodes, bins = idx.camera_pairs(k)
         self.taken[k] = True
         if self.nodes.kernel is not None:
-            if self.track:
-                self.nodes.add_compiled(nodes, bins, idx, self.SA, self.SF)
-            else:
-                self.nodes.add_compiled(nodes, bins)
+            self.nodes.add_compiled(nodes, bins, *((idx, self.SA, self.SF) if self.track else ()))
             return
         dgain, dF_node = self.nodes.add(nodes, bins)
         if not self.track or nodes.size == 0:

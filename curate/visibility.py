@@ -58,7 +58,11 @@ class FrustumVisibility:
 
 def frustum_mask(P: np.ndarray, W: np.ndarray, H: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     """bool [m, K] frustum test for nodes [m, 3] against projections ``P`` [3, 4, K]."""
-    nodes = np.asarray(nodes, np.float64)
+    return _frustum_ops(np.asarray(nodes, np.float64), P, W, H)
+
+
+def _frustum_ops(nodes, P, W, H):
+    """The frustum test's operations, for numpy arrays or torch tensors alike (same order)."""
     X, Y, Z = nodes[:, 0:1], nodes[:, 1:2], nodes[:, 2:3]
     z = _affine(X, Y, Z, P[2])
     vis = z > 0
@@ -159,18 +163,7 @@ class _TorchFrustum:
     def __call__(self, start: int, stop: int):
         import torch
         nd = self.nodes[start:stop]
-        X, Y, Z = nd[:, 0:1], nd[:, 1:2], nd[:, 2:3]
-        z = _affine(X, Y, Z, self.P[2])
-        vis = z > 0
-        u = _affine(X, Y, Z, self.P[0])
-        vis &= u >= 0
-        vis &= u < self.W * z
-        del u
-        v = _affine(X, Y, Z, self.P[1])
-        vis &= v >= 0
-        vis &= v < self.H * z
-        del v, z
-        rows, cols = torch.nonzero(vis, as_tuple=True)
+        rows, cols = torch.nonzero(_frustum_ops(nd, self.P, self.W, self.H), as_tuple=True)
         d = (self.C[cols] - nd[rows]).cpu().numpy()
         return start, rows.cpu().numpy(), cols.cpu().numpy(), self.bins.assign(d)
 
