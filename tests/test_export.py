@@ -1,0 +1,170 @@
+"""Export of the chosen subset: COLMAP model, transforms.json, file list, links or copies."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from curate.cameras import Cameras, look_at
+from curate.transforms_json import read_transforms, write_transforms
+
+from test_ingest import sha_tree
+
+pycolmap = pytest.importorskip("pycolmap")
+from curate.export import ExportConfig, export_names, export_subset  # noqa: E402
+from curate.sfm import SfmConfig, import_poses, read_cameras  # noqa: E402
+
+
+def ring(n: int, w: int = 64, h: int = 48) -> Cameras:
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    c = np.stack([3 * np.cos(a), 3 * np.sin(a), 0.3 * np.sin(3 * a)], 1)
+    return Cameras(look_at(c, np.zeros((n, 3))), 55.0, 56.0, w / 2 + 0.5, h / 2 - 0.25, w, h,
+                   names=tuple(f"photos/img_{i:02d}.png" for i in range(n)))
+
+
+def write_photos(folder: Path, cams: Cameras) -> None:
+    from PIL import Image
+    rng = np.random.default_rng(0)
+    for i, n in enumerate(cams.names):
+        p = folder / n
+        p.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(rng.integers(0, 255, (int(cams.height[i]), int(cams.width[i]), 3), np.uint8)).save(p)
+
+
+@pytest.fixture()
+def import_run(tmp_path):
+    """A run folder filled by import_poses from a generated transforms.json next to its photos."""
+    cams = ring(12)
+    src = tmp_path / "capture"
+    write_photos(src, cams)
+    write_transforms(src / "transforms.json", cams)
+    run = tmp_path / "run"
+    import_poses(SfmConfig(progress=False), src / "transforms.json", run)
+    return cams, src, run
+
+
+def test_export_round_trip_links(import_run, tmp_path):
+    cams, src, run = import_run
+    before = sha_tree(src)
+    chosen = [cams.names[i] for i in (7, 2, 11, 0, 5)]
+    out = export_subset(run, chosen, run / "export")
+    assert sha_tree(src) == before  # the photo folder is untouched
+    names = [Path(n).name for n in chosen]
+    # the file list, in the order chosen
+    assert (out / "images.txt").read_text().split("\n")[:-1] == chosen
+    # links resolve to the originals
+    for n, c in zip(names, chosen):
+        p = out / "images" / n
+        assert p.is_symlink() and p.resolve() == (src / c).resolve()
+    assert sorted(os.listdir(out / "images")) == sorted(names)
+    # transforms.json: same poses and intrinsics, file paths inside the export
+    ref = cams[[7, 2, 11, 0, 5]]
+    back, files = read_transforms(out / "transforms.json")
+    assert list(back.names) == [f"images/{n}" for n in names]
+    assert all(Path(f).is_file() for f in files)
+    for k in ("c2w", "fx", "fy", "cx", "cy", "width", "height", "dist"):
+        assert np.allclose(getattr(back, k), getattr(ref, k)), k
+    # COLMAP model: only the chosen images, same poses (COLMAP's frame = the imported one)
+    model, _ = read_cameras(out / "sparse" / "0")
+    order = [list(model.names).index(n) for n in names]
+    model = model[order]
+    assert len(model) == 5 and list(model.names) == names
+    assert np.allclose(model.c2w, ref.c2w, atol=1e-6)
+    for k in ("fx", "fy", "cx", "cy", "width", "height"):
+        assert np.allclose(getattr(model, k), getattr(ref, k)), k
+    man = json.loads((out / "export.json").read_text())
+    assert man["n_images"] == 5 and man["config"]["mode"] == "link"
+
+
+def test_export_copy_mode_and_reexport(import_run):
+    cams, src, run = import_run
+    before = sha_tree(src)
+    out = export_subset(run, list(cams.names[:5]), mode="link")
+    assert out == (run / "export").resolve()
+    out = export_subset(run, list(cams.names[3:6]), out, mode="copy")  # replaces the earlier export
+    assert sha_tree(src) == before
+    files = sorted((out / "images").iterdir())
+    assert [p.name for p in files] == [Path(n).name for n in cams.names[3:6]]
+    for p, n in zip(files, cams.names[3:6]):
+        assert not p.is_symlink() and p.read_bytes() == (src / n).read_bytes()
+    assert len(read_transforms(out / "transforms.json")[0]) == 3
+
+
+def test_export_refuses_bad_input(import_run):
+    cams, src, run = import_run
+    with pytest.raises(ValueError, match="not registered"):
+        export_subset(run, [cams.names[0], "nope.jpg"], run / "export")
+    with pytest.raises(ValueError, match="repeated"):
+        export_subset(run, [cams.names[0], cams.names[0]], run / "export")
+    with pytest.raises(ValueError, match="photo folder"):
+        export_subset(run, [cams.names[0]], src / "photos" / "export")
+    with pytest.raises(ValueError, match="mode"):
+        ExportConfig(mode="move")
+    assert not (src / "photos" / "export").exists()
+
+
+def test_export_names_unique():
+    assert export_names(["/a/x.jpg", "/b/y.jpg"], ["x.jpg", "y.jpg"]) == ["x.jpg", "y.jpg"]
+    assert export_names(["/p/a/x.jpg", "/p/b/x.jpg"], ["a/x.jpg", "b/x.jpg"]) == ["a__x.jpg", "b__x.jpg"]
+
+
+def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
+    """An SfM-like run: working copies at half size, a model with points; the export describes the originals."""
+    from curate.sfm import reconstruction_from_cameras
+    from curate.sfm_prep import write_outputs
+
+    orig = ring(8, 128, 96)
+    photos = tmp_path / "photos"
+    write_photos(photos, orig)
+    work = orig.scaled_images(0.5)
+    work = Cameras(work.c2w, work.fx, work.fy, work.cx, work.cy, work.width, work.height,
+                   names=tuple(f"img_{i:02d}.jpg" for i in range(8)))
+    rec = reconstruction_from_cameras(work)
+    # points: each projected into every camera that sees it; keypoints added per image
+    rng = np.random.default_rng(1)
+    xyz = rng.uniform(-0.5, 0.5, (40, 3))
+    uv, depth = work.project(xyz)  # [N, P, 2], [N, P]
+    w, h = work.width[:, None], work.height[:, None]
+    inside = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < w) & (uv[..., 1] >= 0) & (uv[..., 1] < h)
+    seen_by = {}
+    for i in range(len(work)):
+        img = rec.image(i + 1)
+        pts = np.nonzero(inside[i])[0]
+        rec.images[i + 1].points2D = pycolmap.Point2DList([pycolmap.Point2D(uv[i, p]) for p in pts])
+        for k, p in enumerate(pts):
+            seen_by.setdefault(int(p), []).append(pycolmap.TrackElement(img.image_id, k))
+    for p, els in seen_by.items():
+        rec.add_point3D(xyz[p], pycolmap.Track(els), np.array([200, 10, 10], np.uint8))
+    run = tmp_path / "run"
+    out_sfm = run / "sfm"
+    (out_sfm / "sparse" / "0").mkdir(parents=True)
+    rec.write(out_sfm / "sparse" / "0")
+    records = [{"original": str((photos / n).resolve()), "rel": Path(n).name, "status": "kept", "reason": "",
+                "working": w, "orig_width": 128, "orig_height": 96, "width": 64, "height": 48,
+                "scale_x": 0.5, "scale_y": 0.5, "format": "png", "orientation": 1}
+               for n, w in zip(orig.names, work.names)]
+    write_outputs(out_sfm, work, xyz, np.zeros((40, 3), np.uint8), np.zeros(40), records,
+                  [f"images/{n}" for n in work.names], 1.0)
+    (out_sfm / "stage.json").write_text(json.dumps({"photos": str(photos.resolve())}))
+
+    chosen = ["img_03.jpg", "img_04.jpg", "img_05.jpg"]
+    out = export_subset(run, chosen)
+    back, _ = read_transforms(out / "transforms.json")
+    ref = orig[[3, 4, 5]]
+    for k in ("c2w", "fx", "fy", "cx", "cy", "width", "height"):
+        assert np.allclose(getattr(back, k), getattr(ref, k)), k
+    m = pycolmap.Reconstruction(out / "sparse" / "0")
+    assert sorted(m.image(i).name for i in m.reg_image_ids()) == ["img_03.png", "img_04.png", "img_05.png"]
+    cam = next(iter(m.cameras.values()))
+    assert (cam.width, cam.height) == (128, 96) and np.allclose(cam.params, [55, 56, 64.5, 47.75])
+    keep = {3, 4, 5}
+    want = sum(sum(int(inside[i, p]) for i in keep) >= 2 for p in range(40))
+    assert m.num_points3D() == want > 0
+    assert m.compute_mean_reprojection_error() < 1e-6  # keypoints were rescaled with the cameras
+    assert (out / "images.txt").read_text() == "img_03.png\nimg_04.png\nimg_05.png\n"
+    with pytest.raises(ValueError, match="photo folder"):
+        export_subset(run, chosen, photos / "sub")
