@@ -55,6 +55,11 @@ def _budget(text: str):
         raise argparse.ArgumentTypeError(f"--budget wants a count (200) or a percentage (15%), got {text!r}")
 
 
+def _budget_text(budget) -> str:
+    """The inverse of :func:`_budget`: 200 -> '200', 0.15 -> '15%'."""
+    return f"{budget * 100:g}%" if isinstance(budget, float) else str(budget)
+
+
 def resolve_budget(budget, n_pool: int) -> int:
     """A count stays; a fraction becomes round(fraction * pool), at least 1."""
     if isinstance(budget, float):
@@ -161,6 +166,10 @@ def cmd_select(args) -> int:
     from .transforms_json import write_transforms
     from .stage import write_json_atomic, config_dict
 
+    if (Path(args.input) / "occupancy" / "stage.json").is_file():
+        return _select_stage(args)
+    if args.out is None:
+        raise CliError("--out is required (except for a run folder)")
     cams, files = load_cameras(Path(args.input))
     if len(cams) == 0:
         raise CliError("the pool has no cameras")
@@ -241,6 +250,96 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _run_cfg(args):
+    """RunConfig from ``curate run`` options."""
+    from dataclasses import replace
+    from .evaluate import EvalConfig
+    from .occupancy import OccupancyConfig
+    from .pipeline import RunConfig
+    from .select import SelectConfig
+    from .sfm_config import SfmConfig
+    try:
+        ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.eval_size, iters=args.iters,
+                        random_seeds=args.random_seeds, workers=args.workers)
+        return RunConfig(budget=_budget_text(args.budget), sfm=SfmConfig(max_image_size=args.max_size, matcher=args.matcher),
+                         occupancy=OccupancyConfig(res=args.res),
+                         select=SelectConfig(method=args.method, energy=_energy_cfg(args), seed=args.seed,
+                                             device=args.device),
+                         evaluate=ev, run_evaluation=not args.no_evaluate, export_mode=args.export_mode)
+    except ValueError as e:
+        raise CliError(str(e))
+
+
+def _saved_cfg(run_dir: Path):
+    """The RunConfig saved in RUN/run.json by ``curate run``."""
+    from .pipeline import RunConfig
+    from .stage import config_from_dict
+    p = run_dir / "run.json"
+    if not p.is_file():
+        raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
+    try:
+        return config_from_dict(RunConfig, json.loads(p.read_text())["config"]), json.loads(p.read_text())
+    except (ValueError, KeyError, TypeError, json.JSONDecodeError) as e:
+        raise CliError(f"{p}: {e}")
+
+
+def cmd_run(args) -> int:
+    from .pipeline import run
+    cfg = _run_cfg(args)
+    if not args.photos and not args.poses:
+        raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
+    try:
+        out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force)
+    except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
+        raise CliError(str(e))
+    rep = json.loads(Path(out).read_text())
+    m = rep.get("methods", {})
+    if m:
+        print("held-out PSNR (dB): " + ", ".join(f"{k} {v['psnr']:.2f}" for k, v in m.items())
+              + (f"; energy - random {rep['paired']['energy-random']['mean']:+.2f} dB"
+                 if "energy-random" in rep.get("paired", {}) else ""))
+    print(f"report: {Path(args.out) / 'report.html'} ({rep['wall_seconds']:.0f}s)")
+    return 0
+
+
+def cmd_stage(args) -> int:
+    """occupancy / evaluate / report / export on an existing run folder, with its saved config."""
+    import time
+    from . import pipeline as pl
+    run_dir = Path(args.run)
+    cfg, rec = _saved_cfg(run_dir)
+    try:
+        if args.command == "occupancy":
+            pl.stage_occupancy(cfg, run_dir, args.force)
+        elif args.command == "evaluate":
+            pl.stage_evaluate(cfg, run_dir, args.force)
+        elif args.command == "export":
+            from dataclasses import replace
+            pl.stage_export(replace(cfg, export_mode=args.mode or cfg.export_mode), run_dir, args.force)
+        else:
+            t0 = time.perf_counter()
+            pl.stage_report(cfg, run_dir, rec.get("photos"), [], time.perf_counter() - t0)
+            print(f"report: {run_dir / 'report.json'}, {run_dir / 'report.html'}")
+    except (FileNotFoundError, ValueError, RuntimeError) as e:
+        raise CliError(str(e))
+    return 0
+
+
+def _select_stage(args) -> int:
+    """``curate select RUN``: the select stage of a run folder, with its saved config."""
+    from dataclasses import replace
+    from . import pipeline as pl
+    run_dir = Path(args.input)
+    cfg, _ = _saved_cfg(run_dir)
+    sel = replace(cfg.select, method=args.method, energy=_energy_cfg(args), seed=args.seed)
+    cfg = replace(cfg, budget=_budget_text(args.budget), select=sel)
+    try:
+        pl.stage_select(cfg, run_dir, getattr(args, "force", False))
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e))
+    return 0
+
+
 def _size(text: str):
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -290,10 +389,46 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
     s.add_argument("--method", default="energy", choices=["energy", "random", "fvs", "hemisphere"])
     s.add_argument("--seed", type=int, default=0, help="seed of the random baseline")
-    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
     s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.add_argument("--force", action="store_true", help="run folder: redo the stage even if unchanged")
     _add_energy_args(s)
     s.set_defaults(func=cmd_select)
+
+    s = sub.add_parser("run", help="the whole pipeline: photos -> best subset, report and export",
+                       description="SfM (or --poses), occupancy, selection, evaluation against random subsets, "
+                       "farthest-view sampling and all images on held-out views, report (RUN/report.json, "
+                       "RUN/report.html) and export (RUN/export). Unchanged stages are skipped on a re-run.")
+    s.add_argument("photos", nargs="?", default=None, help="the photo folder")
+    s.add_argument("--out", required=True, help="run folder")
+    s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
+    s.add_argument("--poses", default=None, help="import this COLMAP model or transforms.json instead of SfM")
+    s.add_argument("--method", default="energy", choices=["energy", "random", "fvs", "hemisphere"],
+                   help="selection method (default energy)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
+    s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
+    s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
+    s.add_argument("--iters", type=int, default=1000, help="field training iterations per subset (default 1000)")
+    s.add_argument("--eval-size", type=int, default=240, help="longer side of training/test images (default 240)")
+    s.add_argument("--workers", type=int, default=0, help="parallel trainings (default: one per core)")
+    s.add_argument("--no-evaluate", action="store_true", help="skip the trainings (selection, report, export only)")
+    s.add_argument("--export-mode", default="link", choices=["link", "copy"], help="export links or copies")
+    s.add_argument("--max-size", type=int, default=1600, help="SfM working copies' longer side (default 1600)")
+    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
+    s.add_argument("--force", action="store_true", help="redo every stage")
+    _add_energy_args(s)
+    s.set_defaults(func=cmd_run)
+
+    for name, text in (("occupancy", "occupancy grid and pool field of a run folder"),
+                       ("evaluate", "train and score the subsets of a run folder"),
+                       ("report", "write RUN/report.json and RUN/report.html"),
+                       ("export", "export the chosen subset (COLMAP, transforms.json, list, links)")):
+        s = sub.add_parser(name, help=text, description=text + ", with the options saved by `curate run`.")
+        s.add_argument("run", help="run folder")
+        s.add_argument("--force", action="store_true", help="redo the stage even if unchanged")
+        if name == "export":
+            s.add_argument("--mode", default=None, choices=["link", "copy"], help="links (default) or copies")
+        s.set_defaults(func=cmd_stage)
 
     s = sub.add_parser("simulate", help="compare camera placements in a synthetic room (the paper's experiment)",
                        description="Place cameras in a procedural room with the energy (progressive, Algorithm 1), "

@@ -120,3 +120,24 @@ def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outp
            "outputs": outputs or {}, **extra}
     write_json_atomic(Path(stage_dir) / STAGE_FILE, rec)
     return rec
+
+
+def config_from_dict(cls: type, d: dict) -> Any:
+    """Inverse of :func:`config_dict` for a dataclass ``cls`` whose fields all have defaults.
+
+    Nested dataclasses are rebuilt, lists become tuples where the default is a tuple,
+    and unknown keys raise ``ValueError`` (a record from another version is not guessed at).
+    """
+    base = cls()
+    kw = {}
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    for k, v in d.items():
+        if k not in names:
+            raise ValueError(f"{cls.__name__} has no option {k!r}")
+        cur = getattr(base, k)
+        if dataclasses.is_dataclass(cur) and isinstance(v, dict):
+            v = config_from_dict(type(cur), v)
+        elif isinstance(cur, tuple) and isinstance(v, list):
+            v = tuple(v)
+        kw[k] = v
+    return cls(**kw)
