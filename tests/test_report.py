@@ -1,0 +1,120 @@
+"""The self-contained HTML report of a run folder (synthetic run folder, no training)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from curate.cameras import Cameras, look_at
+from curate.report import floorplan, top_down_axes, write_html
+
+
+def make_run(root: Path, evaluated: bool = True) -> Path:
+    """A run folder with every file the report reads: 10 cameras on a ring, 3 chosen, 2 held out."""
+    run = root / "run"
+    n, res = 10, 6
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    c = np.stack([2 * np.cos(a), 2 * np.sin(a), np.full(n, 1.0)], 1)
+    names = tuple(f"img_{i:02d}.jpg" for i in range(n))
+    cams = Cameras(look_at(c, np.zeros((n, 3))), 50, 50, 32, 24, 64, 48, names=names)
+    (run / "sfm" / "images").mkdir(parents=True)
+    cams.save(run / "sfm" / "cameras.json")
+    rng = np.random.default_rng(0)
+    for nm in names:
+        Image.fromarray(rng.integers(0, 255, (48, 64, 3), np.uint8)).save(run / "sfm" / "images" / nm)
+    (run / "sfm" / "images.json").write_text(json.dumps({"photos": [
+        {"original": f"/photos/{nm}", "rel": nm, "working": nm, "status": "kept", "registered": True} for nm in names]}))
+    hold, pool, chosen = [0, 5], [i for i in range(n) if i not in (0, 5)], [3, 7, 1]
+    sel = {"method": "energy", "budget": 3, "holdout_every": 5, "holdout": hold, "pool": pool, "chosen": chosen,
+           "chosen_names": [names[i] for i in chosen], "energy": [10.5, 17.25, 20.125], "angular": [0.5, 1.25, 2.125],
+           "frequency": [10.0, 16.0, 18.0], "seconds": 0.12, "n_nodes": 40, "up_axis": 2}
+    (run / "select").mkdir()
+    (run / "select" / "selection.json").write_text(json.dumps(sel))
+    flat = rng.choice(res ** 3, 40, replace=False)
+    np.savez(run / "select" / "nodes.npz", nodes=rng.uniform(-1, 1, (40, 3)), angular=rng.uniform(0, 0.3, 40),
+             frequency=rng.uniform(0.5, 1, 40), flat=flat, res=res, box_min=-np.ones(3), box_max=np.ones(3))
+    rep = {"photos": "/photos", "run_dir": str(run), "budget": 3, "n_photos": 12, "n_registered": n, "n_pool": 8,
+           "n_holdout": 2, "holdout_every": 5, "wall_seconds": 123.4,
+           "stages": [{"name": "sfm", "seconds": 1.5, "skipped": True}, {"name": "select", "seconds": 0.25,
+                                                                          "skipped": False}],
+           "sfm": {"skipped": [{"file": "/photos/notes.txt", "reason": "not an image <txt>"}],
+                   "dropped": [{"file": "/photos/dup.jpg", "reason": "near-duplicate"}]},
+           "selection": {k: v for k, v in sel.items() if k not in ("holdout", "pool")}}
+    if evaluated:
+        gt = run / "evaluate" / "gt"
+        gt.mkdir(parents=True)
+        for i in hold:
+            Image.fromarray(rng.integers(0, 255, (24, 32, 3), np.uint8)).save(gt / f"img_{i:02d}.png")
+        keys = ["energy", "random_s0", "random_s1", "random_s2", "fvs", "all"]
+        for k in keys:
+            (run / "evaluate" / k / "renders").mkdir(parents=True)
+            for i in hold:
+                Image.fromarray(rng.integers(0, 255, (24, 32, 3), np.uint8)).save(
+                    run / "evaluate" / k / "renders" / f"img_{i:02d}.png")
+
+        def m(psnr, key, n_train=3):
+            return {"psnr": psnr, "ssim": 0.5, "n_train": n_train, "train_seconds": 12.0, "key": key,
+                    "per_view": [{"name": names[i], "psnr": psnr + d, "ssim": 0.5} for i, d in zip(hold, (-0.5, 0.5))]}
+        rep["methods"] = {
+            "energy": m(25.125, "energy"), "fvs": m(23.5, "fvs"), "all": m(26.75, "all", 8),
+            "random": {"psnr": 22.375, "psnr_std": 0.625, "ssim": 0.45, "ssim_std": 0.015, "seeds": [0, 1, 2],
+                       "n_train": 3, "runs": {str(s): {**m(22 + s / 2, f"random_s{s}"), "seed": s} for s in range(3)},
+                       "per_view": [{"name": names[i], "psnr": 22.375, "ssim": 0.45} for i in hold]}}
+        rep["paired"] = {"energy-random": {"mean": 2.75, "lo": 1.125, "hi": 4.375, "n": 2},
+                         "energy-fvs": {"mean": 1.625, "lo": -0.5, "hi": 3.75, "n": 2}}
+        rep["gap_closed"] = 0.6286
+    (run / "report.json").write_text(json.dumps(rep))
+    return run
+
+
+def image_sources(page: str) -> list[str]:
+    return re.findall(r'<img[^>]*\ssrc="([^"]*)"', page) + re.findall(r'<image[^>]*\shref="([^"]*)"', page)
+
+
+def test_report_with_evaluation(tmp_path):
+    run = make_run(tmp_path)
+    out = write_html(run)
+    assert out == run / "report.html"
+    page = out.read_text()
+    for v in ("25.12", "22.38 ± 0.62", "23.50", "26.75", "+2.75", "+1.12 .. +4.38", "+1.62", "63%", "123.4",
+              "skipped (unchanged)", "near-duplicate", "not an image &lt;txt&gt;", "img_03.jpg", "random (seed 0)"):
+        assert v in page, v
+    srcs = image_sources(page)
+    # 3 thumbnails + 2 held-out views x (gt + energy, random, fvs, all) + 2 floor plans
+    assert len(srcs) == 3 + 2 * 5 + 2
+    assert all(s.startswith("data:image/") for s in srcs)
+    assert "http://" not in page.replace("http://www.w3.org/2000/svg", "") and "https://" not in page
+    assert page.count("<svg") >= 6  # bars, 2 colour bars, 2 floor plans, camera map, energy curves
+    assert "Not available" not in page  # no section failed
+
+
+def test_report_without_evaluation_and_missing_files(tmp_path):
+    run = make_run(tmp_path, evaluated=False)
+    (run / "select" / "nodes.npz").unlink()
+    page = write_html(run).read_text()
+    assert "Not evaluated" in page and "nodes.npz missing" in page
+    assert all(s.startswith("data:image/") for s in image_sources(page))
+    assert "Not available" not in page
+    # an almost empty run folder still gives a page
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    page = write_html(empty).read_text()
+    assert "Not evaluated" in page and "<h2>" in page
+
+
+def test_floorplan_averages_vertical_columns():
+    res = 3
+    flat = np.array([(1 * res + 2) * res + 0, (1 * res + 2) * res + 2])  # ix=1, iy=2, iz=0 and 2
+    m = floorplan(np.array([1.0, 3.0]), flat, res, up=2, a=0, b=1)
+    assert m.shape == (3, 3) and m[0, 1] == 2.0  # row 0 = largest y, column = x
+    assert np.isnan(m).sum() == 8
+    # y up (cameras' -y along +y): a x b points along +y
+    c2w = np.tile(np.eye(4), (2, 1, 1))
+    c2w[:, :3, 1] = [0, -1, 0]
+    k, a, b, sign = top_down_axes(c2w)
+    assert k == 1 and np.cross(np.eye(3)[a], np.eye(3)[b])[1] == pytest.approx(sign)
