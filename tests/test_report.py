@@ -118,3 +118,21 @@ def test_floorplan_averages_vertical_columns():
     c2w[:, :3, 1] = [0, -1, 0]
     k, a, b, sign = top_down_axes(c2w)
     assert k == 1 and np.cross(np.eye(3)[a], np.eye(3)[b])[1] == pytest.approx(sign)
+
+
+def test_simulate_report(tmp_path):
+    from curate.report import write_simulate_html
+    cams = Cameras(look_at(np.array([[1.0, 0, 1], [0, 1, 1]]), np.zeros((2, 3))), 50, 50, 32, 24, 64, 48)
+    tests = ("hemisphere", "random", "ours")
+    rep = {"scene": "kitchen", "scene_seed": 0, "budget": 2, "n_nodes": 99, "wall_seconds": 3.5,
+           "table": {m: {**{t: 20.0 + i + j / 4 for j, t in enumerate(tests)}, "average": 20.25 + i}
+                     for i, m in enumerate(("ours", "random"))},
+           "ssim": {m: {t: 0.5 for t in tests} for m in ("ours", "random")},
+           "per_view": {m: {t: {"psnr": [20.0 + i, 21.0 + 2 * i, 19.0], "ssim": [0.5] * 3} for t in tests}
+                        for i, m in enumerate(("ours", "random"))},
+           "energy_curve": [1.0, 2.0], "cameras": {"ours": cams.to_dict(), "random": cams.to_dict()},
+           "test_cameras": {t: cams.to_dict() for t in tests}, "timings": {"render_s": 1.25}}
+    (tmp_path / "report.json").write_text(json.dumps(rep))
+    page = write_simulate_html(tmp_path).read_text()
+    assert "21.25" in page and "kitchen" in page and "ours − random" in page and "Not available" not in page
+    assert "https://" not in page and "<img" not in page  # all charts are inline SVG
