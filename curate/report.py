@@ -228,6 +228,11 @@ def _header(run: _Run) -> str:
              ("held out", f"{r.get('n_holdout', len(s.get('holdout', [])) or '—')}"
                           + (f" (every {every}th registered image)" if every else "")),
              ("selection nodes", s.get("n_nodes", "—")), ("wall time", _duration(r.get("wall_seconds")))]
+    exp = _read_json(run.dir / "export" / "export.json")
+    if exp:
+        mode = (exp.get("config") or {}).get("mode", "")
+        items.append(("export", f"{run.dir / 'export'}: {exp.get('n_images', '?')} photos ({mode}), COLMAP sparse/0, "
+                                "transforms.json, images.txt"))
     out = ["<h1>curate: photo selection report</h1>",
            '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items) + "</dl>"]
     p = run.paired.get("energy-random")
@@ -323,7 +328,7 @@ def _floorplan(run: _Run) -> str:
                        ("frequency", "observation frequency O<sub>f</sub><sup>γ</sup>")):
         m = floorplan(z[key], z["flat"], res, k, a, b)
         fin = m[np.isfinite(m)]
-        vlo, vhi = (0.0, float(fin.max())) if fin.size else (0.0, 1.0)
+        vlo, vhi = (float(fin.min()), float(fin.max())) if fin.size else (0.0, 1.0)  # own range: contrast
         vhi = vhi if vhi > vlo else vlo + 1.0
         uri = plots.png_data_uri(plots.colormap(m, vlo, vhi), max(1, int(math.ceil(side / res))))
         figs.append(f'<div class="fig"><div style="height:20px"><b>{title}</b></div>' + _heatmap_svg(uri, w, h, dots)
