@@ -360,6 +360,8 @@ def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: s
     from .stage import write_json_atomic, config_dict, versions
     t_start = time.perf_counter()
     run_dir = Path(run_dir)
+    if photos is not None and run_dir.resolve().is_relative_to(Path(photos).resolve()):
+        raise ValueError(f"the run folder {run_dir} is inside the photo folder {photos}: curate never writes there")
     run_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(run_dir / "run.json", {"config": config_dict(cfg), "photos": str(photos) if photos else None,
                                              "poses": str(poses) if poses else None, "versions": versions()})

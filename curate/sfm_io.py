@@ -125,9 +125,13 @@ def original_cameras(cams: Cameras, records: dict) -> tuple[Cameras, list[str]]:
     by ingest; for an import stage (no working copies) they are returned unchanged.
     """
     by_name = {r["working"]: r for r in records.get("photos", []) if r.get("working")}
+    imported = {r["rel"]: r for r in records.get("photos", []) if not r.get("working") and r.get("rel")}
     fx, fy, cx, cy, w, h, paths = [], [], [], [], [], [], []
     for i, n in enumerate(cams.names):
         r = by_name.get(n)
+        if r is None and n in imported:  # an import: same intrinsics, the original's absolute path
+            r = {"scale_x": 1.0, "scale_y": 1.0, "orig_width": cams.width[i], "orig_height": cams.height[i],
+                 "original": imported[n]["original"]}
         sx = 1.0 / r["scale_x"] if r else 1.0
         sy = 1.0 / r["scale_y"] if r else 1.0
         fx.append(cams.fx[i] * sx)

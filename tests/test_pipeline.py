@@ -1,0 +1,156 @@
+"""`curate run` end to end on the project's sample pool, kill-and-resume, and the pipeline's helpers."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from curate.evaluate import summarize
+from curate.pipeline import RunConfig, surface_band
+from curate.stage import config_dict, config_from_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "data_samples" / "room_walk"
+FAST = ["--iters", "50", "--eval-size", "48", "--random-seeds", "2", "--workers", "1", "--res", "16",
+        "--budget", "12"]
+
+
+def _cmd(out: Path, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "curate", "run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"),
+            "--out", str(out), *FAST, *extra]
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+
+
+def _mtimes(run: Path) -> dict:
+    return {str(p.relative_to(run)): p.stat().st_mtime_ns for p in run.rglob("stage.json")}
+
+
+def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_path):
+    """Kill `curate run` while a subset trains; the re-run keeps every finished stage and completes the report."""
+    run = tmp_path / "run"
+    photos_before = sorted((p.name, p.stat().st_size) for p in (SAMPLE / "images").iterdir())
+    proc = subprocess.Popen(_cmd(run), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    t0 = time.time()
+    # wait until the selection's unit has finished and the next training has started
+    while not ((run / "evaluate" / "energy" / "stage.json").is_file() and (run / "evaluate" / "random_s0").is_dir()):
+        assert proc.poll() is None, proc.stdout.read().decode()
+        assert time.time() - t0 < 600, "the run never reached the evaluation"
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (run / "report.json").exists()
+    assert not (run / "evaluate" / "random_s0" / "stage.json").exists()
+    before = _mtimes(run)
+    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/energy/stage.json"} <= set(before)
+
+    res = subprocess.run(_cmd(run), env=_env(), capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stdout + res.stderr
+    after = _mtimes(run)
+    for k, v in before.items():  # nothing finished was redone
+        assert after[k] == v, k
+    for line in ("occupancy  skipped", "select     skipped"):
+        assert line in res.stdout
+    rep = json.loads((run / "report.json").read_text())
+    assert set(rep["methods"]) == {"energy", "random", "fvs", "all"}
+    assert len(rep["methods"]["random"]["runs"]) == 2
+    n_hold = len(range(0, 160, 14))
+    for m in rep["methods"].values():
+        assert len(m["per_view"]) == n_hold
+        assert all(np.isfinite(v["psnr"]) for v in m["per_view"])
+    assert rep["n_holdout"] == n_hold and rep["n_pool"] == 160 - n_hold
+    assert len(rep["selection"]["chosen"]) == 12
+    assert not set(rep["selection"]["chosen"]) & set(range(0, 160, 14)), "a held-out view was selected"
+    assert {"lo", "hi", "mean"} <= set(rep["paired"]["energy-random"])
+    assert (run / "report.html").is_file()
+    # export: the chosen photos, linked to the originals
+    names = (run / "export" / "images.txt").read_text().split()
+    assert len(names) == 12
+    for n in names:
+        assert (run / "export" / "images" / n).resolve() == (SAMPLE / "images" / n).resolve()
+    # the user's photos are untouched
+    assert sorted((p.name, p.stat().st_size) for p in (SAMPLE / "images").iterdir()) == photos_before
+
+    # a third run with nothing changed redoes nothing; --force on one stage redoes it and what follows
+    res = subprocess.run(_cmd(run), env=_env(), capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0 and _mtimes(run) == after
+    res = subprocess.run([sys.executable, "-m", "curate", "select", str(run), "--budget", "8", "--method", "fvs"],
+                         env=_env(), capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    sel = json.loads((run / "select" / "selection.json").read_text())
+    assert sel["method"] == "fvs" and len(sel["chosen"]) == 8
+
+
+def test_run_config_round_trip_and_unknown_option():
+    cfg = RunConfig(budget="60")
+    assert config_from_dict(RunConfig, config_dict(cfg)) == cfg
+    d = config_dict(cfg)
+    d["evaluate"]["no_such_option"] = 1
+    with pytest.raises(ValueError, match="no_such_option"):
+        config_from_dict(RunConfig, d)
+
+
+def test_surface_band():
+    m = np.zeros((9, 9, 9), bool)
+    m[2:7, 2:7, 2:7] = True  # a solid cube: its interior is not surface
+    band0 = surface_band(m, 0)
+    assert band0[2, 4, 4] and not band0[4, 4, 4] and not band0[1, 4, 4]
+    band1 = surface_band(m, 1)
+    assert band1[1, 4, 4] and band1[3, 4, 4] and not band1[4, 4, 4]
+    thin = np.zeros((5, 5, 5), bool)
+    thin[2] = True  # a wall one voxel thick is all surface
+    assert np.array_equal(surface_band(thin, 0), thin)
+    assert not surface_band(np.zeros((4, 4, 4), bool), 1).any()
+
+
+def _metrics(method, seed, psnrs):
+    return {"method": method, "seed": seed, "n_train": 5, "psnr": float(np.mean(psnrs)), "ssim": 0.5,
+            "per_view": [{"name": f"v{i}", "psnr": p, "ssim": 0.5} for i, p in enumerate(psnrs)],
+            "train_seconds": 1.0, "iters": 10}
+
+
+def test_summarize_random_over_seeds_paired_and_gap():
+    res = {"energy": _metrics("energy", None, [20, 22, 24]), "random_s0": _metrics("random", 0, [19, 20, 21]),
+           "random_s1": _metrics("random", 1, [17, 20, 23]), "fvs": _metrics("fvs", None, [20, 21, 22]),
+           "all": _metrics("all", None, [24, 25, 26])}
+    methods, paired, gap = summarize(res)
+    assert methods["random"]["psnr"] == pytest.approx(20.0)
+    assert methods["random"]["psnr_std"] == pytest.approx(0.0)
+    assert [v["psnr"] for v in methods["random"]["per_view"]] == [18, 20, 22]
+    assert paired["energy-random"]["mean"] == pytest.approx(2.0)
+    assert paired["energy-fvs"]["mean"] == pytest.approx(1.0)
+    assert gap == pytest.approx((22 - 20) / (25 - 20))
+    res["all"] = _metrics("all", None, [19, 20, 21])  # no room above random: no gap figure
+    assert summarize(res)[2] is None
+
+
+def test_run_refuses_a_run_folder_inside_the_photos(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "curate", "run", str(SAMPLE / "images"), "--poses",
+                          str(SAMPLE / "transforms.json"), "--out", str(SAMPLE / "images" / "run"), "--budget", "5"],
+                         env=_env(), capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "inside the photo folder" in res.stderr
+    assert not (SAMPLE / "images" / "run").exists()
+
+
+def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
+    from curate.sfm import import_poses
+    from curate.sfm_config import SfmConfig
+    from curate.sfm_io import load_sfm, original_cameras
+    from curate.pipeline import image_paths
+    import_poses(SfmConfig(progress=False), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
+    res = load_sfm(tmp_path)
+    oc, paths = original_cameras(res.cameras, res.records)
+    assert all(Path(p).is_absolute() and Path(p).is_file() for p in paths)
+    assert np.array_equal(oc.fx, res.cameras.fx) and np.array_equal(oc.width, res.cameras.width)
+    assert image_paths(tmp_path, list(res.cameras.names), res.records) == paths
