@@ -12,12 +12,16 @@ import time
 from dataclasses import dataclass, field
 
 from .cameras import Cameras
+from .coverage import CoverageConfig
 from .energy import EnergyConfig, EnergyTerms
 from .grid import NodeGrid
 
 log = logging.getLogger(__name__)
 
-METHODS = ("energy", "random", "fvs", "hemisphere")
+METHODS = ("energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy")
+"""Selection methods. "energy" is the paper's greedy on its energy, unchanged; "coverage" is
+facility location over the pool's own views (:mod:`curate.coverage`); "coverage+energy"
+adds the paper's energy to it as a second term (see :class:`SelectConfig`)."""
 
 
 @dataclass(frozen=True)
@@ -25,7 +29,9 @@ class SelectConfig:
     """How to choose a subset."""
 
     method: str = "energy"
-    """One of "energy" (greedy on the energy), "random", "fvs" (farthest-view sampling), "hemisphere"."""
+    """One of "energy" (the paper: greedy on its energy), "coverage" (facility location over the
+    pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms), "random", "fvs"
+    (farthest-view sampling), "hemisphere"."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
     """Energy parameters (method "energy", and the energy reported for every method)."""
     seed: int = 0
@@ -34,6 +40,12 @@ class SelectConfig:
     """Farthest-view sampling: weight of the viewing-direction angle against centre distance."""
     device: str | None = None
     """Torch device for the visibility test (None: CUDA when available, else CPU)."""
+    coverage: CoverageConfig = field(default_factory=CoverageConfig)
+    """Methods "coverage" and "coverage+energy": the similarity between pool views."""
+    energy_weight: float = 0.5
+    """Method "coverage+energy": each step maximises ``dF / F(pool) + energy_weight * dE / E(pool)``,
+    the gains of the coverage F and of the paper's energy E, each relative to its value for the
+    whole pool (non-lazy: E is not submodular)."""
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -60,10 +72,13 @@ class Selection:
     angular: list[float] = field(default_factory=list)
     frequency: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    objective: list[float] = field(default_factory=list)
+    """Methods "coverage*": the coverage F after each step (empty for the others)."""
 
     def to_dict(self) -> dict:
         return {"method": self.method, "chosen": self.chosen, "initial": self.initial, "energy": self.energy,
-                "angular": self.angular, "frequency": self.frequency, "seconds": self.seconds}
+                "angular": self.angular, "frequency": self.frequency, "seconds": self.seconds,
+                **({"objective": self.objective} if self.objective else {})}
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
@@ -83,6 +98,13 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     if cfg.method == "energy":
         tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
         sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
+    elif cfg.method in ("coverage", "coverage+energy"):
+        from .coverage import coverage_select
+        chosen, obj = coverage_select(cams, index, budget, cfg.coverage, initial,
+                                      energy=cfg.energy if cfg.method == "coverage+energy" else None,
+                                      energy_weight=cfg.energy_weight)
+        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
+        sel = Selection(cfg.method, chosen, initial, e, a, f, objective=obj)
     else:
         if cfg.method == "random":
             chosen = random_subset(len(cams), budget, cfg.seed, initial)

@@ -1,0 +1,275 @@
+"""Which selection method gives the best NeRF? The evaluation harness of issue 7.
+
+Per scene: a run folder under ``--out`` (known poses imported, no SfM; the occupancy stage
+trains the pool field once, which is also the 'all' ceiling), then for each budget and
+method a subset of the pool, and one field trained per (subset, training seed) with the
+SAME :class:`curate.evaluate.EvalConfig` through :func:`curate.evaluate.run_units`
+(units ``RUN/evaluate/q_<method>_b<budget>_t<seed>``, keyed with
+:func:`curate.stage.stage_key`, so a re-run skips finished trainings).
+
+Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
+(the paper), ``fvs`` (farthest-view sampling), ``random`` (seeds 0..n-1, one training
+each), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.select.METHODS`.
+
+Cheap proxies (seconds, no training) for every method: from each held-out view to the
+chosen cameras, the nearest centre distance (``pos``, ``pos90``: mean, 90th percentile),
+the smallest viewing-direction angle (``ang``, ``ang90``, degrees), and the best
+single-view overlap of its (node, direction-bin) cells (``cell``).
+
+Per-view paired differences (95% t intervals over the held-out views): default - random
+(random averaged over its seeds per view), default - fvs, default - energy; each
+method's per-view PSNR is first averaged over its training seeds.
+
+Prints a table per scene and budget, and ONE JSON line last; writes
+``<out>/quality_psnr.svg`` (PSNR against budget per method, one chart per scene).
+
+Usage:
+  nice -n 5 python scripts/bench_selection_quality.py --scenes office --budgets 60 --train-seeds 2
+  python scripts/bench_selection_quality.py --proxy-only --budgets 10%,17%,30%
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+SHARED = ROOT.parent / "shared" / "data"
+VARIANTS: dict = {}
+
+
+# ------------------------------------------------------------------ scenes
+def scene_poses(scene: str, out: Path) -> Path:
+    """A transforms.json with absolute image paths for ``scene`` (written under ``out``)."""
+    from curate.datasets import load_office, load_templering
+    from curate.transforms_json import write_transforms
+    d = (SHARED / scene).resolve()
+    if scene == "fox":
+        return d / "transforms.json"
+    if scene == "office":
+        cams, img = load_office(d), d / "images"
+    elif scene == "templering":
+        cams, img = load_templering(d), d
+    else:
+        raise SystemExit(f"scene {scene!r}: no known poses (skull needs SfM: not in this harness yet)")
+    p = out / f"{scene}_transforms.json"
+    if not p.is_file():
+        write_transforms(p, cams, [str(img / n) for n in cams.names])
+    return p
+
+
+def prepare(scene: str, out: Path, ev, train: bool = True) -> Path:
+    """Run folder with imported poses and (``train``) the occupancy stage (pool field) done."""
+    from curate.pipeline import RunConfig, stage_occupancy
+    from curate.sfm import import_poses
+    run = out / scene
+    cfg = RunConfig(evaluate=ev)
+    import_poses(cfg.sfm, scene_poses(scene, out), run)
+    if train:
+        stage_occupancy(cfg, run)
+    return run
+
+
+def node_grid(run: Path, cams):
+    """The run's selection nodes; without an occupancy stage (``--proxy-only``), every node
+    of a 32^3 grid over the scene box (printed)."""
+    from curate.grid import NodeGrid
+    from curate.pipeline import load_node_grid
+    from curate.stage import read_stage
+    from curate.train import default_box
+    if read_stage(run / "occupancy") is not None:
+        return load_node_grid(run)
+    print(f"{run.name}: no occupancy stage: nodes = the whole 32^3 grid over the scene box")
+    b = default_box(cams)
+    return NodeGrid(b[0], b[1], 32)
+
+
+def parse_budget(b: str, n_pool: int) -> int:
+    return max(1, int(round(float(b[:-1]) / 100 * n_pool))) if b.endswith("%") else int(b)
+
+
+def _variants():
+    from curate.coverage import CoverageConfig
+    from curate.select import SelectConfig
+    return {"fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
+            "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
+            "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose"))}
+
+
+# ------------------------------------------------------------------ proxies
+def proxies(pc, hc, cell_sim_hold, chosen) -> dict:
+    """Held-out view -> chosen cameras: nearest centre, smallest angle, best cell overlap."""
+    ch = np.asarray(chosen, int)
+    d = np.linalg.norm(hc.centres[:, None] - pc.centres[ch][None], axis=2).min(1)
+    a = np.degrees(np.arccos(np.clip(hc.view_dirs @ pc.view_dirs[ch].T, -1, 1))).min(1)
+    ov = cell_sim_hold[:, ch].max(1)
+    r = lambda x: round(float(x), 4)  # noqa: E731
+    return {"pos": r(d.mean()), "pos90": r(np.percentile(d, 90)), "ang": r(a.mean()),
+            "ang90": r(np.percentile(a, 90)), "cell": r(ov.mean())}
+
+
+def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
+    """[H, K] share of each held-out view's (node, bin) cells that pool camera k also observes."""
+    from curate.cameras import Cameras
+    from curate.coverage import cell_similarity
+    from curate.visibility import build_pair_index
+    idx = build_pair_index(Cameras.concat([pc, hc]), grid.nodes(), bins)
+    S = cell_similarity(idx, 0.0).tocsr()
+    return S[len(pc):, :len(pc)].toarray()
+
+
+# ------------------------------------------------------------------ the harness
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scenes", default="office,fox,templering")
+    ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
+    ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
+    ap.add_argument("--random-seeds", type=int, default=3)
+    ap.add_argument("--methods", default="default,energy,fvs,random,all")
+    ap.add_argument("--extra", default="", help="more selection methods: METHODS names, or variants "
+                    "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1)")
+    ap.add_argument("--max-side", type=int, default=160)
+    ap.add_argument("--iters", type=int, default=600)
+    ap.add_argument("--holdout-every", type=int, default=14)
+    ap.add_argument("--out", default=str(ROOT / "runs" / "quality"))
+    ap.add_argument("--proxy-only", action="store_true", help="selections and proxies only (no training)")
+    args = ap.parse_args(argv)
+
+    import logging
+    logging.basicConfig(level=logging.WARNING)
+    from curate.evaluate import EvalConfig, Unit, eval_cameras, run_units
+    from curate.pipeline import load_split
+    from curate.select import SelectConfig, select
+    from curate.stage import read_stage, stage_key
+    from curate.stats import paired_difference
+    from curate.train import default_box
+
+    global VARIANTS
+    VARIANTS = _variants()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=1)
+    default = SelectConfig()
+    methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
+    sel_methods = [m for m in methods if m not in ("random", "all")]
+    rows, paired, series = [], [], {}
+    settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
+                "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
+                "random_seeds": args.random_seeds, "default_method": default.method,
+                "default_coverage": vars(default.coverage)}
+    t_all = time.perf_counter()
+    for scene in [s for s in args.scenes.split(",") if s]:
+        run = prepare(scene, out, ev, train=not args.proxy_only)
+        sfm, paths, pool, hold = load_split(run, ev.holdout_every)
+        pc, hc = sfm.cameras[pool], sfm.cameras[hold]
+        grid = node_grid(run, sfm.cameras)
+        cs_hold = holdout_cell_similarity(pc, hc, grid, default.energy.bins)
+        cams = eval_cameras(sfm.cameras, ev.max_side)
+        box = default_box(sfm.cameras)
+        sfm_key = read_stage(run / "sfm")["key"]
+        occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
+        for b in [x for x in args.budgets.split(",") if x]:
+            B = parse_budget(b, len(pool))
+            subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
+            timing = {}
+            for m in methods:
+                if m == "all":
+                    continue
+                if m == "random":
+                    cfgs = [SelectConfig("random", seed=s) for s in range(args.random_seeds)]
+                else:
+                    cfgs = [default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
+                subsets[m] = []
+                for c in cfgs:
+                    s = select(pc, grid, B, c)
+                    subsets[m].append(s.chosen)
+                    timing[m] = round(s.seconds, 3)
+            prox = {m: [proxies(pc, hc, cs_hold, ch) for ch in v] for m, v in subsets.items()}
+            units, groups = [], {}
+            if not args.proxy_only:
+                for m, subs in subsets.items():
+                    for si, ch in enumerate(subs):
+                        seeds = [0] if m == "random" else list(range(args.train_seeds))
+                        for t in seeds:
+                            key = f"q_{m}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}"
+                            u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
+                            groups.setdefault(t, []).append(u)
+                if "all" in methods:
+                    groups.setdefault(0, []).append(Unit("all", "all", None, list(pool)))
+            results: dict[str, dict] = {}
+            for t, us in sorted(groups.items()):
+                cfg_t = replace(ev, train_seed=t)
+                train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
+                keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": hold},
+                                         [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
+                fp = {"all": str(run / "occupancy" / "field.pt")}
+                results.update(run_units(run, us, keys, cfg_t, cams, paths, hold, box, fp, progress=False))
+            # per method: per-view PSNR averaged over its trainings (random: over its seeds)
+            per_view, per_run = {}, {}
+            for m in methods:
+                rs = [r for k, r in results.items() if (k == "all" if m == "all" else k.startswith(f"q_{m}_"))
+                      and (m == "all" or f"_b{B}_" in k)]
+                if not rs:
+                    continue
+                per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)
+                per_run[m] = [round(r["psnr"], 3) for r in rs]
+            print(f"\n{scene}: {B} of {len(pool)} pool images, {len(hold)} held out "
+                  f"(max_side {ev.max_side}, {ev.iters} it)")
+            print(f"{'method':10s} {'PSNR':>7s}  {'runs':28s} {'pos':>6s} {'pos90':>6s} {'ang':>5s} {'ang90':>6s} "
+                  f"{'cell':>6s} {'sel s':>6s}")
+            for m in methods:
+                pr = prox.get(m)
+                pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0]} if pr else {}
+                row = {"scene": scene, "budget": B, "pool": len(pool), "method": m,
+                       "method_name": default.method if m == "default" else m,
+                       "psnr": round(float(per_view[m].mean()), 3) if m in per_view else None,
+                       "runs": per_run.get(m, []), **{k: round(v, 4) for k, v in pm.items()},
+                       "select_s": timing.get(m)}
+                rows.append(row)
+                ps = f"{row['psnr']:7.2f}" if row["psnr"] is not None else "      -"
+                px = (f"{pm['pos']:6.3f} {pm['pos90']:6.3f} {pm['ang']:5.1f} {pm['ang90']:6.1f} {pm['cell']:6.3f}"
+                      if pm else " " * 34)
+                print(f"{m:10s} {ps}  {str(per_run.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
+                if row["psnr"] is not None:
+                    series.setdefault(scene, {}).setdefault(m, []).append((B, row["psnr"]))
+            if "default" in per_view:
+                for o in ("random", "fvs", "energy"):
+                    if o in per_view:
+                        d = paired_difference(per_view["default"], per_view[o])
+                        d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
+                        paired.append({"scene": scene, "budget": B, "pair": f"default-{o}", **d})
+                        print(f"  default - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
+                              f"{d['n']} views)")
+                if all(m in per_view for m in ("random", "all")):
+                    room = per_view["all"].mean() - per_view["random"].mean()
+                    if room > 1e-6:
+                        g = (per_view["default"].mean() - per_view["random"].mean()) / room
+                        paired.append({"scene": scene, "budget": B, "pair": "gap_closed", "mean": round(float(g), 3)})
+                        print(f"  gap closed (default - random) / (all - random): {g:.2f}")
+    if series:
+        from curate.plots import line_chart
+        svg = []
+        for scene, ser in series.items():
+            s = {m: ([x for x, _ in sorted(v)], [y for _, y in sorted(v)]) for m, v in ser.items()}
+            svg.append(line_chart(s, f"{scene}: held-out PSNR", "images chosen", "PSNR (dB)"))
+        p = out / "quality_psnr.svg"
+        if len(svg) == 1:
+            p.write_text(svg[0])
+        else:  # stack the charts in one SVG
+            body = "".join(f'<g transform="translate(0,{310 * i})">{x}</g>' for i, x in enumerate(svg))
+            p.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="520" height="{310 * len(svg)}">{body}</svg>')
+        print(f"plot: {p}")
+    print(json.dumps({"settings": settings, "rows": rows, "paired": paired,
+                      "seconds": round(time.perf_counter() - t_all, 1)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
