@@ -304,7 +304,6 @@ def cmd_run(args) -> int:
 
 def cmd_stage(args) -> int:
     """occupancy / evaluate / report / export on an existing run folder, with its saved config."""
-    import time
     from . import pipeline as pl
     run_dir = Path(args.run)
     cfg, rec = _saved_cfg(run_dir)
@@ -317,8 +316,7 @@ def cmd_stage(args) -> int:
             from dataclasses import replace
             pl.stage_export(replace(cfg, export_mode=args.mode or cfg.export_mode), run_dir, args.force)
         else:
-            t0 = time.perf_counter()
-            pl.stage_report(cfg, run_dir, rec.get("photos"), [], time.perf_counter() - t0)
+            pl.stage_report(cfg, run_dir, rec.get("photos"), [], None)
             print(f"report: {run_dir / 'report.json'}, {run_dir / 'report.html'}")
     except (FileNotFoundError, ValueError, RuntimeError) as e:
         raise CliError(str(e))
@@ -411,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
     s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
     s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
-    s.add_argument("--iters", type=int, default=1000, help="field training iterations per subset (default 1000)")
+    s.add_argument("--iters", type=int, default=800, help="field training iterations per subset (default 800)")
     s.add_argument("--eval-size", type=int, default=240, help="longer side of training/test images (default 240)")
     s.add_argument("--workers", type=int, default=0, help="parallel trainings (default: one per core)")
     s.add_argument("--no-evaluate", action="store_true", help="skip the trainings (selection, report, export only)")

@@ -294,17 +294,41 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
     return d
 
 
-def stage_report(cfg: RunConfig, run_dir: Path, photos: str | None, timings: list, wall: float) -> Path:
-    """``RUN/report.json`` (machine-readable) and ``RUN/report.html`` (for a person)."""
+def recorded_seconds(run_dir: Path) -> dict[str, float | None]:
+    """Seconds each stage took when it actually ran (from the stage records; evaluate: all units summed)."""
+    from .stage import read_stage
+    out: dict[str, float | None] = {}
+    for s in ("sfm", "occupancy", "select", "evaluate", "export"):
+        if s == "evaluate":
+            recs = [read_stage(p.parent) for p in sorted((run_dir / "evaluate").glob("*/stage.json"))]
+            out[s] = round(sum(r.get("seconds", 0) for r in recs if r), 2) if recs else None
+        else:
+            out[s] = (read_stage(run_dir / s) or {}).get("seconds")
+    return out
+
+
+def stage_report(cfg: RunConfig, run_dir: Path, photos: str | None, timings: list, wall: float | None) -> Path:
+    """``RUN/report.json`` (machine-readable) and ``RUN/report.html`` (for a person).
+
+    ``stages``: this invocation's stages (``seconds`` here, ``skipped`` when unchanged) with
+    ``compute_seconds``, the time each took when it actually ran; ``wall_seconds``: this
+    invocation (``curate report`` alone keeps the previous figure).
+    """
     from .sfm_io import load_sfm
     from .stage import read_stage, write_json_atomic
     sfm = load_sfm(run_dir)
     sel = json.loads((run_dir / "select" / "selection.json").read_text())
     photos_rec = sfm.records.get("photos", [])
+    recorded = recorded_seconds(run_dir)
+    if not timings:  # `curate report` alone: the stages as recorded when they ran
+        timings = [{"name": k, "seconds": None, "skipped": None} for k in recorded]
+    timings = [{**t, "compute_seconds": recorded.get(t["name"])} for t in timings]
+    if wall is None and (run_dir / "report.json").is_file():
+        wall = json.loads((run_dir / "report.json").read_text()).get("wall_seconds")
     rep = {"photos": photos, "run_dir": str(run_dir), "budget": sel["budget"], "n_photos": len(photos_rec),
            "n_registered": len(sfm.cameras), "n_pool": len(sel["pool"]), "n_holdout": len(sel["holdout"]),
-           "holdout_every": sel["holdout_every"], "wall_seconds": round(wall, 2), "stages": timings,
-           "stage_seconds": {s: (read_stage(run_dir / s) or {}).get("seconds") for s in ("sfm", "occupancy", "select")},
+           "holdout_every": sel["holdout_every"], "wall_seconds": None if wall is None else round(wall, 2),
+           "stages": timings, "compute_seconds": round(sum(v for v in recorded.values() if v), 2),
            "sfm": {"skipped": [{"file": r["original"], "reason": r.get("reason", "")} for r in photos_rec
                                if r.get("status") == "skipped"],
                    "dropped": [{"file": r["original"], "reason": r.get("reason", "")} for r in photos_rec

@@ -437,11 +437,16 @@ def _timings(run: _Run) -> str:
     st = run.rep.get("stages") or []
     if not st:
         return _note("No stage timings recorded.")
+    def status(t: dict) -> str:
+        return {True: "skipped (unchanged)", False: "run"}.get(t.get("skipped"), "—")
+
     rows = "".join(f'<tr><td class="l">{_e(t.get("name"))}</td><td>{_num(t.get("seconds"), 1)}</td>'
-                   f'<td class="l">{"skipped (unchanged)" if t.get("skipped") else "run"}</td></tr>' for t in st)
-    return ('<table><tr><th class="l">stage</th><th>seconds</th><th class="l">status</th></tr>' + rows
-            + f'<tr><td class="l"><b>wall time</b></td><td>{_num(run.rep.get("wall_seconds"), 1)}</td><td></td></tr>'
-            "</table>")
+                   f'<td>{_num(t.get("compute_seconds"), 1)}</td><td class="l">{status(t)}</td></tr>' for t in st)
+    return ('<table><tr><th class="l">stage</th><th>seconds (this run)</th><th>seconds (when computed)</th>'
+            '<th class="l">status</th></tr>' + rows
+            + f'<tr><td class="l"><b>wall time</b></td><td>{_num(run.rep.get("wall_seconds"), 1)}</td>'
+            f'<td>{_num(run.rep.get("compute_seconds"), 1)}</td><td></td></tr></table>'
+            '<p class="small">Evaluation: the trainings\' seconds summed (they run in parallel).</p>')
 
 
 def _skipped(run: _Run) -> str:
