@@ -247,7 +247,7 @@ def eval_units(cfg: RunConfig, run_dir: Path):
     units = []
     for m in ev.methods:
         if m == "energy":
-            units.append(Unit("energy", cfg.select.method, None, chosen))
+            units.append(Unit("energy", "energy", None, chosen))  # "energy": the selection, whatever its method
         elif m == "random":
             for s in range(ev.random_seeds):
                 units.append(Unit(f"random_s{s}", "random", s,
