@@ -135,7 +135,8 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
                 val_cams: Cameras | None = None, val_images: Sequence | None = None, seed: int = 0,
                 box: tuple | None = None, prior: NodeGrid | None = None,
                 callback: Callable[[int, float, RadianceField], None] | None = None,
-                ckpt_name: str = "field.pt") -> tuple[RadianceField, TrainStats]:
+                ckpt_name: str = "field.pt", init: RadianceField | None = None,
+                start_iter: int = 0) -> tuple[RadianceField, TrainStats]:
     """Train a field on ``images`` seen by ``cams`` (at the cameras' sizes).
 
     Args:
@@ -154,9 +155,28 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
             mask are never sampled.
         callback: ``callback(iteration, train_seconds, field)`` after every iteration
             (its time is not counted; used to evaluate along the way).
+        init, start_iter: resume. ``init`` is trained further in place (its box is kept;
+            ``box`` must be None or equal to it) as if this call were iterations
+            ``start_iter .. start_iter + iters`` of one run: the learning-rate decay, the
+            upsampling schedule (a field coarser than the schedule at ``start_iter`` is
+            upsampled at once) and the occupancy-update schedule continue from there, and
+            ``iters``, ``time_budget_s`` and ``stats.iters`` count this call only. Differences
+            from one uninterrupted run: the Adam optimizer is re-created (its moments restart,
+            as they already do at every upsampling); the field's empty-space mask is reset to
+            all cells active, since the images of this call may see space pruned before, and
+            is first re-pruned ``occ_update_start`` iterations after ``start_iter``; the
+            ray/jitter generator restarts from ``seed`` (pass a different seed per call).
+            Validation / early stopping work as usual (``cfg.val_every = 0`` turns them off).
     Returns:
         (field, stats).
     """
+    if init is not None and not isinstance(init, RadianceField):
+        raise TypeError(f"init must be a RadianceField, got {type(init).__name__}")
+    if int(start_iter) != start_iter or start_iter < 0:
+        raise ValueError(f"start_iter must be a non-negative integer, got {start_iter!r}")
+    if start_iter and init is None:
+        raise ValueError("start_iter > 0 resumes a field: pass it as init")
+    start_iter = int(start_iter)
     check_cameras(cams)
     if iters is None and time_budget_s is None:
         iters = 20000
@@ -177,8 +197,20 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
     RGB = torch.as_tensor(np.concatenate([im.reshape(-1, 3) for im in imgs]), device=dev)  # [NR, 3]
     n_rays = O.shape[0]
 
-    lo, hi = box if box is not None else default_box(cams)
-    fld = RadianceField(cfg, lo, hi).to(dev)
+    if init is not None:
+        lo = (init.centre - init.half_size).detach().cpu().numpy().astype(np.float64)
+        hi = (init.centre + init.half_size).detach().cpu().numpy().astype(np.float64)
+        if box is not None and not (np.allclose(box[0], lo, atol=1e-5) and np.allclose(box[1], hi, atol=1e-5)):
+            raise ValueError(f"box {box} differs from the resumed field's box {lo} .. {hi}")
+        fld = init.to(dev)
+        # the upsampling the schedule has done by start_iter (none if the field is already finer)
+        done = [r for at, r in zip(cfg.upsample_at, cfg.res_schedule[1:]) if at < start_iter and r > fld.res]
+        if done:
+            fld.upsample(max(done))
+        fld.occ.fill_(True)  # new images may see space pruned before
+    else:
+        lo, hi = box if box is not None else default_box(cams)
+        fld = RadianceField(cfg, lo, hi).to(dev)
     from .occupancy import prior_mask
     if prior is not None and prior.mask is not None and not prior.mask.any():
         raise ValueError("the occupancy prior is empty: nothing to train")
@@ -190,12 +222,15 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
              np.round(lo, 3), np.round(hi, 3), dev)
 
     st = TrainStats()
-    best, bad, train_s, it = -np.inf, 0, 0.0, 0
+    best, bad, train_s, it = -np.inf, 0, 0.0, start_iter
     n_dens = 0
     ups = list(zip(cfg.upsample_at, cfg.res_schedule[1:]))
+    if init is not None:
+        ups = [(at, r) for at, r in ups if at >= start_iter and r > fld.res]
+    occ_start = cfg.occ_update_start + (start_iter if init is not None else 0)
     pbar = tqdm(total=iters, desc="train field", leave=False, disable=not log.isEnabledFor(logging.INFO))
     while True:
-        if iters is not None and it >= iters:
+        if iters is not None and it - start_iter >= iters:
             st.stop_reason = "iters"
             break
         if time_budget_s is not None and train_s >= time_budget_s:
@@ -208,8 +243,7 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
                 pm = prior_mask(fld, prior)
                 fld.occ &= pm
             opt = _optimizer(fld, cfg)
-        if cfg.occ_update_every and it >= cfg.occ_update_start and \
-                (it - cfg.occ_update_start) % cfg.occ_update_every == 0:
+        if cfg.occ_update_every and it >= occ_start and (it - occ_start) % cfg.occ_update_every == 0:
             st.occupancy.append((it, fld.update_occupancy(pm)))
         decay = 0.1 ** (it / max(cfg.lr_decay_iters, 1))
         for g in opt.param_groups:
@@ -233,7 +267,7 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
             st.samples_per_ray = n_dens / (50 * cfg.batch_rays)
             n_dens = 0
             pbar.set_postfix(psnr=f"{-10 * np.log10(max(float(mse.detach()), 1e-10)):.2f}",
-                             rps=f"{it * cfg.batch_rays / train_s:.0f}", spr=f"{st.samples_per_ray:.1f}",
+                             rps=f"{(it - start_iter) * cfg.batch_rays / train_s:.0f}", spr=f"{st.samples_per_ray:.1f}",
                              occ=f"{float(fld.occ.float().mean()):.3f}")
         if not np.isfinite(float(mse.detach())):
             raise FloatingPointError(f"non-finite loss at iteration {it}")
@@ -251,8 +285,8 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
                     st.stop_reason = "plateau"
                     break
     pbar.close()
-    st.iters, st.train_seconds = it, train_s
-    st.rays_per_s = it * cfg.batch_rays / max(train_s, 1e-9)
+    st.iters, st.train_seconds = it - start_iter, train_s
+    st.rays_per_s = st.iters * cfg.batch_rays / max(train_s, 1e-9)
     log.info("trained %d iterations in %.1fs (%.0f rays/s, %.1f density samples/ray), stop: %s",
              it, train_s, st.rays_per_s, st.samples_per_ray, st.stop_reason)
     if run_dir is not None:

@@ -164,3 +164,37 @@ def test_errors_for_degenerate_inputs(sphere_scene):
     empty = NodeGrid([-1] * 3, [1] * 3, 8, np.zeros((8, 8, 8), bool))
     with pytest.raises(ValueError, match="prior is empty"):
         train_field(_tiny_cfg(), cams, imgs, iters=5, box=([-1] * 3, [1] * 3), prior=empty)
+
+
+# ---------------------------------------------------------------- resume
+def test_resume_continues_the_schedule(sphere_scene):
+    """Two resumed halves of N iterations: finite, improving loss, and the resolution of one 2N run."""
+    cams, imgs = sphere_scene
+    cfg = _tiny_cfg(upsample_at=(130,))
+    box = ([-1.2] * 3, [1.2] * 3)
+    whole, st_w = train_field(cfg, cams, imgs, iters=200, seed=0, box=box)
+    half, st1 = train_field(cfg, cams[:6], imgs[:6], iters=100, seed=0, box=box)
+    assert half.res == 16
+    again, st2 = train_field(cfg, cams, imgs, iters=100, seed=1, init=half, start_iter=100, box=box)
+    assert again is half and again.res == whole.res == 24 and st2.iters == 100
+    losses = [x[2] for x in st1.loss + st2.loss]
+    assert [x[0] for x in st2.loss] == [150, 200]  # the global iteration count goes on
+    assert all(np.isfinite(losses)) and losses[-1] < 0.5 * losses[0]
+    assert losses[-1] < 2.0 * st_w.loss[-1][2]
+    # a field coarser than the schedule at start_iter is upsampled at once
+    late, _ = train_field(cfg, cams, imgs, iters=1, seed=2, init=train_field(cfg, cams, imgs, iters=2)[0],
+                          start_iter=500)
+    assert late.res == 24
+
+
+def test_resume_errors(sphere_scene):
+    cams, imgs = sphere_scene
+    with pytest.raises(TypeError, match="RadianceField"):
+        train_field(_tiny_cfg(), cams, imgs, iters=5, init="field.pt")
+    with pytest.raises(ValueError, match="non-negative"):
+        train_field(_tiny_cfg(), cams, imgs, iters=5, start_iter=-3)
+    with pytest.raises(ValueError, match="as init"):
+        train_field(_tiny_cfg(), cams, imgs, iters=5, start_iter=10)
+    f = RadianceField(_tiny_cfg(), [-1] * 3, [1] * 3)
+    with pytest.raises(ValueError, match="differs"):
+        train_field(_tiny_cfg(), cams, imgs, iters=5, init=f, start_iter=5, box=([-2] * 3, [2] * 3))
