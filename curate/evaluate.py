@@ -176,11 +176,15 @@ def save_ground_truth(run_dir: str | Path, cams: Cameras, paths: Sequence[str], 
 
 def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg: EvalConfig, cams: Cameras,
               paths: Sequence[str], holdout: Sequence[int], box: tuple,
-              field_paths: dict[str, str] | None = None, progress: bool = True) -> dict[str, dict]:
+              field_paths: dict[str, str] | None = None, progress: bool = True,
+              executor=None) -> dict[str, dict]:
     """Run every unit (finished ones are skipped); {unit key: metrics}.
 
     ``keys[unit.key]`` is the unit's stage key; ``field_paths`` maps a unit key to an
     already trained field (the occupancy stage's pool field serves 'all').
+    ``executor``: any ``concurrent.futures.Executor`` (e.g. a Ray-backed one for a
+    cluster) to submit the trainings to; None: a local process pool (see
+    :func:`auto_workers`), or this process for one worker.
     """
     from .stage import is_fresh
     from tqdm import tqdm
@@ -198,13 +202,19 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), level)
             for u in todo]
     bar = tqdm(total=len(units), initial=len(units) - len(todo), desc="evaluate (trainings)", disable=not progress)
-    if workers <= 1 or len(todo) <= 1:
+    from concurrent.futures import as_completed
+    if executor is not None and todo:
+        futs = {executor.submit(_unit_entry, a): a[1].key for a in args}
+        for f in as_completed(futs):
+            results[futs[f]] = f.result()
+            bar.update(1)
+    elif workers <= 1 or len(todo) <= 1:
         for a in args:
             results[a[1].key] = _unit_entry(a)
             bar.update(1)
     else:
         import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
             futs = {ex.submit(_unit_entry, a): a[1].key for a in args}
             for f in as_completed(futs):

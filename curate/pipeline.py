@@ -267,8 +267,12 @@ def eval_units(cfg: RunConfig, run_dir: Path):
     return units, keys, sel
 
 
-def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
-    """Train every unit (finished units are skipped) -> ``RUN/evaluate``."""
+def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None,
+                   executor=None) -> Path:
+    """Train every unit (finished units are skipped) -> ``RUN/evaluate``.
+
+    ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
+    """
     import shutil
     from .evaluate import eval_cameras, run_units, summarize
     from .stage import write_json_atomic
@@ -286,7 +290,8 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
         raise ValueError("no held-out views: set holdout_every > 0 and register enough images")
     cams = eval_cameras(sfm.cameras, cfg.evaluate.max_side)
     fp = {"all": str(run_dir / "occupancy" / "field.pt")}
-    res = run_units(run_dir, units, keys, cfg.evaluate, cams, paths, hold, default_box(sfm.cameras), fp)
+    res = run_units(run_dir, units, keys, cfg.evaluate, cams, paths, hold, default_box(sfm.cameras), fp,
+                    executor=executor)
     methods, paired, gap = summarize(res)
     write_json_atomic(d / "summary.json", {"methods": methods, "paired": paired, "gap_closed": gap})
     txt = ", ".join(f"{m} {v['psnr']:.2f}" for m, v in methods.items())
@@ -374,11 +379,12 @@ def stage_export(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
 
 
 def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
-        force: bool = False) -> Path:
+        force: bool = False, executor=None) -> Path:
     """The whole pipeline into ``run_dir``; returns the path of ``report.json``.
 
     ``photos``: the photo folder (SfM), or with ``poses`` (a COLMAP model or a
-    transforms.json) the folder the poses' image paths are relative to.
+    transforms.json) the folder the poses' image paths are relative to. ``executor``:
+    a ``concurrent.futures.Executor`` for the evaluation's trainings (None: local processes).
     """
     from .sfm import import_poses, run_sfm
     from .stage import write_json_atomic, config_dict, versions
@@ -403,7 +409,7 @@ def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: s
     stage_occupancy(cfg, run_dir, force, timings)
     stage_select(cfg, run_dir, force, timings)
     if cfg.run_evaluation:
-        stage_evaluate(cfg, run_dir, force, timings)
+        stage_evaluate(cfg, run_dir, force, timings, executor)
     stage_export(cfg, run_dir, force, timings)
     t0 = time.perf_counter()
     out = stage_report(cfg, run_dir, str(photos) if photos else None, timings, time.perf_counter() - t_start)
