@@ -7,10 +7,14 @@ Pipeline (``run_sfm``): ingest (``curate.ingest``: decode, orient, downscale int
 working copies) -> quality (``curate.quality``: sharpness, near-duplicates; drop per
 config) -> SIFT extraction (one shared camera when every photo comes from the same
 camera model at the same size, else one camera per photo) -> matching (exhaustive for
-small pools, sequential for ordered frames, spatial with GPS; never a vocabulary tree,
-so it works offline) -> incremental mapping (largest model kept) -> optional dense
-reconstruction (CUDA only). ``import_poses`` produces the same outputs from an existing
-COLMAP model or a transforms.json.
+small pools, sequential for ordered frames, spatial with GPS; loop detection with a
+vocabulary tree trained on the capture itself, never a download, so it works offline) ->
+incremental mapping (largest model kept; initial pair with >= ``init_min_num_inliers``
+verified inliers) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
+mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
+and config give the same matches and, up to multi-threaded bundle adjustment, the same
+model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
+transforms.json.
 
 Run-folder contract, ``RUN/sfm/``:
 
@@ -216,13 +220,21 @@ def _build_vocab_tree(db: Path, path: Path, seed: int, per_image: int = 1000) ->
 
 
 def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
+    """Match and verify the image pairs of ``matcher``; verification RANSAC is seeded by ``cfg.seed``.
+
+    COLMAP's default verification seed (-1) draws a new one per run: the office walk then got
+    a different set of verified pairs, and a different model, on every run.
+    """
     import pycolmap
     mo = pycolmap.FeatureMatchingOptions()
     mo.num_threads = cfg.num_threads
     mo.guided_matching = cfg.guided_matching
+    vo = pycolmap.TwoViewGeometryOptions()
+    vo.ransac.random_seed = cfg.seed
+    vo.min_num_inliers = cfg.min_num_matches
     dev = pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
     if matcher == "exhaustive":
-        pycolmap.match_exhaustive(db, matching_options=mo, device=dev)
+        pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
     elif matcher == "sequential":
         po = pycolmap.SequentialPairingOptions()
         po.overlap = cfg.sequential_overlap
@@ -233,12 +245,14 @@ def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
             po.vocab_tree_path = str(_build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed))
             po.loop_detection_period = cfg.loop_detection_period
             po.loop_detection_num_images = cfg.loop_detection_num_images
-        pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, device=dev)
+        pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                                  device=dev)
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
         po.ignore_z = True
-        pycolmap.match_spatial(db, matching_options=mo, pairing_options=po, device=dev)
+        pycolmap.match_spatial(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                               device=dev)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
 
@@ -253,6 +267,7 @@ def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progr
     opts.mapper.random_seed = cfg.seed
     opts.triangulation.random_seed = cfg.seed
     opts.min_num_matches = cfg.min_num_matches
+    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
     opts.ba_refine_principal_point = False
     bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
     count = [0]

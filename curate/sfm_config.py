@@ -29,13 +29,18 @@ class SfmConfig:
     sequential_overlap: int = 15      # sequential: match each frame with the next N frames
     sequential_quadratic: bool = True  # sequential: also frames i + 2^k (helps closing loops without a vocab tree)
     loop_detection: bool = True       # sequential: find loops with a vocabulary tree trained on the capture itself
+    #                                   (office: without it the walk splits into 6 models at fast turns)
     loop_detection_period: int = 10   # sequential loop detection: query every N-th frame
     loop_detection_num_images: int = 30  # ... against its N most similar frames
     spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
     guided_matching: bool = False     # COLMAP guided matching (more matches, slower)
     # --- mapping
     min_num_matches: int = 15         # minimum verified matches for an image pair to count
-    seed: int = 0                     # COLMAP's random seed (RANSAC, mapper)
+    init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
+    #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar
+    #                                   initial pair got a wrong relative pose, a kink that bent the walk by 17 deg
+    seed: int = 0                     # random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary
+    #                                   tree's training sample: same photos and config, same matches and model
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
     normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres

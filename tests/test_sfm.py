@@ -53,6 +53,23 @@ def test_pose_errors_zero_for_similar_copy():
     assert e["n_matched"] == 12 and e["rotation_deg_median"] < 1e-6 and e["centre_rel_median"] < 1e-9
 
 
+# ------------------------------------------------------------------ determinism and the initial pair
+@pytest.mark.parametrize("matcher", ["exhaustive", "sequential"])
+def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
+    """Verification RANSAC gets cfg.seed (COLMAP's -1 reseeds every run), the mapper the strict initial pair."""
+    from curate import sfm
+    got: dict = {}
+    monkeypatch.setattr(pycolmap, "match_" + matcher, lambda db, **kw: got.update(kw))
+    sfm._match(small_cfg(seed=7, loop_detection=False), tmp_path / "database.db", matcher)
+    vo = got["verification_options"]
+    assert vo.ransac.random_seed == 7 and vo.min_num_inliers == SfmConfig().min_num_matches
+    monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
+    sfm._map(small_cfg(seed=7, init_min_num_inliers=150), tmp_path / "database.db", tmp_path, tmp_path / "m", 3,
+             progress=False)
+    o = got["options"]
+    assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
+
+
 # ------------------------------------------------------------------ mixed folder: bad files, input untouched, skip
 def test_sfm_on_mixed_folder_and_skip_unchanged(tmp_path):
     photos = make_mixed_folder(tmp_path / "photos", n_good=10, size=400)
