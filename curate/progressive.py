@@ -112,6 +112,8 @@ class PlacementTrace:
     frequency: list[float] = field(default_factory=list)
     n_acceptable: list[int] = field(default_factory=list)
     propose_seconds: list[float] = field(default_factory=list)
+    field_loop: dict | None = None
+    """Set by callers whose ``on_add`` trains a field (per-camera timings)."""
 
 
 def progressive_placement(nodes: np.ndarray, box: tuple, free_box: tuple, cfg: ProgressiveConfig,
@@ -178,34 +180,183 @@ def scene_oracle(scene, probe: tuple[int, int] = (32, 24)):
     return occupied, min_depth
 
 
-def grid_oracle(box_min, box_max, occ: np.ndarray, margin: float, steps: int = 12, probe: tuple[int, int] = (16, 12)):
-    """(occupied, min_depth) callables from a boolean occupancy volume ``occ`` [R, R, R] over a box.
+class GridOracle:
+    """Occupancy callables over a boolean volume ``occ`` [R, R, R] spanning a box, re-read at every
+    call, so the volume may be replaced between steps (e.g. in ``on_add``).
 
-    Points outside the box count as occupied. ``min_depth`` marches ``probe``-sized rays
+    Points outside the box count as occupied. :meth:`min_depth` marches ``probe``-sized rays
     from each camera up to ``margin`` (``steps`` samples each) and returns the distance of
     the first occupied sample along z, or ``margin`` when none is found within it (enough
     for the rejection test, far cheaper than a full depth render).
     """
-    lo, hi = np.asarray(box_min, float), np.asarray(box_max, float)
-    occ = np.asarray(occ, bool)
-    R = np.array(occ.shape)
 
-    def occupied(points):
+    def __init__(self, box_min, box_max, occ: np.ndarray, margin: float, steps: int = 12,
+                 probe: tuple[int, int] = (16, 12)):
+        self.lo, self.hi = np.asarray(box_min, float), np.asarray(box_max, float)
+        self.occ = np.asarray(occ, bool)
+        self.margin, self.steps, self.probe = float(margin), int(steps), probe
+
+    def occupied(self, points) -> np.ndarray:
+        """[n] bool for points [n, 3]."""
+        lo, hi, occ = self.lo, self.hi, self.occ
+        R = np.array(occ.shape)
         p = np.asarray(points, float).reshape(-1, 3)
         inside = np.all((p >= lo) & (p <= hi), axis=1)
         ijk = np.clip(np.rint((p - lo) / np.where(hi > lo, hi - lo, 1) * (R - 1)).astype(int), 0, R - 1)
         return ~inside | occ[ijk[:, 0], ijk[:, 1], ijk[:, 2]]
 
-    def min_depth(cams: Cameras):
-        W, H = probe
+    def min_depth(self, cams: Cameras) -> np.ndarray:
+        """[N] distance of the nearest occupied sample seen within ``margin`` (``margin`` if none)."""
+        W, H = self.probe
+        margin = self.margin
         uu, vv = np.meshgrid((np.arange(W) + 0.5) / W, (np.arange(H) + 0.5) / H)
         x = (uu.ravel()[None] * cams.width[:, None] - cams.cx[:, None]) / cams.fx[:, None]   # [N, W*H]
         y = (vv.ravel()[None] * cams.height[:, None] - cams.cy[:, None]) / cams.fy[:, None]
         d = np.stack([x, y, np.ones_like(x)], -1) @ np.transpose(cams.rotations, (0, 2, 1))
-        out = np.full(len(cams), float(margin))
-        for z in np.linspace(margin / steps, margin, steps)[::-1]:  # far to near: the nearest wins
-            hit = occupied((cams.centres[:, None, :] + z * d).reshape(-1, 3)).reshape(len(cams), -1).any(1)
+        out = np.full(len(cams), margin)
+        for z in np.linspace(margin / self.steps, margin, self.steps)[::-1]:  # far to near: the nearest wins
+            hit = self.occupied((cams.centres[:, None, :] + z * d).reshape(-1, 3)).reshape(len(cams), -1).any(1)
             out[hit] = z
         return out
 
-    return occupied, min_depth
+
+def grid_oracle(box_min, box_max, occ: np.ndarray, margin: float, steps: int = 12, probe: tuple[int, int] = (16, 12)):
+    """(occupied, min_depth) callables from a boolean occupancy volume ``occ`` [R, R, R] over a box
+    (a fixed :class:`GridOracle`)."""
+    o = GridOracle(box_min, box_max, occ, margin, steps, probe)
+    return o.occupied, o.min_depth
+
+
+@dataclass(frozen=True)
+class FieldOccupancyConfig:
+    """How the field-driven loop derives occupancy from the field being trained."""
+
+    threshold: float = 0.1
+    """A node is occupied where the field's opacity across one voxel exceeds this
+    (:func:`curate.occupancy.field_occupancy`)."""
+    res: int = 32
+    """Nodes per axis of the occupancy volume over the box B."""
+    supersample: int = 2
+    """Density probes per axis and voxel."""
+    warmup: int | None = None
+    """Photos taken before the field's occupancy is used (before: only B^f is known free);
+    None: the loop's ``n_free_first``, i.e. the field takes over when candidates leave B^f
+    (the paper's field has then trained 20 x 250 iterations)."""
+    min_iters: int = 1000
+    """...and field iterations trained before it is used (an under-trained field explains the
+    photos with surfaces at wrong depths: it would carve through furniture)."""
+    carve: bool = True
+    """Space no taken photo has seen (beyond the field's depth, or outside every frustum)
+    counts as occupied: a camera is never proposed where nothing was observed."""
+    probe: tuple = (32, 24)
+    """Rays cast through the field's density per taken camera, for the carving."""
+    hit_opacity: float = 0.5
+    """A probe ray's surface is its first occupied sample (``threshold``) or, if nearer, where its
+    accumulated opacity reaches this; a ray with no occupied sample carves nothing."""
+    slack_voxels: float = 1.0
+    """Free space is carved up to this many voxels before a ray's surface."""
+
+
+def first_hit_depth(density_world: Callable, origins: np.ndarray, dirs: np.ndarray, t_max: float, step: float,
+                    voxel: float, threshold: float = 0.1, opacity: float = 0.5, chunk: int = 1 << 20) -> np.ndarray:
+    """[R] depth of the surface along unit rays (origins, dirs [R, 3]) through a world density
+    ``density_world(points [n, 3]) -> [n]``, sampled every ``step`` up to ``t_max``.
+
+    A ray hits at its first sample that is occupied by the occupancy volume's criterion (the
+    opacity across one ``voxel``, ``1 - exp(-sigma voxel)``, exceeds ``threshold``); the depth
+    is that of the hit or, if nearer, where the opacity accumulated along the ray reaches
+    ``opacity``. A ray with no occupied sample returns inf: haze that never forms a surface
+    (an under-trained field) is no evidence of free space.
+    """
+    ts = np.arange(0.5 * step, t_max, step)  # [S]
+    out = np.full(len(origins), np.inf)
+    per = max(1, chunk // max(len(ts), 1))
+    for s in range(0, len(origins), per):
+        o, d = origins[s:s + per], dirs[s:s + per]
+        sig = np.clip(np.asarray(density_world((o[:, None, :] + ts[None, :, None] * d[:, None, :]).reshape(-1, 3)),
+                                 float).reshape(len(o), len(ts)), 0, None)
+        occ = 1 - np.exp(-sig * voxel) > threshold  # [n, S]
+        acc = 1 - np.exp(-np.cumsum(sig * step, 1)) >= opacity
+        t_occ = np.where(occ.any(1), ts[occ.argmax(1)], np.inf)
+        t_acc = np.where(acc.any(1), ts[acc.argmax(1)], np.inf)
+        out[s:s + per] = np.where(np.isfinite(t_occ), np.minimum(t_occ, t_acc), np.inf)
+    return out
+
+
+def observed_free(density_world: Callable, cams: Cameras, points: np.ndarray, t_max: float, step: float,
+                  voxel: float, threshold: float = 0.1, probe: tuple = (32, 24), slack: float = 0.1,
+                  opacity: float = 0.5, box: tuple | None = None) -> np.ndarray:
+    """[M] bool: points [M, 3] seen as free space by some camera of ``cams``.
+
+    Each camera casts a ``probe``-sized grid of rays through the density and finds each
+    ray's surface (:func:`first_hit_depth`); a point is observed free when it projects into
+    a probe pixel whose ray hit a surface, and lies closer than that depth minus ``slack``.
+    Rays that hit no surface (the field has not converged there), or (``box`` given) hit
+    one outside ``box`` grown by ``voxel``, carve nothing.
+    """
+    W, H = probe
+    pts = np.asarray(points, float).reshape(-1, 3)
+    free = np.zeros(len(pts), bool)
+    if len(cams) == 0:
+        return free
+    small = Cameras(cams.c2w, cams.fx * W / cams.width, cams.fy * H / cams.height,
+                    cams.cx * W / cams.width, cams.cy * H / cams.height, W, H)
+    uu, vv = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
+    for k in range(len(small)):
+        x, y = (uu.ravel() - small.cx[k]) / small.fx[k], (vv.ravel() - small.cy[k]) / small.fy[k]
+        d = np.stack([x, y, np.ones_like(x)], 1) @ small.rotations[k].T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        depth = first_hit_depth(density_world, np.broadcast_to(small.centres[k], d.shape), d, t_max, step,
+                                voxel, threshold, opacity)
+        if box is not None:
+            hit = small.centres[k] + np.where(np.isfinite(depth), depth, 0)[:, None] * d
+            inside = np.all((hit >= np.asarray(box[0]) - voxel) & (hit <= np.asarray(box[1]) + voxel), axis=1)
+            depth = np.where(inside, depth, np.inf)
+        uv, z = small[k].project(pts)
+        u, v, z = uv[0, :, 0], uv[0, :, 1], z[0]
+        ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+        pix = np.clip(v.astype(int), 0, H - 1) * W + np.clip(u.astype(int), 0, W - 1)
+        dist = np.linalg.norm(pts - small.centres[k], axis=1)
+        free |= ok & (dist < depth[pix] - slack)
+    return free
+
+
+class FieldOracle(GridOracle):
+    """Occupancy from a radiance field trained as cameras are added (the paper's setting).
+
+    The volume is a ``cfg.res``^3 node grid over the box B. The free box B^f is free at all
+    times (the user's word). Until :meth:`update` is first called (the loop calls it once
+    ``cfg.warmup`` photos are taken and the field trained ``cfg.min_iters`` iterations),
+    everything outside B^f is unknown and counts as occupied, so the first cameras stay in
+    B^f. Each update sets: occupied = the field's opacity across a voxel > ``cfg.threshold``,
+    or (``cfg.carve``) not observed free by any taken camera (:func:`observed_free`, whose
+    ray surfaces must lie in B, give or take a voxel: a surface beyond B is the field's
+    background, no evidence of free space); minus B^f.
+    """
+
+    def __init__(self, box: tuple, free_box: tuple, margin: float, cfg: FieldOccupancyConfig = FieldOccupancyConfig(),
+                 steps: int = 12, probe: tuple[int, int] = (16, 12)):
+        from .grid import NodeGrid
+        self.cfg = cfg
+        self.grid = NodeGrid(box[0], box[1], cfg.res)
+        nodes = self.grid.all_nodes()
+        flo, fhi = (np.asarray(b, float) for b in free_box)
+        self.in_free = np.all((nodes >= flo) & (nodes <= fhi), axis=1).reshape((cfg.res,) * 3)
+        super().__init__(self.grid.box_min, self.grid.box_max, ~self.in_free, margin, steps, probe)
+        self.updates = 0
+
+    def update(self, field, cams: Cameras) -> float:
+        """Re-derive the volume from ``field`` and the cameras taken so far; returns the occupied fraction."""
+        from .occupancy import RefineConfig, field_occupancy
+        c = self.cfg
+        occ = field_occupancy(field, self.grid, RefineConfig(threshold=c.threshold, supersample=c.supersample)) > c.threshold
+        if c.carve:
+            vox = float(np.max((self.grid.box_max - self.grid.box_min) / max(c.res - 1, 1)))
+            diag = float(np.linalg.norm(self.grid.box_max - self.grid.box_min))
+            seen = observed_free(field.density_world, cams, self.grid.all_nodes(), t_max=diag, step=0.5 * vox,
+                                 voxel=vox, threshold=c.threshold, probe=tuple(c.probe), slack=c.slack_voxels * vox,
+                                 opacity=c.hit_opacity, box=(self.grid.box_min, self.grid.box_max))
+            occ |= ~seen.reshape(occ.shape)
+        self.occ = occ & ~self.in_free
+        self.updates += 1
+        return float(self.occ.mean())

@@ -11,6 +11,17 @@ For a procedural room (:mod:`curate.synthetic`), each method places ``budget`` c
 The photos are rendered, the same field is trained on each set, and PSNR/SSIM are measured
 on three test sets drawn the hemisphere, random and ours ways (all distinct from every
 training set), as in the paper's table.
+
+Occupancy for ours (``SimulateConfig.occupancy``): ``"oracle"`` rejects candidates with
+the scene's exact geometry; ``"field"`` is the paper's setting (Algorithm 1): after each
+added camera its photo is rendered ("taken"), the loop's field resumes training for
+``train_between`` iterations on all photos taken so far, and the next step's occupancy
+comes from that field (:class:`curate.progressive.FieldOracle`: thresholded density, and
+unobserved space counts as occupied; the free box B^f is free throughout, and is the only
+known free space until ``field_occupancy.warmup`` photos are taken). The baselines and
+the three test sets always use the scene's occupancy (the test sets are the measuring
+instrument: the same for both variants at one seed). The final, compared training of
+every method is a fresh field on its photos, as for the baselines.
 """
 
 from __future__ import annotations
@@ -26,7 +37,8 @@ import numpy as np
 from .baselines import farthest_view, fibonacci_hemisphere
 from .cameras import Cameras, look_at
 from .grid import NodeGrid
-from .progressive import CameraSpec, ProgressiveConfig, acceptable, draw_acceptable, progressive_placement, scene_oracle
+from .progressive import (CameraSpec, FieldOccupancyConfig, FieldOracle, ProgressiveConfig, acceptable,
+                          draw_acceptable, progressive_placement, scene_oracle)
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +74,22 @@ class SimulateConfig:
     """Or a fixed number of iterations (overrides train_seconds when set)."""
     seed: int = 0
     """Seed of every random draw (placements, test sets, training)."""
+    occupancy: str = "oracle"
+    """Occupancy of ours' rejection test: 'oracle' (the scene's geometry) or 'field' (the field
+    trained as cameras are added, the paper's setting; see the module docstring)."""
+    train_between: int = 250
+    """'field': training iterations of the loop's field after each added camera (the paper: 250)."""
+    field_occupancy: FieldOccupancyConfig = field(default_factory=FieldOccupancyConfig)
+    """'field': how occupancy is derived from the loop's field."""
+    loop_field: object = None
+    """'field': the loop field's :class:`curate.field.FieldConfig` (None: the default field without
+    validation, its empty-space mask re-pruned every min(100, train_between / 2) iterations)."""
+
+    def __post_init__(self):
+        if self.occupancy not in ("oracle", "field"):
+            raise ValueError(f"occupancy must be 'oracle' or 'field', got {self.occupancy!r}")
+        if self.train_between < 1:
+            raise ValueError("train_between must be >= 1")
 
 
 def surface_nodes(scene, res: int) -> NodeGrid:
@@ -95,13 +123,15 @@ def hemisphere_set(scene, n: int, radius: float, spec: CameraSpec, margin: float
     return pool[farthest_view(pool, n, rot_weight=0.0)]
 
 
-def place(method: str, scene, cfg: SimulateConfig, nodes: np.ndarray, seed: int, n: int):
-    """(cameras [n], trace or None) placed by ``method``."""
+def place(method: str, scene, cfg: SimulateConfig, nodes: np.ndarray, seed: int, n: int, occupancy: str = "oracle"):
+    """(cameras [n], trace or None) placed by ``method``; ``occupancy`` is ours' ('oracle' or 'field')."""
     occupied, min_depth = scene_oracle(scene)
     pc = replace(cfg.placement, budget=n, seed=seed)
     lo, hi = scene.interior
     box = (lo + 0.05, hi - 0.05)
     rng = np.random.default_rng(seed)
+    if method == "ours" and occupancy == "field":
+        return field_placement(scene, cfg, nodes, pc, box)
     if method == "ours":
         return progressive_placement(nodes, box, scene.free_box, pc, occupied, min_depth)
     if method == "random":
@@ -112,6 +142,53 @@ def place(method: str, scene, cfg: SimulateConfig, nodes: np.ndarray, seed: int,
         pool = draw_acceptable(rng, *box, cfg.fvs_pool, pc, occupied, min_depth)
         return pool[farthest_view(pool, n, rot_weight=1.0)], None
     raise ValueError(f"unknown method {method!r}")
+
+
+def field_placement(scene, cfg: SimulateConfig, nodes: np.ndarray, pc: ProgressiveConfig, box: tuple):
+    """Algorithm 1 with occupancy from the field being trained (see the module docstring).
+
+    Returns (cameras, trace); the trace gets ``field_loop``: per added camera the seconds of
+    rendering the photo, of training, of deriving occupancy, and the occupied fraction.
+    """
+    from .field import FieldConfig
+    from .train import train_field
+    oracle = FieldOracle(scene.interior, scene.free_box, pc.margin, cfg.field_occupancy)
+    tb = cfg.train_between
+    warmup = pc.n_free_first if cfg.field_occupancy.warmup is None else cfg.field_occupancy.warmup
+    u = max(1, min(100, tb // 2))  # re-prune the empty-space mask within each resumed call
+    fcfg = cfg.loop_field or FieldConfig(val_every=0, occ_update_start=u, occ_update_every=u)
+    images: list = []
+    st = {"field": None, "iters": 0}
+    loop = {"render_s": [], "train_s": [], "occupancy_s": [], "occupied_fraction": [], "iters": [],
+            "false_free": []}
+    # diagnostics only: the scene's occupancy at the volume's nodes, faces of B excluded (the walls)
+    truth = scene.occupied(oracle.grid.all_nodes()).reshape(oracle.occ.shape)
+    inner = np.zeros_like(truth)
+    inner[1:-1, 1:-1, 1:-1] = True
+
+    def on_add(step, placed):
+        t0 = time.perf_counter()
+        images.append(scene.render(placed[len(placed) - 1:])[0][0])
+        t1 = time.perf_counter()
+        if len(placed) >= 2:  # a field needs two views
+            st["field"], ts = train_field(fcfg, placed, images, iters=tb, seed=pc.seed + st["iters"],
+                                          box=scene.interior, init=st["field"], start_iter=st["iters"])
+            st["iters"] += ts.iters
+        t2 = time.perf_counter()
+        frac = float(oracle.occ.mean())
+        if st["field"] is not None and len(placed) >= warmup and st["iters"] >= cfg.field_occupancy.min_iters:
+            frac = oracle.update(st["field"], placed)
+        t3 = time.perf_counter()
+        free = ~oracle.occ & inner
+        false_free = float((truth & free).sum() / max(free.sum(), 1))  # free nodes that are solid
+        for k, v in zip(("render_s", "train_s", "occupancy_s", "occupied_fraction", "iters", "false_free"),
+                        (t1 - t0, t2 - t1, t3 - t2, frac, st["iters"], false_free)):
+            loop[k].append(v)
+
+    cams, trace = progressive_placement(nodes, box, scene.free_box, pc, oracle.occupied, oracle.min_depth,
+                                        on_add=on_add)
+    trace.field_loop = {**loop, "occupancy_updates": oracle.updates}
+    return cams, trace
 
 
 def run_simulation(cfg: SimulateConfig, out_dir: str | Path, train_fn=None, progress: bool = True) -> dict:
@@ -137,7 +214,7 @@ def run_simulation(cfg: SimulateConfig, out_dir: str | Path, train_fn=None, prog
     trains, traces = {}, {}
     for m in cfg.methods:
         t0 = time.perf_counter()
-        trains[m], traces[m] = place(m, scene, cfg, nodes, cfg.seed, cfg.budget)
+        trains[m], traces[m] = place(m, scene, cfg, nodes, cfg.seed, cfg.budget, cfg.occupancy)
         timings[f"place_{m}_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     test_imgs = {k: scene.render(c)[0] for k, c in tests.items()}
@@ -162,7 +239,12 @@ def run_simulation(cfg: SimulateConfig, out_dir: str | Path, train_fn=None, prog
         "table": table,
         "ssim": {m: {t: float(np.mean(results[m][t]["ssim"])) for t in TEST_SETS} for m in cfg.methods},
         "per_view": results,
+        "occupancy": cfg.occupancy,
+        "occupancy_note": {"oracle": "ours rejects candidates with the scene's exact occupancy",
+                           "field": "ours rejects candidates with occupancy from the field trained as cameras "
+                                    "are added (Algorithm 1)"}[cfg.occupancy] + "; baselines and test sets: scene",
         "propose_seconds_per_camera": float(np.median(ours_trace.propose_seconds)) if ours_trace else None,
+        "field_loop": _field_loop_summary(cfg, ours_trace),
         "energy_curve": ours_trace.energy if ours_trace else [],
         "cameras": {m: c.to_dict() for m, c in trains.items()},
         "test_cameras": {k: c.to_dict() for k, c in tests.items()},
@@ -172,6 +254,23 @@ def run_simulation(cfg: SimulateConfig, out_dir: str | Path, train_fn=None, prog
     from .report import write_simulate_html
     write_simulate_html(out)
     return report
+
+
+def _field_loop_summary(cfg: SimulateConfig, trace) -> dict | None:
+    """The field-driven loop's settings and per-camera timings (None for the oracle variant)."""
+    fl = getattr(trace, "field_loop", None)
+    if fl is None:
+        return None
+    from dataclasses import asdict
+    med = lambda v: float(np.median(v)) if len(v) else None  # noqa: E731
+    return {"train_between": cfg.train_between, "settings": asdict(cfg.field_occupancy),
+            "propose_s_per_camera": med(trace.propose_seconds), "render_s_per_camera": med(fl["render_s"]),
+            "train_s_per_camera": med(fl["train_s"]), "occupancy_s_per_camera": med(fl["occupancy_s"]),
+            "total_propose_s": float(np.sum(trace.propose_seconds)), "total_train_s": float(np.sum(fl["train_s"])),
+            "total_occupancy_s": float(np.sum(fl["occupancy_s"])), "field_iters": fl["iters"][-1] if fl["iters"] else 0,
+            "occupancy_updates": fl["occupancy_updates"], "occupied_fraction": fl["occupied_fraction"],
+            "false_free_fraction": fl["false_free"],
+            "per_camera": {k: fl[k] for k in ("render_s", "train_s", "occupancy_s")}}
 
 
 def _default_train(cfg: SimulateConfig):

@@ -77,3 +77,54 @@ def test_grid_oracle_agrees_with_scene(room):
     near_exact = exact(cams) < 0.5
     near_grid = min_depth(cams) < 0.5
     assert (near_exact == near_grid).mean() > 0.85
+
+
+class _ExactField:
+    """A stand-in for a trained field: opaque exactly where the scene is occupied."""
+
+    def __init__(self, scene):
+        self.scene = scene
+
+    def density_world(self, x):
+        return np.where(self.scene.occupied(np.asarray(x)), 1e3, 0.0)
+
+
+def test_field_oracle_free_box_then_field(room):
+    from scipy import ndimage
+    from curate.progressive import FieldOccupancyConfig, FieldOracle
+    s, _ = room
+    cfg = FieldOccupancyConfig(res=20, probe=(24, 18))
+    o = FieldOracle(s.interior, s.free_box, 0.3, cfg)
+    nodes = o.grid.all_nodes()
+    flo, fhi = s.free_box
+    in_free = np.all((nodes >= flo) & (nodes <= fhi), axis=1)
+    # Before any update only B^f is free.
+    assert np.array_equal(o.occupied(nodes), ~in_free)
+    cams = random_cameras(np.random.default_rng(2), flo, fhi, 12, CameraSpec(), max_pitch_deg=30)
+    frac = o.update(_ExactField(s), cams)
+    assert 0 < frac < 1 and o.updates == 1
+    occ = o.occupied(nodes)
+    assert not occ[in_free].any()  # B^f stays free
+    truth = s.occupied(nodes).reshape(o.occ.shape)
+    deep = ndimage.binary_erosion(truth)  # solid nodes more than one voxel inside
+    assert not (deep.ravel() & ~occ).any()  # with an exact field, no solid is called free
+    assert (~occ & ~in_free).sum() > 0.2 * (~truth.ravel() & ~in_free).sum()  # the field frees space beyond B^f
+    # Unobserved space counts as occupied: with no photo, only B^f is free even where the field is empty.
+    o.update(_ExactField(s), cams[:0])
+    assert np.array_equal(o.occupied(nodes), ~in_free)
+
+
+def test_first_hit_depth_on_a_slab():
+    from curate.progressive import first_hit_depth
+    dens = lambda p: np.where(p[:, 0] > 2.0, 5.0, 0.0)  # noqa: E731  opaque slab beyond x = 2
+    o = np.zeros((3, 3))
+    d = np.array([[1.0, 0, 0], [0, 1.0, 0], [np.sqrt(0.5), np.sqrt(0.5), 0]])
+    t = first_hit_depth(dens, o, d, t_max=6.0, step=0.01, voxel=0.2)
+    assert abs(t[0] - 2.0) < 0.02 and np.isinf(t[1])
+    assert abs(t[2] - 2.0 * np.sqrt(2)) < 0.02  # the slab is entered at t = 2 sqrt 2
+    # Haze below the threshold is no surface, even where it adds up to an opaque ray.
+    haze = lambda p: np.full(len(p), 0.3)  # noqa: E731  0.06 opacity per voxel, 0.5 after 2.3
+    assert np.isinf(first_hit_depth(haze, o, d, t_max=6.0, step=0.01, voxel=0.2)).all()
+    # A surface behind haze: the depth where the haze's opacity reaches 0.5, if nearer.
+    both = lambda p: haze(p) + dens(p) * (p[:, 0] > 4.0)  # noqa: E731
+    assert abs(first_hit_depth(both, o[:1], d[:1], t_max=6.0, step=0.01, voxel=0.2)[0] - np.log(2) / 0.3) < 0.02
