@@ -234,6 +234,7 @@ def cmd_simulate(args) -> int:
     cfg = SimulateConfig(scene=args.scene, scene_seed=args.scene_seed, budget=args.budget, n_test=args.n_test,
                          node_res=args.res, train_seconds=args.train_seconds,
                          train_iters=args.train_iters or None, seed=args.seed,
+                         occupancy=args.occupancy, train_between=args.train_between,
                          placement=ProgressiveConfig(n_candidates=args.candidates, energy=EnergyConfig(gamma=args.gamma),
                                                      camera=CameraSpec(w, h)))
     if args.methods:
@@ -246,7 +247,8 @@ def cmd_simulate(args) -> int:
     print("train/test  " + "".join(f"{t:>12s}" for t in cols))
     for m, row in rep["table"].items():
         print(f"{m:12s}" + "".join(f"{row[t]:12.2f}" for t in cols))
-    print(f"PSNR (dB) on held-out test views; {rep['wall_seconds']:.0f}s; report in {args.out}/report.json")
+    print(f"PSNR (dB) on held-out test views; ours' occupancy: {rep['occupancy']}; {rep['wall_seconds']:.0f}s; "
+          f"report in {args.out}/report.json")
     return 0
 
 
@@ -446,6 +448,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--train-seconds", type=float, default=120.0, help="field training per method (default 120)")
     s.add_argument("--train-iters", type=int, default=0, help="fixed training iterations instead of seconds")
     s.add_argument("--methods", default="", help="comma list (default ours,random,hemisphere,fvs)")
+    s.add_argument("--occupancy", default="oracle", choices=["oracle", "field"],
+                   help="ours' occupancy: the scene's geometry (default) or the field trained as cameras are added")
+    s.add_argument("--train-between", type=int, default=250,
+                   help="--occupancy field: field iterations after each added camera (default 250)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", required=True)
     s.add_argument("--json", action="store_true")
