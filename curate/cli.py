@@ -304,6 +304,33 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_batch(args) -> int:
+    from .batch import read_list, run_batch
+    from .executors import RayMissing
+    cfg = _run_cfg(args)
+    folders = list(args.folders)
+    if args.list:
+        try:
+            folders += read_list(args.list)
+        except OSError as e:
+            raise CliError(f"--list: {e}")
+    if not folders:
+        raise CliError("give photo folders, or --list FILE")
+    try:
+        summ = run_batch(folders, args.out, cfg, executor=args.executor, jobs=args.jobs,
+                         ray_address=args.ray_address, force=args.force)
+    except (RayMissing, ValueError) as e:
+        raise CliError(str(e))
+    for r in summ["rows"]:
+        p = r["psnr"]
+        print(f"{r['name']:24s} {r['status']:6s} " + (f"{r['chosen']}/{r['registered']} chosen, PSNR selection "
+              f"{p['energy'] or float('nan'):.2f} random {p['random'] or float('nan'):.2f}" if r["status"] == "ok"
+              else r["reason"]))
+    print(f"summary: {Path(args.out) / 'summary.html'} ({summ['n_ok']} ok, {summ['n_failed']} failed, "
+          f"{summ['wall_seconds']:.0f}s)")
+    return 0 if summ["n_failed"] == 0 else 1
+
+
 def cmd_stage(args) -> int:
     """occupancy / evaluate / report / export on an existing run folder, with its saved config."""
     from . import pipeline as pl
@@ -347,6 +374,26 @@ def _size(text: str):
         return w, h
     except (ValueError, AssertionError):
         raise argparse.ArgumentTypeError(f"--size wants WIDTHxHEIGHT, e.g. 160x120, got {text!r}")
+
+
+def _add_run_options(s: argparse.ArgumentParser) -> None:
+    """The options of `curate run` that `curate batch` shares."""
+    s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
+    s.add_argument("--method", default="energy", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
+                                                            "hemisphere"],
+                   help="selection method (default energy: the paper's; coverage: pool coverage)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
+    s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
+    s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
+    s.add_argument("--iters", type=int, default=800, help="field training iterations per subset (default 800)")
+    s.add_argument("--eval-size", type=int, default=240, help="longer side of training/test images (default 240)")
+    s.add_argument("--workers", type=int, default=0, help="parallel trainings (default: one per core)")
+    s.add_argument("--no-evaluate", action="store_true", help="skip the trainings (selection, report, export only)")
+    s.add_argument("--export-mode", default="link", choices=["link", "copy"], help="export links or copies")
+    s.add_argument("--max-size", type=int, default=1600, help="SfM working copies' longer side (default 1600)")
+    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
+    s.add_argument("--force", action="store_true", help="redo every stage")
+    _add_energy_args(s)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -403,24 +450,25 @@ def build_parser() -> argparse.ArgumentParser:
                        "RUN/report.html) and export (RUN/export). Unchanged stages are skipped on a re-run.")
     s.add_argument("photos", nargs="?", default=None, help="the photo folder")
     s.add_argument("--out", required=True, help="run folder")
-    s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
     s.add_argument("--poses", default=None, help="import this COLMAP model or transforms.json instead of SfM")
-    s.add_argument("--method", default="energy", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
-                                                            "hemisphere"],
-                   help="selection method (default energy: the paper's; coverage: pool coverage)")
-    s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
-    s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
-    s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
-    s.add_argument("--iters", type=int, default=800, help="field training iterations per subset (default 800)")
-    s.add_argument("--eval-size", type=int, default=240, help="longer side of training/test images (default 240)")
-    s.add_argument("--workers", type=int, default=0, help="parallel trainings (default: one per core)")
-    s.add_argument("--no-evaluate", action="store_true", help="skip the trainings (selection, report, export only)")
-    s.add_argument("--export-mode", default="link", choices=["link", "copy"], help="export links or copies")
-    s.add_argument("--max-size", type=int, default=1600, help="SfM working copies' longer side (default 1600)")
-    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
-    s.add_argument("--force", action="store_true", help="redo every stage")
-    _add_energy_args(s)
+    _add_run_options(s)
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("batch", help="curate many photo folders (locally or on a Ray cluster), with a summary",
+                       description="`curate run` on every folder: RUNS/<name>/ per folder, RUNS/summary.json and "
+                       "RUNS/summary.html. A folder's poses: its transforms.json, else its sparse/0 (COLMAP), else "
+                       "SfM. A failing folder is reported failed, the others go on; a re-run resumes.")
+    s.add_argument("folders", nargs="*", help="photo folders")
+    s.add_argument("--list", default=None, help="a text file listing folders, one a line (relative to the file)")
+    s.add_argument("--out", required=True, help="the batch folder (RUNS)")
+    s.add_argument("--executor", default="local", choices=["local", "ray"],
+                   help="local: a process per folder (default); ray: Ray tasks, trainings in parallel on the cluster")
+    s.add_argument("--ray-address", default=None,
+                   help="with --executor ray: 'auto' or HOST:PORT of a running cluster (default: a local instance)")
+    s.add_argument("--jobs", type=int, default=0,
+                   help="folders at once (default: one per core, capped by memory; ray: the cluster's CPUs)")
+    _add_run_options(s)
+    s.set_defaults(func=cmd_batch)
 
     for name, text in (("occupancy", "occupancy grid and pool field of a run folder"),
                        ("evaluate", "train and score the subsets of a run folder"),

@@ -8,4 +8,5 @@ if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && ! dpkg -s libusb-
   apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null
 fi
 "$PY" -m pip install -q --disable-pip-version-check "torch==2.13.0"
-"$PY" -m pip install -q --disable-pip-version-check -e ".[test]"
+# ray: `curate batch --executor ray` and its test (wheel ~80 MB, ~250 MB installed, ~25 s)
+"$PY" -m pip install -q --disable-pip-version-check -e ".[test,ray]"
