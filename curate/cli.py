@@ -379,9 +379,9 @@ def _size(text: str):
 def _add_run_options(s: argparse.ArgumentParser) -> None:
     """The options of `curate run` that `curate batch` shares."""
     s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
-    s.add_argument("--method", default="energy", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
+    s.add_argument("--method", default="coverage", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
                                                             "hemisphere"],
-                   help="selection method (default energy: the paper's; coverage: pool coverage)")
+                   help="selection method (default coverage: pool coverage; energy: the paper's)")
     s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
     s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
     s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
@@ -434,9 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "transforms.json, selected.txt and selection.json in --out.")
     s.add_argument("input", help="transforms.json, a COLMAP model folder, cameras.json, or a run folder")
     s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
-    s.add_argument("--method", default="energy", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
+    s.add_argument("--method", default="coverage", choices=["coverage", "coverage+energy", "energy", "random", "fvs",
                                                             "hemisphere"],
-                   help="selection method (default energy: the paper's; coverage: pool coverage)")
+                   help="selection method (default coverage: pool coverage; energy: the paper's)")
     s.add_argument("--seed", type=int, default=0, help="seed of the random baseline")
     s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
     s.add_argument("--json", action="store_true", help="print one JSON object")

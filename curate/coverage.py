@@ -60,7 +60,7 @@ class CoverageConfig:
     """"cells": views of a cell after which it counts fully (T)."""
     cell_power: float = 1.0
     """"cells": a cell's weight is (pool views observing it) ** cell_power (0: every observed cell alike)."""
-    similarity: str = "cells"
+    similarity: str = "cells+pose"
     """"views": "cells" (overlap of observed (node, direction-bin) cells), "pose" (centre distance and
     viewing angle kernel) or "cells+pose" (their mean)."""
     pos_scale: float | None = None

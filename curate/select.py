@@ -28,7 +28,7 @@ adds the paper's energy to it as a second term (see :class:`SelectConfig`)."""
 class SelectConfig:
     """How to choose a subset."""
 
-    method: str = "energy"
+    method: str = "coverage"
     """One of "energy" (the paper: greedy on its energy), "coverage" (facility location over the
     pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms), "random", "fvs"
     (farthest-view sampling), "hemisphere"."""

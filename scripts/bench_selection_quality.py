@@ -4,7 +4,8 @@ Per scene: a run folder under ``--out`` (known poses imported, no SfM; the occup
 trains the pool field once, which is also the 'all' ceiling), then for each budget and
 method a subset of the pool, and one field trained per (subset, training seed) with the
 SAME :class:`curate.evaluate.EvalConfig` through :func:`curate.evaluate.run_units`
-(units ``RUN/evaluate/q_<method>_b<budget>_t<seed>``, keyed with
+(units ``RUN/evaluate/q_<method>_b<budget>_t<seed>``, the default's folder named
+``q_default-<hash of its SelectConfig>_...``, keyed with
 :func:`curate.stage.stage_key`, so a re-run skips finished trainings).
 
 Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
@@ -100,7 +101,8 @@ def _variants():
     from curate.select import SelectConfig
     return {"fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
-            "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose"))}
+            "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
+            "cov_cells": SelectConfig("coverage", coverage=CoverageConfig(similarity="cells"))}
 
 
 # ------------------------------------------------------------------ proxies
@@ -132,9 +134,11 @@ def main(argv=None) -> int:
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)
+    ap.add_argument("--one-seed", default="", help="selection methods trained with training seed 0 only (comma list)")
     ap.add_argument("--methods", default="default,energy,fvs,random,all")
     ap.add_argument("--extra", default="", help="more selection methods: METHODS names, or variants "
-                    "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1)")
+                    "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1), "
+                    "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone)")
     ap.add_argument("--max-side", type=int, default=160)
     ap.add_argument("--iters", type=int, default=600)
     ap.add_argument("--holdout-every", type=int, default=14)
@@ -157,6 +161,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=1)
     default = SelectConfig()
+    from curate.stage import stage_key as _sk
+    default_tag = _sk(default)[:6]
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
     sel_methods = [m for m in methods if m not in ("random", "all")]
     rows, paired, series = [], [], {}
@@ -193,12 +199,13 @@ def main(argv=None) -> int:
                     timing[m] = round(s.seconds, 3)
             prox = {m: [proxies(pc, hc, cs_hold, ch) for ch in v] for m, v in subsets.items()}
             units, groups = [], {}
+            label = {"default": f"default-{default_tag}"}   # the folder names a default's variant
             if not args.proxy_only:
                 for m, subs in subsets.items():
                     for si, ch in enumerate(subs):
-                        seeds = [0] if m == "random" else list(range(args.train_seeds))
+                        seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
                         for t in seeds:
-                            key = f"q_{m}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}"
+                            key = f"q_{label.get(m, m)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}"
                             u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
                             groups.setdefault(t, []).append(u)
                 if "all" in methods:
@@ -214,7 +221,7 @@ def main(argv=None) -> int:
             # per method: per-view PSNR averaged over its trainings (random: over its seeds)
             per_view, per_run = {}, {}
             for m in methods:
-                rs = [r for k, r in results.items() if (k == "all" if m == "all" else k.startswith(f"q_{m}_"))
+                rs = [r for k, r in results.items() if (k == "all" if m == "all" else k.startswith(f"q_{label.get(m, m)}_"))
                       and (m == "all" or f"_b{B}_" in k)]
                 if not rs:
                     continue
