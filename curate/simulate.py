@@ -31,6 +31,7 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +40,9 @@ from .cameras import Cameras, look_at
 from .grid import NodeGrid
 from .progressive import (CameraSpec, FieldOccupancyConfig, FieldOracle, ProgressiveConfig, acceptable,
                           draw_acceptable, progressive_placement, scene_oracle)
+
+if TYPE_CHECKING:
+    from .field import FieldConfig
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +85,7 @@ class SimulateConfig:
     """'field': training iterations of the loop's field after each added camera (the paper: 250)."""
     field_occupancy: FieldOccupancyConfig = field(default_factory=FieldOccupancyConfig)
     """'field': how occupancy is derived from the loop's field."""
-    loop_field: object = None
+    loop_field: FieldConfig | None = None
     """'field': the loop field's :class:`curate.field.FieldConfig` (None: the default field without
     validation, its empty-space mask re-pruned every min(100, train_between / 2) iterations)."""
 
