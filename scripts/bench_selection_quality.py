@@ -22,7 +22,7 @@ Per-view paired differences (95% t intervals over the held-out views): default -
 method's per-view PSNR is first averaged over its training seeds.
 
 Prints a table per scene and budget, and ONE JSON line last; writes
-``<out>/quality_psnr.svg`` (PSNR against budget per method, one chart per scene).
+``<out>/quality_psnr_<scenes>.svg`` (PSNR against budget per method, one chart per scene).
 
 Usage:
   nice -n 5 python scripts/bench_selection_quality.py --scenes office --budgets 60 --train-seeds 2
@@ -266,7 +266,7 @@ def main(argv=None) -> int:
         for scene, ser in series.items():
             s = {m: ([x for x, _ in sorted(v)], [y for _, y in sorted(v)]) for m, v in ser.items()}
             svg.append(line_chart(s, f"{scene}: held-out PSNR", "images chosen", "PSNR (dB)"))
-        p = out / "quality_psnr.svg"
+        p = out / f"quality_psnr_{'_'.join(series)}.svg"
         if len(svg) == 1:
             p.write_text(svg[0])
         else:  # stack the charts in one SVG
