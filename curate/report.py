@@ -32,6 +32,13 @@ __all__ = ["write_html", "floorplan", "top_down_axes"]
 
 METHOD_ORDER = ("energy", "random", "fvs", "all")
 METHOD_LABEL = {"energy": "energy (ours)", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
+SELECTION_NAME = {"energy": "the paper's energy", "coverage": "pool coverage", "coverage+energy": "coverage + energy"}
+
+
+def _selection_label(run) -> str:
+    """What the selection unit ('energy' in report.json) was chosen by, for a reader."""
+    m = (run.rep.get("selection") or {}).get("method", "energy")
+    return f"selection: {SELECTION_NAME.get(m, m)}"
 N_RENDER_VIEWS = 6
 THUMB_SIDE = 160
 
@@ -239,7 +246,7 @@ def _header(run: _Run) -> str:
     if p and "energy" in run.methods and "random" in run.methods:
         gap = r.get("gap_closed")
         sig = "significant" if p.get("lo") is not None and p["lo"] > 0 else "not significant at 95%"
-        out.append(f'<div class="verdict">Energy selection: <b>{_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
+        out.append(f'<div class="verdict">{_e(_selection_label(run)).capitalize()}: <b>{_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
                    f'random subsets of the same size (95% CI {_num(p["lo"], 2, True)} .. {_num(p["hi"], 2, True)}, '
                    f'{p.get("n", "?")} views; {sig})'
                    + (f"; closes <b>{100 * gap:.0f}%</b> of the gap from random to all pool images" if gap is not None
@@ -265,7 +272,7 @@ def _method_table(run: _Run) -> str:
             name = f"random (mean ± std over {len(seeds)} seeds)"
         else:
             psnr, ssim, t, name = _num(v.get("psnr")), _num(v.get("ssim"), 3), _num(v.get("train_seconds"), 0), \
-                METHOD_LABEL.get(k, k)
+                _selection_label(run) if k == "energy" else METHOD_LABEL.get(k, k)
         cls = ' class="hl"' if k == "energy" else ""
         rows.append(f'<tr{cls}><td class="l">{_e(name)}</td><td>{psnr}</td><td>{ssim}</td>'
                     f'<td>{_e(v.get("n_train", "—"))}</td><td>{t}</td></tr>')
@@ -283,8 +290,8 @@ def _method_table(run: _Run) -> str:
                    + "".join(pr) + "</table>")
     gap = run.rep.get("gap_closed")
     if gap is not None:
-        out.append(f"<p>Fraction of the random → all-images gap closed by the energy selection: "
-                   f"<b>{100 * float(gap):.0f}%</b> ((energy − random) / (all − random)).</p>")
+        out.append(f"<p>Fraction of the random → all-images gap closed by the {_e(_selection_label(run))}: "
+                   f"<b>{100 * float(gap):.0f}%</b> ((selection − random) / (all − random)).</p>")
     elif all(k in m for k in ("energy", "random", "all")):
         out.append(_note("Gap closed: not defined (all pool images do not beat random subsets)."))
     return "\n".join(out)
@@ -297,7 +304,8 @@ def _bars(run: _Run) -> str:
         return _note("Not evaluated.")
     vals = [m[k]["psnr"] for k in keys]
     errs = [m[k].get("psnr_std") or 0.0 for k in keys]
-    return plots.bar_chart(keys, vals, errs, title="Held-out PSNR per method (random: ± std over seeds)",
+    names = ["selection" if k == "energy" else k for k in keys]
+    return plots.bar_chart(names, vals, errs, title="Held-out PSNR per method (random: ± std over seeds)",
                            ylabel="PSNR (dB)", width=560, height=300)
 
 
