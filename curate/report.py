@@ -281,7 +281,7 @@ def _method_table(run: _Run) -> str:
     if run.paired:
         pr = []
         for k, p in run.paired.items():
-            pr.append(f'<tr><td class="l">{_e(k.replace("-", " − "))}</td><td>{_num(p.get("mean"), 2, True)}</td>'
+            pr.append(f'<tr><td class="l">{_e(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{_num(p.get("mean"), 2, True)}</td>'
                       f'<td>{_num(p.get("lo"), 2, True)} .. {_num(p.get("hi"), 2, True)}</td><td>{_e(p.get("n", "—"))}'
                       f'</td></tr>')
         out.append('<p class="small">Paired per-view PSNR differences on the held-out views (random: each view\'s '
