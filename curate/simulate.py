@@ -255,7 +255,7 @@ def run_simulation(cfg: SimulateConfig, out_dir: str | Path, train_fn=None, prog
         "n_nodes": int(len(nodes)), "timings": timings, "wall_seconds": time.perf_counter() - t_start,
     }
     (out / "report.json").write_text(json.dumps(report, indent=1, default=float))
-    from .report import write_simulate_html
+    from .report_simulate import write_simulate_html
     write_simulate_html(out)
     return report
 

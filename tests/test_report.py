@@ -121,7 +121,7 @@ def test_floorplan_averages_vertical_columns():
 
 
 def test_simulate_report(tmp_path):
-    from curate.report import write_simulate_html
+    from curate.report_simulate import write_simulate_html
     cams = Cameras(look_at(np.array([[1.0, 0, 1], [0, 1, 1]]), np.zeros((2, 3))), 50, 50, 32, 24, 64, 48)
     tests = ("hemisphere", "random", "ours")
     rep = {"scene": "kitchen", "scene_seed": 0, "budget": 2, "n_nodes": 99, "wall_seconds": 3.5,
