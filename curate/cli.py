@@ -254,7 +254,6 @@ def cmd_simulate(args) -> int:
 
 def _run_cfg(args):
     """RunConfig from ``curate run`` options."""
-    from dataclasses import replace
     from .evaluate import EvalConfig
     from .occupancy import OccupancyConfig
     from .pipeline import RunConfig

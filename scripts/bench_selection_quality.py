@@ -164,7 +164,6 @@ def main(argv=None) -> int:
     from curate.stage import stage_key as _sk
     default_tag = _sk(default)[:6]
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
-    sel_methods = [m for m in methods if m not in ("random", "all")]
     rows, paired, series = [], [], {}
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
                 "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
@@ -198,7 +197,7 @@ def main(argv=None) -> int:
                     subsets[m].append(s.chosen)
                     timing[m] = round(s.seconds, 3)
             prox = {m: [proxies(pc, hc, cs_hold, ch) for ch in v] for m, v in subsets.items()}
-            units, groups = [], {}
+            groups = {}
             label = {"default": f"default-{default_tag}"}   # the folder names a default's variant
             if not args.proxy_only:
                 for m, subs in subsets.items():
