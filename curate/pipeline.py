@@ -275,7 +275,7 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
     """
     import shutil
     from .evaluate import eval_cameras, run_units, summarize
-    from .stage import write_json_atomic
+    from .stage import is_fresh, write_json_atomic
     from .train import default_box
 
     t0 = time.perf_counter()
@@ -283,7 +283,6 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
     units, keys, sel = eval_units(cfg, run_dir)
     if force and d.exists():
         shutil.rmtree(d)
-    from .stage import is_fresh
     fresh = all(is_fresh(d / u.key, keys[u.key]) for u in units)
     sfm, paths, pool, hold = load_split(run_dir, cfg.evaluate.holdout_every)
     if not hold:
