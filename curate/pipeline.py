@@ -210,9 +210,12 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     grid = load_node_grid(run_dir)
     budget = resolve_budget(_parse_budget(cfg.budget), len(pool))
     pc = sfm.cameras[pool]
-    sel = select(pc, grid, budget, cfg.select, progress=True)
+    t_vis = time.perf_counter()
+    index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
+    t_vis = time.perf_counter() - t_vis
+    sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
+    sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     chosen = [pool[k] for k in sel.chosen]
-    index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device)
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
     np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
                         frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),

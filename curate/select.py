@@ -82,11 +82,13 @@ class Selection:
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
-           progress: bool = False) -> Selection:
+           progress: bool = False, index=None) -> Selection:
     """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).
 
     The energy curve is filled for every method (for baselines, it is evaluated after
-    the choice, so they can be compared on the same footing).
+    the choice, so they can be compared on the same footing). ``index``: the pair index
+    of ``cams`` over the grid's nodes with ``cfg.energy.bins`` when the caller already
+    built it (its time is then not in ``Selection.seconds``).
     """
     from .baselines import farthest_view, hemisphere_subset, random_subset
     from .greedy import greedy_select, trace_energy
@@ -94,7 +96,8 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
 
     t0 = time.perf_counter()
     initial = [int(k) for k in dict.fromkeys(initial)]
-    index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
+    if index is None:
+        index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
     if cfg.method == "energy":
         tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
         sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
