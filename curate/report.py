@@ -32,7 +32,8 @@ __all__ = ["write_html", "floorplan", "top_down_axes"]
 
 METHOD_ORDER = ("energy", "random", "fvs", "all")
 METHOD_LABEL = {"energy": "energy (ours)", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
-SELECTION_NAME = {"energy": "the paper's energy", "coverage": "pool coverage", "coverage+energy": "coverage + energy"}
+SELECTION_NAME = {"energy": "the paper's energy", "coverage": "pool coverage", "coverage+energy": "coverage + energy",
+                  "medoids": "view medoids"}
 
 
 def _selection_label(run) -> str:

@@ -15,23 +15,21 @@ from .cameras import Cameras
 from .coverage import CoverageConfig
 from .energy import EnergyConfig, EnergyTerms
 from .grid import NodeGrid
+from .medoids import MedoidsConfig
+from .methods import DEFAULT_METHOD, METHODS  # noqa: F401  (METHODS re-exported)
 
 log = logging.getLogger(__name__)
-
-METHODS = ("energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy")
-"""Selection methods. "energy" is the paper's greedy on its energy, unchanged; "coverage" is
-facility location over the pool's own views (:mod:`curate.coverage`); "coverage+energy"
-adds the paper's energy to it as a second term (see :class:`SelectConfig`)."""
 
 
 @dataclass(frozen=True)
 class SelectConfig:
     """How to choose a subset."""
 
-    method: str = "coverage"
-    """One of "energy" (the paper: greedy on its energy), "coverage" (facility location over the
-    pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms), "random", "fvs"
-    (farthest-view sampling), "hemisphere"."""
+    method: str = DEFAULT_METHOD
+    """One of "medoids" (the default, chosen by the harness: k-medoids of the pool's views,
+    :mod:`curate.medoids`), "energy" (the paper: greedy on its energy), "coverage" (facility
+    location over the pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms),
+    "random", "fvs" (farthest-view sampling), "hemisphere"."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
     """Energy parameters (method "energy", and the energy reported for every method)."""
     seed: int = 0
@@ -42,6 +40,8 @@ class SelectConfig:
     """Torch device for the visibility test (None: CUDA when available, else CPU)."""
     coverage: CoverageConfig = field(default_factory=CoverageConfig)
     """Methods "coverage" and "coverage+energy": the similarity between pool views."""
+    medoids: MedoidsConfig = field(default_factory=MedoidsConfig)
+    """Method "medoids": its look-at depth and iterations."""
     energy_weight: float = 0.5
     """Method "coverage+energy": each step maximises ``dF / F(pool) + energy_weight * dE / E(pool)``,
     the gains of the coverage F and of the paper's energy E, each relative to its value for the
@@ -73,7 +73,8 @@ class Selection:
     frequency: list[float] = field(default_factory=list)
     seconds: float = 0.0
     objective: list[float] = field(default_factory=list)
-    """Methods "coverage*": the coverage F after each step (empty for the others)."""
+    """Methods "coverage*": the coverage F after each step; "medoids": the mean view distance
+    to the nearest chosen view after each iteration (empty for the others)."""
 
     def to_dict(self) -> dict:
         return {"method": self.method, "chosen": self.chosen, "initial": self.initial, "energy": self.energy,
@@ -108,6 +109,11 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
                                       energy_weight=cfg.energy_weight)
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f, objective=obj)
+    elif cfg.method == "medoids":
+        from .medoids import medoids_select
+        chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)
+        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
+        sel = Selection(cfg.method, chosen, initial, e, a, f, objective=cost)
     else:
         if cfg.method == "random":
             chosen = random_subset(len(cams), budget, cfg.seed, initial)

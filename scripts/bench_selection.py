@@ -15,6 +15,8 @@ Cases, each in its own subprocess so its peak memory (ru_maxrss) is its own:
   exact  150 candidates x 12^3 nodes, budget 25: choices identical to brute force?
   s1300  select 200 of 1300 at 32^3: wall time, visibility included.
   large  select 500 of 10000 at 64^3: wall time and peak memory.
+  methods, methods3000  every method (energy, coverage, medoids, fvs, random), 200 of 1000 and
+         300 of 3000 at 32^3 (index built once): seconds each and ratios to the energy greedy.
 
 Prints one JSON object as its last line.
 Usage: python scripts/bench_selection.py [--skip-large] [--case NAME]
@@ -117,8 +119,34 @@ def case_select(n: int, res: int, budget: int, key: str) -> dict:
             f"{key}_index_mb": idx.nbytes() / 2 ** 20, f"{key}_jit_warmup_s": warm}
 
 
+def case_methods(n: int, budget: int, key: str) -> dict:
+    """Every selection method on one pool (32^3 nodes, index built once): wall seconds each,
+    and each method's time over the paper's greedy measured in the same run (ratios are
+    steadier than absolute times on a shared machine)."""
+    warm_up()
+    from curate.grid import NodeGrid
+    from curate.select import SelectConfig, select
+    from curate.visibility import build_pair_index
+    cams = pool(n, 2)
+    grid = NodeGrid(np.full(3, -1.0), np.full(3, 1.0), 32)
+    cfg = SelectConfig()
+    t0 = time.perf_counter()
+    idx = build_pair_index(cams, grid.nodes(), cfg.energy.bins)
+    out = {f"{key}_visibility_s": time.perf_counter() - t0}
+    for m in ("energy", "coverage", "medoids", "fvs", "random"):
+        t = time.perf_counter()
+        sel = select(cams, grid, budget, SelectConfig(m), index=idx)
+        assert len(sel.chosen) == budget
+        out[f"{key}_{m}_s"] = time.perf_counter() - t
+    for m in ("coverage", "medoids", "fvs"):
+        out[f"{key}_{m}_over_energy"] = out[f"{key}_{m}_s"] / out[f"{key}_energy_s"]
+    return out
+
+
 CASES = {
     "main": case_main,
+    "methods": lambda: case_methods(1000, 200, "methods_200_of_1000"),
+    "methods3000": lambda: case_methods(3000, 300, "methods_300_of_3000"),
     "exact": case_exact,
     "s1300": lambda: case_select(1300, 32, 200, "select_200_of_1300"),
     "large": lambda: case_select(10000, 64, 500, "select_500_of_10000_64cubed"),
@@ -140,7 +168,7 @@ def main() -> None:
         print(json.dumps(out))
         return
     result: dict = {}
-    for name in ("main", "exact", "s1300", "large"):
+    for name in ("main", "methods", "methods3000", "exact", "s1300", "large"):
         if name == "large" and a.skip_large:
             continue
         p = subprocess.run([sys.executable, __file__, "--case", name], capture_output=True, text=True)

@@ -17,9 +17,10 @@ chosen cameras, the nearest centre distance (``pos``, ``pos90``: mean, 90th perc
 the smallest viewing-direction angle (``ang``, ``ang90``, degrees), and the best
 single-view overlap of its (node, direction-bin) cells (``cell``).
 
-Per-view paired differences (95% t intervals over the held-out views): default - random
-(random averaged over its seeds per view), default - fvs, default - energy; each
-method's per-view PSNR is first averaged over its training seeds.
+Per-view paired differences (95% t intervals over the held-out views) of ``--candidate``
+(default: ``default``) against random (averaged over its seeds per view), fvs, energy,
+default and coverage where present; each method's per-view PSNR is first averaged over
+its training seeds.
 
 Prints a table per scene and budget, and ONE JSON line last; writes
 ``<out>/quality_psnr_<scenes>.svg`` (PSNR against budget per method, one chart per scene).
@@ -27,6 +28,8 @@ Prints a table per scene and budget, and ONE JSON line last; writes
 Usage:
   nice -n 5 python scripts/bench_selection_quality.py --scenes office --budgets 60 --train-seeds 2
   python scripts/bench_selection_quality.py --proxy-only --budgets 10%,17%,30%
+  python scripts/bench_selection_quality.py --scenes office,fox,templering,skull --pack .gpudata/scenes
+  python scripts/bench_selection_quality.py --data .gpudata/scenes --out .gpudata/quality ...  (e.g. on a GPU)
 """
 
 from __future__ import annotations
@@ -47,32 +50,80 @@ VARIANTS: dict = {}
 
 
 # ------------------------------------------------------------------ scenes
-def scene_poses(scene: str, out: Path) -> Path:
-    """A transforms.json with absolute image paths for ``scene`` (written under ``out``)."""
+SKULL_SFM = ROOT / "runs" / "skull"
+
+
+def scene_cameras(scene: str):
+    """(cameras, absolute image paths) of a scene: published or ground-truth poses; skull has
+    none, so its cameras come from a ``curate sfm`` run folder (``--skull-sfm``)."""
     from curate.datasets import load_office, load_templering
-    from curate.transforms_json import write_transforms
+    from curate.transforms_json import read_transforms
     d = (SHARED / scene).resolve()
     if scene == "fox":
-        return d / "transforms.json"
+        return read_transforms(d / "transforms.json")
     if scene == "office":
-        cams, img = load_office(d), d / "images"
-    elif scene == "templering":
-        cams, img = load_templering(d), d
-    else:
-        raise SystemExit(f"scene {scene!r}: no known poses (skull needs SfM: not in this harness yet)")
+        cams = load_office(d)
+        return cams, [str(d / "images" / n) for n in cams.names]
+    if scene == "templering":
+        cams = load_templering(d)
+        return cams, [str(d / n) for n in cams.names]
+    if scene == "skull":
+        from curate.pipeline import image_paths
+        from curate.sfm_io import load_sfm
+        if not (SKULL_SFM / "sfm" / "cameras.json").is_file():
+            raise SystemExit(f"skull has no poses: run `curate sfm {d}/images --out {SKULL_SFM}` first "
+                             "(or pass --skull-sfm RUN)")
+        sfm = load_sfm(SKULL_SFM)
+        return sfm.cameras, image_paths(SKULL_SFM, list(sfm.cameras.names), sfm.records)
+    raise SystemExit(f"unknown scene {scene!r}")
+
+
+def scene_poses(scene: str, out: Path, data: Path | None = None) -> Path:
+    """A transforms.json for ``scene``: under ``data`` when packed (``--pack``), else written
+    under ``out`` with absolute paths to the photos in ``../shared/data``."""
+    if data is not None:
+        p = data / scene / "transforms.json"
+        if not p.is_file():
+            raise SystemExit(f"{p}: missing (pack it with --pack {data})")
+        return p
     p = out / f"{scene}_transforms.json"
     if not p.is_file():
-        write_transforms(p, cams, [str(img / n) for n in cams.names])
+        from curate.transforms_json import write_transforms
+        cams, files = scene_cameras(scene)
+        write_transforms(p, cams, files)
     return p
 
 
-def prepare(scene: str, out: Path, ev, train: bool = True) -> Path:
+def pack(scenes: list[str], dest: Path, side: int) -> None:
+    """Copy every scene's photos, downscaled to ``side`` px (longer side), with a transforms.json
+    of relative paths into ``dest/<scene>/``: a small, self-contained copy that travels to
+    another machine (a GPU worker) without ``../shared``."""
+    from PIL import Image
+    from tqdm import tqdm
+    from curate.transforms_json import write_transforms
+    from curate.train import load_image
+    for scene in scenes:
+        cams, files = scene_cameras(scene)
+        f = np.minimum(1.0, side / np.maximum(cams.width, cams.height))
+        small = cams.scaled_images(f)
+        (dest / scene / "images").mkdir(parents=True, exist_ok=True)
+        rel = []
+        for i, src in enumerate(tqdm(files, desc=f"pack {scene}")):
+            r = f"images/{i:04d}_{Path(src).stem}.jpg"
+            img = load_image(src, int(small.width[i]), int(small.height[i]))
+            Image.fromarray(np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)).save(dest / scene / r, quality=95)
+            rel.append(r)
+        write_transforms(dest / scene / "transforms.json", small, rel)
+        print(f"packed {scene}: {len(rel)} images at <= {side} px -> {dest / scene}")
+
+
+def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = None) -> Path:
     """Run folder with imported poses and (``train``) the occupancy stage (pool field) done."""
     from curate.pipeline import RunConfig, stage_occupancy
     from curate.sfm import import_poses
     run = out / scene
     cfg = RunConfig(evaluate=ev)
-    import_poses(cfg.sfm, scene_poses(scene, out), run)
+    import_poses(cfg.sfm, scene_poses(scene, out, data), run)
     if train:
         stage_occupancy(cfg, run)
     return run
@@ -98,8 +149,9 @@ def parse_budget(b: str, n_pool: int) -> int:
 
 def _variants():
     from curate.coverage import CoverageConfig
+    from curate.medoids import MedoidsConfig
     from curate.select import SelectConfig
-    return {"fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
+    return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),"fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
             "cov_cells": SelectConfig("coverage", coverage=CoverageConfig(similarity="cells"))}
@@ -129,6 +181,7 @@ def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
 
 # ------------------------------------------------------------------ the harness
 def main(argv=None) -> int:
+    global SKULL_SFM, VARIANTS
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", default="office,fox,templering")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
@@ -138,13 +191,27 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="default,energy,fvs,random,all")
     ap.add_argument("--extra", default="", help="more selection methods: METHODS names, or variants "
                     "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1), "
-                    "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone)")
+                    "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone), "
+                    "'medoids_p2' (medoids minimising the mean squared view distance)")
     ap.add_argument("--max-side", type=int, default=160)
     ap.add_argument("--iters", type=int, default=600)
     ap.add_argument("--holdout-every", type=int, default=14)
+    ap.add_argument("--candidate", default="default", help="the method compared (paired, per view) with the others")
+    ap.add_argument("--workers", type=int, default=1, help="trainings at once (processes; e.g. 4 on one GPU)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "quality"))
     ap.add_argument("--proxy-only", action="store_true", help="selections and proxies only (no training)")
+    ap.add_argument("--data", default="", help="read scenes packed by --pack from this folder (not ../shared)")
+    ap.add_argument("--pack", default="", help="only pack --scenes (photos downscaled to --pack-side, "
+                    "relative transforms.json) into this folder for another machine, then stop")
+    ap.add_argument("--pack-side", type=int, default=320)
+    ap.add_argument("--skull-sfm", default=str(SKULL_SFM), help="run folder of `curate sfm` on skull (its poses)")
     args = ap.parse_args(argv)
+    SKULL_SFM = Path(args.skull_sfm)
+    scenes = [s for s in args.scenes.split(",") if s]
+    if args.pack:
+        pack(scenes, Path(args.pack), args.pack_side)
+        return 0
+    data = Path(args.data).resolve() if args.data else None
 
     import logging
     logging.basicConfig(level=logging.WARNING)
@@ -155,11 +222,10 @@ def main(argv=None) -> int:
     from curate.stats import paired_difference
     from curate.train import default_box
 
-    global VARIANTS
     VARIANTS = _variants()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=1)
+    ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=args.workers)
     default = SelectConfig()
     from curate.stage import stage_key as _sk
     default_tag = _sk(default)[:6]
@@ -170,8 +236,8 @@ def main(argv=None) -> int:
                 "random_seeds": args.random_seeds, "default_method": default.method,
                 "default_coverage": vars(default.coverage)}
     t_all = time.perf_counter()
-    for scene in [s for s in args.scenes.split(",") if s]:
-        run = prepare(scene, out, ev, train=not args.proxy_only)
+    for scene in scenes:
+        run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
         sfm, paths, pool, hold = load_split(run, ev.holdout_every)
         pc, hc = sfm.cameras[pool], sfm.cameras[hold]
         grid = node_grid(run, sfm.cameras)
@@ -245,20 +311,21 @@ def main(argv=None) -> int:
                 print(f"{m:10s} {ps}  {str(per_run.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
                 if row["psnr"] is not None:
                     series.setdefault(scene, {}).setdefault(m, []).append((B, row["psnr"]))
-            if "default" in per_view:
-                for o in ("random", "fvs", "energy"):
+            cand = args.candidate
+            if cand in per_view:
+                for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
                     if o in per_view:
-                        d = paired_difference(per_view["default"], per_view[o])
+                        d = paired_difference(per_view[cand], per_view[o])
                         d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
-                        paired.append({"scene": scene, "budget": B, "pair": f"default-{o}", **d})
-                        print(f"  default - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
+                        paired.append({"scene": scene, "budget": B, "pair": f"{cand}-{o}", **d})
+                        print(f"  {cand} - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
                               f"{d['n']} views)")
                 if all(m in per_view for m in ("random", "all")):
                     room = per_view["all"].mean() - per_view["random"].mean()
                     if room > 1e-6:
-                        g = (per_view["default"].mean() - per_view["random"].mean()) / room
-                        paired.append({"scene": scene, "budget": B, "pair": "gap_closed", "mean": round(float(g), 3)})
-                        print(f"  gap closed (default - random) / (all - random): {g:.2f}")
+                        g = (per_view[cand].mean() - per_view["random"].mean()) / room
+                        paired.append({"scene": scene, "budget": B, "pair": f"gap_closed_{cand}", "mean": round(float(g), 3)})
+                        print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
     if series:
         from curate.plots import line_chart
         svg = []

@@ -115,20 +115,19 @@ def test_coincident_centres_pose_scale():
     assert default_pos_scale(dup, 2) > 0
 
 
-# ------------------------------------------------------------------ the default
-def test_default_method_is_coverage_and_deterministic():
-    assert SelectConfig().method == DEFAULT_METHOD and "coverage" in METHODS and "energy" in METHODS
+# ------------------------------------------------------------------ pinned choices
+def test_coverage_deterministic_and_pinned():
+    assert "coverage" in METHODS and "energy" in METHODS
     cams = random_pool(60, seed=11)
     a = select(cams, NodeGrid([-1, -1, -1], [1, 1, 1], 8), 12, SelectConfig("coverage"))
     b = select(cams, NodeGrid([-1, -1, -1], [1, 1, 1], 8), 12, SelectConfig("coverage"))
     assert a.chosen == b.chosen and len(set(a.chosen)) == 12
-    assert a.chosen == REFERENCE_DEFAULT
+    assert a.chosen == REFERENCE_COVERAGE
 
 
-DEFAULT_METHOD = "coverage"
 # The coverage method's choices on random_pool(60, seed=11), 8^3 nodes, budget 12 (pinned:
 # a change of the default's choices must be deliberate).
-REFERENCE_DEFAULT = [3, 31, 26, 24, 51, 33, 43, 41, 37, 0, 23, 19]
+REFERENCE_COVERAGE = [3, 31, 26, 24, 51, 33, 43, 41, 37, 0, 23, 19]
 
 
 def test_paper_energy_unchanged_by_the_new_options():

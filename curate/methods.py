@@ -1,0 +1,17 @@
+"""Names of the selection methods (no heavy imports: the CLI reads them for ``--help``).
+
+"energy" is the paper's greedy on its energy, unchanged; "coverage" is facility location
+over the pool's own views (:mod:`curate.coverage`); "coverage+energy" adds the paper's
+energy to it as a second term; "medoids" is k-medoids of the pool's views in a centre +
+look-at distance (:mod:`curate.medoids`); "fvs" is farthest-view sampling; "random" and
+"hemisphere" are baselines.
+"""
+
+METHODS = ("energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy", "medoids")
+"""Every selection method :func:`curate.select.select` knows."""
+
+DEFAULT_METHOD = "medoids"
+"""The method ``curate`` uses unless told otherwise (chosen by the harness, README)."""
+
+METHOD_HELP = ("selection method (default %(default)s; energy: the paper's, unchanged; "
+               "see the README's 'Which selection method, and why')")
