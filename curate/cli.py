@@ -300,8 +300,9 @@ def cmd_run(args) -> int:
     rep = json.loads(Path(out).read_text())
     m = rep.get("methods", {})
     if m:
-        print("held-out PSNR (dB): " + ", ".join(f"{k} {v['psnr']:.2f}" for k, v in m.items())
-              + (f"; energy - random {rep['paired']['energy-random']['mean']:+.2f} dB"
+        sel = f"selection ({(rep.get('selection') or {}).get('method', cfg.select.method)})"  # key "energy": any method
+        print("held-out PSNR (dB): " + ", ".join(f"{sel if k == 'energy' else k} {v['psnr']:.2f}" for k, v in m.items())
+              + (f"; {sel} - random {rep['paired']['energy-random']['mean']:+.2f} dB"
                  if "energy-random" in rep.get("paired", {}) else ""))
     print(f"report: {Path(args.out) / 'report.html'} ({rep['wall_seconds']:.0f}s)")
     return 0

@@ -191,17 +191,25 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     field_paths = field_paths or {}
     save_ground_truth(run_dir, cams, paths, holdout)
     todo = [u for u in units if not is_fresh(Path(run_dir) / "evaluate" / u.key, keys[u.key])]
+    fresh = [u for u in units if u not in todo]
+    # units with equal keys (e.g. method "auto" chose exactly the FVS subset) train once; the others copy it
+    first: dict[str, Unit] = {keys[u.key]: u for u in reversed(fresh)}
+    dups = []
+    for u in todo:
+        src = first.setdefault(keys[u.key], u) if u.key not in field_paths else u
+        if src is not u:
+            dups.append((u, src))
+    todo = [u for u in todo if all(u is not d for d, _ in dups)]
     results: dict[str, dict] = {}
-    for u in units:
-        if u not in todo:
-            results[u.key] = json.loads((Path(run_dir) / "evaluate" / u.key / "metrics.json").read_text())
+    for u in fresh:
+        results[u.key] = json.loads((Path(run_dir) / "evaluate" / u.key / "metrics.json").read_text())
     pix = int(np.max([np.sum(cams.width[u.subset] * cams.height[u.subset]) for u in todo])) if todo else 0
     n_train = [u for u in todo if u.key not in field_paths]
     workers = auto_workers(cfg, len(n_train), pix)
     level = logging.getLogger("curate").getEffectiveLevel()
     args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), level)
             for u in todo]
-    bar = tqdm(total=len(units), initial=len(units) - len(todo), desc="evaluate (trainings)", disable=not progress)
+    bar = tqdm(total=len(units), initial=len(fresh), desc="evaluate (trainings)", disable=not progress)
     from concurrent.futures import as_completed
     if executor is not None and todo:
         futs = {executor.submit(_unit_entry, a): a[1].key for a in args}
@@ -220,8 +228,25 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
             for f in as_completed(futs):
                 results[futs[f]] = f.result()
                 bar.update(1)
+    for u, src in dups:
+        results[u.key] = _copy_unit(Path(run_dir) / "evaluate", src.key, u, results[src.key])
+        bar.update(1)
     bar.close()
     return {u.key: results[u.key] for u in units}
+
+
+def _copy_unit(ev_dir: Path, src_key: str, unit: Unit, metrics: dict) -> dict:
+    """Copy the finished unit ``src_key`` as ``unit`` (same key: same subset and settings);
+    its record last, so a crash leaves no stale record."""
+    import shutil
+    src, dst = ev_dir / src_key, ev_dir / unit.key
+    if dst.exists():
+        shutil.rmtree(dst)
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("stage.json"))
+    m = {**metrics, "method": unit.method, "seed": unit.seed, "copied_from": src_key}
+    (dst / "metrics.json").write_text(json.dumps(m, indent=1))
+    shutil.copy2(src / "stage.json", dst / "stage.json")
+    return m
 
 
 def summarize(results: dict[str, dict]) -> tuple[dict, dict, float | None]:

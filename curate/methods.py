@@ -4,13 +4,15 @@
 over the pool's own views (:mod:`curate.coverage`); "coverage+energy" adds the paper's
 energy to it as a second term; "medoids" is k-medoids of the pool's views in a centre +
 look-at distance (:mod:`curate.medoids`); "fvs" is farthest-view sampling; "random" and
-"hemisphere" are baselines.
+"hemisphere" are baselines. "auto" picks by the kind of capture
+(:func:`curate.select.capture_kind`): "medoids" for a walk-through or a forward-facing
+capture, "fvs" for an object capture (cameras around a point, looking at it).
 """
 
-METHODS = ("energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy", "medoids")
+METHODS = ("auto", "energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy", "medoids")
 """Every selection method :func:`curate.select.select` knows."""
 
-DEFAULT_METHOD = "medoids"
+DEFAULT_METHOD = "auto"
 """The method ``curate`` uses unless told otherwise (chosen by the harness, README)."""
 
 METHOD_HELP = ("selection method (default %(default)s; energy: the paper's, unchanged; "

@@ -33,7 +33,7 @@ __all__ = ["write_html", "floorplan", "top_down_axes"]
 METHOD_ORDER = ("energy", "random", "fvs", "all")
 METHOD_LABEL = {"energy": "energy (ours)", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
 SELECTION_NAME = {"energy": "the paper's energy", "coverage": "pool coverage", "coverage+energy": "coverage + energy",
-                  "medoids": "view medoids"}
+                  "medoids": "view medoids", "fvs": "farthest-view sampling", "random": "random"}
 
 
 def _selection_label(run) -> str:
@@ -254,6 +254,9 @@ def _header(run: _Run) -> str:
                       else "") + ".</div>")
     elif not run.methods:
         out.append(_note("Not evaluated: no trainings were run for this report (selection only)."))
+    note = (run.rep.get("selection") or {}).get("note")
+    if note:
+        out.append(_note(f"Selection method {note}."))
     return "\n".join(out)
 
 

@@ -26,8 +26,9 @@ class SelectConfig:
     """How to choose a subset."""
 
     method: str = DEFAULT_METHOD
-    """One of "medoids" (the default, chosen by the harness: k-medoids of the pool's views,
-    :mod:`curate.medoids`), "energy" (the paper: greedy on its energy), "coverage" (facility
+    """One of "auto" (the default, chosen by the harness: "medoids" for a walk-through,
+    "fvs" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
+    pool's views, :mod:`curate.medoids`), "energy" (the paper: greedy on its energy), "coverage" (facility
     location over the pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms),
     "random", "fvs" (farthest-view sampling), "hemisphere"."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
@@ -76,10 +77,44 @@ class Selection:
     """Methods "coverage*": the coverage F after each step; "medoids": the mean view distance
     to the nearest chosen view after each iteration (empty for the others)."""
 
+    note: str = ""
+    """Method "auto": which method it ran and why (``method`` is the one it ran)."""
+
     def to_dict(self) -> dict:
         return {"method": self.method, "chosen": self.chosen, "initial": self.initial, "energy": self.energy,
                 "angular": self.angular, "frequency": self.frequency, "seconds": self.seconds,
-                **({"objective": self.objective} if self.objective else {})}
+                **({"objective": self.objective} if self.objective else {}),
+                **({"note": self.note} if self.note else {})}
+
+
+OBJECT_MAX_ANGLE_DEG = 20.0
+""":func:`capture_kind`: an object capture when the median camera looks within this angle of
+the point nearest all viewing axes (measured: object sets 0.6-7.2 deg, walks 55-56 deg)."""
+
+
+def capture_kind(cams: Cameras) -> tuple[str, float]:
+    """("object" | "walk", median angle in degrees) for a pool of cameras.
+
+    The point p nearest every viewing axis (least squares, ``sum_i (I - v_i v_i^T)(p - c_i) = 0``)
+    is where an object capture's cameras look; the angle between each camera's viewing
+    direction and the direction from its centre to p is then small for almost every camera.
+    On a walk-through (or a forward-facing capture) the axes do not meet: the angles are
+    large. Fewer than 3 cameras, or axes all parallel, count as a walk.
+    """
+    import numpy as np
+    if len(cams) < 3:
+        return "walk", 180.0
+    c, v = cams.centres, cams.view_dirs                       # [K, 3], [K, 3]
+    P = np.eye(3)[None] - v[:, :, None] * v[:, None, :]        # [K, 3, 3] projectors off each axis
+    A, b = P.sum(0), np.einsum("kij,kj->i", P, c)
+    if np.linalg.eigvalsh(A / len(c))[0] < 1e-3:               # (near) parallel axes: no meeting point
+        return "walk", 180.0
+    p = np.linalg.solve(A, b)
+    to = p - c
+    n = np.linalg.norm(to, axis=1)
+    cos = np.sum(to * v, axis=1) / np.maximum(n, 1e-300)
+    ang = float(np.median(np.degrees(np.arccos(np.clip(np.where(n > 0, cos, -1.0), -1.0, 1.0)))))
+    return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
@@ -97,6 +132,14 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
 
     t0 = time.perf_counter()
     initial = [int(k) for k in dict.fromkeys(initial)]
+    note = ""
+    if cfg.method == "auto":
+        from dataclasses import replace
+        kind, ang = capture_kind(cams)
+        cfg = replace(cfg, method="fvs" if kind == "object" else "medoids")
+        note = (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to the "
+                f"viewing axes' meeting point {ang:.1f} deg) -> {cfg.method}")
+        log.info("select %s", note)
     if index is None:
         index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
     if cfg.method == "energy":
@@ -124,6 +167,7 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f)
     sel.seconds = time.perf_counter() - t0
+    sel.note = note
     log.info("select %s: %d cameras of %d in %.2fs", cfg.method, len(sel.chosen), len(cams), sel.seconds)
     return sel
 

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from dataclasses import replace
@@ -286,8 +287,8 @@ def main(argv=None) -> int:
             # per method: per-view PSNR averaged over its trainings (random: over its seeds)
             per_view, per_run = {}, {}
             for m in methods:
-                rs = [r for k, r in results.items() if (k == "all" if m == "all" else k.startswith(f"q_{label.get(m, m)}_"))
-                      and (m == "all" or f"_b{B}_" in k)]
+                pat = re.compile(rf"q_{re.escape(label.get(m, m))}(_s\d+)?_b{B}_t\d+")  # not q_<m>_p2_...
+                rs = [r for k, r in results.items() if (k == "all" if m == "all" else pat.fullmatch(k))]
                 if not rs:
                     continue
                 per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)

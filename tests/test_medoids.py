@@ -173,11 +173,6 @@ def test_burst_does_not_absorb_the_budget():
 
 
 # ------------------------------------------------------------------ end to end
-def test_medoids_is_the_default():
-    """The harness table in the README chose it (issue 7); changing it must be deliberate."""
-    assert SelectConfig().method == "medoids"
-
-
 def test_select_medoids_end_to_end_and_config_roundtrip():
     cams = random_pool(25, seed=8)
     cfg = SelectConfig("medoids", medoids=MedoidsConfig(depth=None, max_iters=50))
