@@ -70,7 +70,7 @@ def test_equal_units_train_once(tmp_path, monkeypatch):
     calls = []
 
     def fake_entry(args):
-        run_dir, u, key = args[0], args[1], args[7]
+        u, key = args[1], args[7]
         calls.append(u.key)
         d = tmp_path / "evaluate" / u.key
         d.mkdir(parents=True)
