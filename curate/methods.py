@@ -5,8 +5,8 @@ over the pool's own views (:mod:`curate.coverage`); "coverage+energy" adds the p
 energy to it as a second term; "medoids" is k-medoids of the pool's views in a centre +
 look-at distance (:mod:`curate.medoids`); "fvs" is farthest-view sampling; "random" and
 "hemisphere" are baselines. "auto" picks by the kind of capture
-(:func:`curate.select.capture_kind`): "medoids" for a walk-through or a forward-facing
-capture, "fvs" for an object capture (cameras around a point, looking at it).
+(:func:`curate.select.capture_kind`): "medoids" for a walk-through (viewing axes that
+meet nowhere, or near-parallel ones), "fvs" for an object capture (cameras around a point, looking at it).
 """
 
 METHODS = ("auto", "energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy", "medoids")

@@ -98,8 +98,9 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
     The point p nearest every viewing axis (least squares, ``sum_i (I - v_i v_i^T)(p - c_i) = 0``)
     is where an object capture's cameras look; the angle between each camera's viewing
     direction and the direction from its centre to p is then small for almost every camera.
-    On a walk-through (or a forward-facing capture) the axes do not meet: the angles are
-    large. Fewer than 3 cameras, or axes all parallel, count as a walk.
+    On a walk-through the axes do not meet: the angles are large. Near-parallel axes
+    (a forward-facing capture with little convergence) count as a walk; a forward-facing
+    capture whose axes converge on the subject counts as an object capture. Fewer than 3 cameras, or axes all parallel, count as a walk.
     """
     import numpy as np
     if len(cams) < 3:
