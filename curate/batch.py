@@ -142,12 +142,8 @@ def folder_key(item: Folder, cfg) -> str:
 
 def default_jobs(n_folders: int) -> int:
     """Folders at once on this machine: one per core, capped by the folders and by memory (~3 GB each)."""
-    from .executors import cpu_count
-    try:
-        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover
-        avail = 8 << 30
-    return int(max(1, min(n_folders, cpu_count(), avail // (3 << 30))))
+    from .executors import available_memory, cpu_count
+    return int(max(1, min(n_folders, cpu_count(), available_memory() // (3 << 30))))
 
 
 # ------------------------------------------------------------------ one folder

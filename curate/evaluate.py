@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from .cameras import Cameras
+from .executors import available_memory, cpu_count
 from .field import FieldConfig
 
 log = logging.getLogger(__name__)
@@ -87,13 +87,6 @@ def _stem(name: str) -> str:
     return Path(name).stem
 
 
-def _cpu_count() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 def auto_workers(cfg: EvalConfig, n_units: int, pixels: int) -> int:
     """Parallel trainings: one per core on CPU (each single-threaded), limited by memory
     (about 40 bytes of cached rays per training pixel) and by the number of units."""
@@ -101,12 +94,8 @@ def auto_workers(cfg: EvalConfig, n_units: int, pixels: int) -> int:
         return min(cfg.workers, max(n_units, 1))
     if cfg.field.resolve_device().type == "cuda":
         return 1
-    try:
-        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover
-        avail = 8 << 30
     per = 40 * pixels + (1 << 30)
-    return int(max(1, min(_cpu_count(), n_units, avail // per)))
+    return int(max(1, min(cpu_count(), n_units, available_memory() // per)))
 
 
 def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: Sequence[str],

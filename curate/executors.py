@@ -44,6 +44,14 @@ def cpu_count() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def available_memory() -> int:
+    """Bytes of physical memory free now (8 GiB where the system does not say)."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover
+        return 8 << 30
+
+
 def ray_init(address: str | None = None, num_cpus: int | None = None, env: dict | None = None):
     """Connect to a Ray cluster (``address``: 'auto' or 'HOST:PORT') or start a local instance.
 

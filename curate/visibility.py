@@ -23,6 +23,7 @@ import numpy as np
 
 from .bins import DirectionBins
 from .cameras import Cameras
+from .executors import cpu_count
 
 
 class Visibility(Protocol):
@@ -134,15 +135,6 @@ def _torch_device(device: str | None):
     return torch.device(device)
 
 
-def _cpu_count() -> int:
-    """CPUs this process may run on (the thread pool's size)."""
-    import os
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 class _TorchFrustum:
     """The frustum test of :func:`frustum_mask`, with torch, plus each pair's direction bin.
 
@@ -181,7 +173,7 @@ class _TorchFrustum:
             for a, b in jobs:
                 yield self(a, b)
             return
-        workers, prev = _cpu_count(), torch.get_num_threads()
+        workers, prev = cpu_count(), torch.get_num_threads()
         torch.set_num_threads(1)
         try:
             with ThreadPoolExecutor(workers) as ex:
