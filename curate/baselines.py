@@ -44,14 +44,21 @@ def farthest_view(cams: Cameras, budget: int, initial=(), rot_weight: float = 0.
             out = out + rot_weight * diag / np.pi * np.arccos(np.clip(d @ d[k], -1.0, 1.0))
         return out
 
+    return farthest_point(n, budget, dist_to, int(np.argmin(np.linalg.norm(c - c.mean(0), axis=1))), initial)
+
+
+def farthest_point(n: int, budget: int, dist_to, first: int, initial=()) -> list[int]:
+    """Greedy k-center order over ``n`` items: repeatedly the item farthest from every item
+    taken so far (``initial`` included). ``dist_to(k)``: [n] distances from item k to every
+    item. Without ``initial`` the first pick is ``first``. Ties go to the lowest index."""
+    budget = min(max(0, int(budget)), n - len(set(initial)))
     taken = np.zeros(n, bool)
     mind = np.full(n, np.inf)
     for k in initial:
         taken[k] = True
         mind = np.minimum(mind, dist_to(k))
     chosen: list[int] = []
-    if not np.any(taken):
-        first = int(np.argmin(np.linalg.norm(c - c.mean(0), axis=1)))
+    if budget > 0 and not np.any(taken):
         chosen.append(first)
         taken[first] = True
         mind = dist_to(first)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .baselines import farthest_point
 from .cameras import Cameras
 
 
@@ -68,12 +69,9 @@ def view_depths(cams: Cameras, nodes: np.ndarray | None, index=None) -> np.ndarr
     out = np.full(K, np.nan)
     if index is not None and nodes is not None and index.n_pairs > 0:
         node_of = np.repeat(np.arange(index.n_nodes), np.diff(index.indptr))      # [P]
-        cam = index.cam.astype(np.int64)
-        depth = np.linalg.norm(np.asarray(nodes, np.float64)[node_of] - c[cam], axis=1)  # [P]
-        order = np.argsort(cam, kind="stable")
-        starts = np.searchsorted(cam[order], np.arange(K + 1))
-        for k in range(K):
-            seg = depth[order[starts[k]:starts[k + 1]]]
+        depth = np.linalg.norm(np.asarray(nodes, np.float64)[node_of] - c[index.cam.astype(np.int64)], axis=1)  # [P]
+        for k in range(K):                                    # the index's camera-major view of its pairs
+            seg = depth[index.cam_pos[index.cam_indptr[k]:index.cam_indptr[k + 1]]]
             if len(seg):
                 out[k] = np.median(seg)
         fallback = float(np.median(depth)) if np.median(depth) > 0 else fallback
@@ -112,24 +110,10 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     c, a = embed(cams, depths)
     allk = np.arange(K)
 
-    # farthest-point initialisation in the view distance
-    taken = np.zeros(K, bool)
-    mind = np.full(K, np.inf)
-    for k in initial:
-        taken[k] = True
-        mind = np.minimum(mind, view_distance(c, a, [k], allk)[0])
-    chosen: list[int] = []
-    if not initial:
-        x = np.concatenate([c, a], axis=1)
-        first = int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))
-        chosen.append(first)
-        taken[first] = True
-        mind = view_distance(c, a, [first], allk)[0]
-    while len(chosen) < budget:
-        k = int(np.argmax(np.where(taken, -np.inf, mind)))
-        chosen.append(k)
-        taken[k] = True
-        mind = np.minimum(mind, view_distance(c, a, [k], allk)[0])
+    # farthest-point initialisation in the view distance, from the view nearest the mean (c, a)
+    x = np.concatenate([c, a], axis=1)
+    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0],
+                            int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1))), initial)
 
     # Voronoi iteration; medoids 0..len(initial)-1 are fixed
     med = np.array(initial + chosen, np.int64)
