@@ -227,7 +227,7 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     finish_stage(d, key, {"select": cfg.select, "budget": cfg.budget}, t0,
                  outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
     e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
-    how = f"{sel.method}, {sel.note.split(' (')[0]}" if sel.note else sel.method
+    how = sel.method if sel.method == cfg.select.method else f"{cfg.select.method}: {sel.method}"
     _summary("select", t0, False, f"{len(chosen)} of {len(pool)} pool images ({how}{e}), "
              f"{rec['n_nodes']} nodes, {sel.seconds:.2f}s", timings)
     return d
@@ -298,8 +298,8 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
     methods, paired, gap = summarize(res)
     write_json_atomic(d / "summary.json", {"methods": methods, "paired": paired, "gap_closed": gap})
     # the unit "energy" is the selection, whatever its method (report.json keeps the key)
-    how = json.loads((run_dir / "select" / "selection.json").read_text()).get("method", cfg.select.method)
-    txt = ", ".join(f"{f'selection ({how})' if m == 'energy' else m} {v['psnr']:.2f}"
+    label = f"selection ({sel['method']})"
+    txt = ", ".join(f"{label if m == 'energy' else m} {v['psnr']:.2f}"
                     for m, v in methods.items())
     _summary("evaluate", t0, fresh, f"held-out PSNR: {txt} ({len(hold)} views)", timings)
     return d

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .cameras import Cameras
 from .coverage import CoverageConfig
@@ -135,7 +135,6 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     initial = [int(k) for k in dict.fromkeys(initial)]
     note = ""
     if cfg.method == "auto":
-        from dataclasses import replace
         kind, ang = capture_kind(cams)
         cfg = replace(cfg, method="fvs" if kind == "object" else "medoids")
         note = (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to the "

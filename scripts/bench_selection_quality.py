@@ -39,7 +39,7 @@ import json
 import re
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -152,7 +152,8 @@ def _variants():
     from curate.coverage import CoverageConfig
     from curate.medoids import MedoidsConfig
     from curate.select import SelectConfig
-    return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),"fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
+    return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),
+            "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
             "cov_cells": SelectConfig("coverage", coverage=CoverageConfig(similarity="cells"))}
@@ -228,14 +229,13 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=args.workers)
     default = SelectConfig()
-    from curate.stage import stage_key as _sk
-    default_tag = _sk(default)[:6]
+    default_tag = stage_key(default)[:6]
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
     rows, paired, series = [], [], {}
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
                 "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
                 "random_seeds": args.random_seeds, "default_method": default.method,
-                "default_coverage": vars(default.coverage)}
+                "default_config": asdict(default)}
     t_all = time.perf_counter()
     for scene in scenes:
         run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
