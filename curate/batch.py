@@ -49,6 +49,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .report import _num
+
 log = logging.getLogger(__name__)
 
 METHODS = ("energy", "random", "fvs", "all")
@@ -485,7 +487,7 @@ def run_batch(folders: Iterable[str | Path], out: str | Path, cfg, executor: str
                 if row["status"] == "ok":
                     p = row["psnr"]
                     msg = (f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, PSNR selection "
-                           f"{_f(p['energy'])} / random {_f(p['random'])} / fvs {_f(p['fvs'])} / all {_f(p['all'])} "
+                           f"{_num(p['energy'])} / random {_num(p['random'])} / fvs {_num(p['fvs'])} / all {_num(p['all'])} "
                            f"({row['wall_seconds']:.0f}s)")
                 else:
                     msg = f"{it.name}: FAILED in {row.get('failed_stage')}: {row['reason']}"
@@ -516,10 +518,6 @@ def _config(cfg) -> dict:
     return config_dict(cfg)
 
 
-def _f(v, nd: int = 2) -> str:
-    return "—" if v is None else f"{v:.{nd}f}"
-
-
 def write_summary_html(out: Path, summ: dict) -> Path:
     """``RUNS/summary.html``: one self-contained table, each folder linking to its report."""
     e = html.escape
@@ -533,15 +531,15 @@ def write_summary_html(out: Path, summ: dict) -> Path:
         status = (f"<span class=ok>ok</span>{' (resumed)' if r.get('resumed') else ''}" if st == "ok" else
                   f"<span class=bad>failed</span> in {e(str(r.get('failed_stage')))}<br><small>{e(r['reason'])}</small>"
                   if st == "failed" else e(st))
-        rnd = _f(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
+        rnd = _num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
         dif = r.get("energy_minus_random")
         link = f'<a href="{e(r["report"])}">report</a>' if r.get("report") else ""
         wall = "—" if r.get("wall_seconds") is None else f"{r['wall_seconds']:.0f} s"
         body.append(f"<tr><td class=l><b>{e(r['name'])}</b><br><small>{e(r['folder'])} ({e(r['poses'])})</small></td>"
                     f"<td>{status}</td><td>{_n(r.get('photos'))}</td><td>{_n(r.get('registered'))}</td>"
-                    f"<td>{_n(r.get('chosen'))}</td><td><b>{_f(p.get('energy'))}</b></td><td>{rnd}</td>"
-                    f"<td>{_f(p.get('fvs'))}</td><td>{_f(p.get('all'))}</td>"
-                    f"<td>{'—' if dif is None else f'{dif:+.2f}'}</td>"
+                    f"<td>{_n(r.get('chosen'))}</td><td><b>{_num(p.get('energy'))}</b></td><td>{rnd}</td>"
+                    f"<td>{_num(p.get('fvs'))}</td><td>{_num(p.get('all'))}</td>"
+                    f"<td>{_num(dif, 2, True)}</td>"
                     f"<td>{wall}</td>"
                     f"<td class=l>{link}</td></tr>")
     css = ("body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px;color:#222}"
@@ -556,11 +554,8 @@ def write_summary_html(out: Path, summ: dict) -> Path:
             f"<table>{head}\n" + "\n".join(body) + "</table>\n"
             '<p><small>Written by curate batch. Self-contained; the report links are relative to this file.'
             "</small></p></body></html>\n")
-    path = out / "summary.html"
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(path)
-    return path
+    from .stage import write_text_atomic
+    return write_text_atomic(out / "summary.html", page)
 
 
 def _n(v) -> str:

@@ -513,9 +513,7 @@ def write_html(run_dir: str | Path) -> Path:
     page = ('<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>curate report</title>'
             f'<style>{CSS}</style></head><body>\n' + "\n".join(body)
             + '\n<p class="small">Written by curate. Self-contained: every image is embedded.</p></body></html>\n')
-    out = run_dir / "report.html"
-    tmp = out.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(out)
+    from .stage import write_text_atomic
+    out = write_text_atomic(run_dir / "report.html", page)
     logger.info("report: %s (%.0f kB)", out, out.stat().st_size / 1024)
     return out

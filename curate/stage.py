@@ -103,13 +103,19 @@ def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
     return False
 
 
-def write_json_atomic(path: str | Path, obj: Any) -> Path:
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename: a reader
+    never sees half a file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps(obj, indent=1, default=str))
+    tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
     return path
+
+
+def write_json_atomic(path: str | Path, obj: Any) -> Path:
+    return write_text_atomic(path, json.dumps(obj, indent=1, default=str))
 
 
 def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outputs: dict | None = None,
