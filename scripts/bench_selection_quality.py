@@ -144,10 +144,6 @@ def node_grid(run: Path, cams):
     return NodeGrid(b[0], b[1], 32)
 
 
-def parse_budget(b: str, n_pool: int) -> int:
-    return max(1, int(round(float(b[:-1]) / 100 * n_pool))) if b.endswith("%") else int(b)
-
-
 def _variants():
     from curate.coverage import CoverageConfig
     from curate.medoids import MedoidsConfig
@@ -217,6 +213,7 @@ def main(argv=None) -> int:
 
     import logging
     logging.basicConfig(level=logging.WARNING)
+    from curate.cli import _budget, resolve_budget
     from curate.evaluate import EvalConfig, Unit, eval_cameras, run_units
     from curate.pipeline import load_split
     from curate.select import SelectConfig, select
@@ -248,7 +245,7 @@ def main(argv=None) -> int:
         sfm_key = read_stage(run / "sfm")["key"]
         occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
         for b in [x for x in args.budgets.split(",") if x]:
-            B = parse_budget(b, len(pool))
+            B = resolve_budget(_budget(b), len(pool))
             subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
             timing = {}
             for m in methods:
