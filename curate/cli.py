@@ -9,7 +9,9 @@ import logging
 import sys
 from pathlib import Path
 
+from .budget import budget_text, parse_budget, resolve_budget  # noqa: F401  (resolve_budget re-exported)
 from .methods import DEFAULT_METHOD, METHOD_HELP, METHODS
+from .sfm_config import CAMERA_MODES, MATCHERS
 from .sfm_config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy
 
 
@@ -42,32 +44,20 @@ def _bins(text: str):
 
 
 def _budget(text: str):
-    """'200' -> 200 (a count); '15%' -> 0.15 (a fraction of the pool)."""
-    t = text.strip()
+    """argparse type of ``--budget``: :func:`curate.budget.parse_budget`."""
     try:
-        if t.endswith("%"):
-            f = float(t[:-1]) / 100.0
-            if not 0 < f <= 1:
-                raise ValueError
-            return f
-        n = int(t)
-        if n < 0:
-            raise ValueError
-        return n
+        return parse_budget(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--budget wants a count (200) or a percentage (15%), got {text!r}")
 
 
-def _budget_text(budget) -> str:
-    """The inverse of :func:`_budget`: 200 -> '200', 0.15 -> '15%'."""
-    return f"{budget * 100:g}%" if isinstance(budget, float) else str(budget)
+def _add_budget(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
 
 
-def resolve_budget(budget, n_pool: int) -> int:
-    """A count stays; a fraction becomes round(fraction * pool), at least 1."""
-    if isinstance(budget, float):
-        return max(1, int(round(budget * n_pool)))
-    return int(budget)
+def _add_matcher(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--matcher", default="auto", choices=MATCHERS,
+                   help="SfM image pairs (default auto: exhaustive up to 150 photos, else sequential or spatial)")
 
 
 def _add_energy_args(p: argparse.ArgumentParser) -> None:
@@ -266,7 +256,7 @@ def _run_cfg(args):
     try:
         ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.eval_size, iters=args.iters,
                         random_seeds=args.random_seeds, workers=args.workers)
-        return RunConfig(budget=_budget_text(args.budget), sfm=SfmConfig(max_image_size=args.max_size, matcher=args.matcher),
+        return RunConfig(budget=budget_text(args.budget), sfm=SfmConfig(max_image_size=args.max_size, matcher=args.matcher),
                          occupancy=OccupancyConfig(res=args.res),
                          select=SelectConfig(method=args.method, energy=_energy_cfg(args), seed=args.seed,
                                              device=args.device),
@@ -363,7 +353,7 @@ def _select_stage(args) -> int:
     run_dir = Path(args.input)
     cfg, _ = _saved_cfg(run_dir)
     sel = replace(cfg.select, method=args.method, energy=_energy_cfg(args), seed=args.seed)
-    cfg = replace(cfg, budget=_budget_text(args.budget), select=sel)
+    cfg = replace(cfg, budget=budget_text(args.budget), select=sel)
     try:
         pl.stage_select(cfg, run_dir, getattr(args, "force", False))
     except (FileNotFoundError, ValueError) as e:
@@ -382,7 +372,7 @@ def _size(text: str):
 
 def _add_run_options(s: argparse.ArgumentParser) -> None:
     """The options of `curate run` that `curate batch` shares."""
-    s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
+    _add_budget(s)
     s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
     s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
     s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
@@ -393,7 +383,7 @@ def _add_run_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--no-evaluate", action="store_true", help="skip the trainings (selection, report, export only)")
     s.add_argument("--export-mode", default="link", choices=["link", "copy"], help="export links or copies")
     s.add_argument("--max-size", type=int, default=1600, help="SfM working copies' longer side (default 1600)")
-    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
+    _add_matcher(s)
     s.add_argument("--force", action="store_true", help="redo every stage")
     _add_energy_args(s)
 
@@ -414,8 +404,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--poses", default=None, help="import this COLMAP model folder or transforms.json instead of SfM")
     s.add_argument("--max-size", type=int, default=1600, help="longer side of the working copies (default 1600)")
     s.add_argument("--recursive", action="store_true", help="also take photos from sub-folders")
-    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential", "spatial"])
-    s.add_argument("--camera-mode", default="auto", choices=["auto", "single", "per_image"])
+    _add_matcher(s)
+    s.add_argument("--camera-mode", default="auto", choices=CAMERA_MODES)
     s.add_argument("--drop-blurry", action="store_true", help="drop blurry photos (default: flag them only)")
     s.add_argument("--keep-duplicates", action="store_true", help="keep near-duplicate photos")
     s.add_argument("--sift-peak-threshold", type=float, default=_SfmDefaults.sift_peak_threshold,
@@ -440,7 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Choose a budget of cameras from a posed pool and write them as "
                        "transforms.json, selected.txt and selection.json in --out.")
     s.add_argument("input", help="transforms.json, a COLMAP model folder, cameras.json, or a run folder")
-    s.add_argument("--budget", type=_budget, required=True, help="a count (60) or a fraction of the pool (15%%)")
+    _add_budget(s)
     s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
     s.add_argument("--seed", type=int, default=0, help="seed of the random baseline")
     s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")

@@ -202,13 +202,13 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     if begin_stage(d, key, force):
         _summary("select", t0, True, "", timings)
         return d
-    from .cli import resolve_budget
+    from .budget import parse_budget, resolve_budget
     from .sfm_io import load_sfm
     sfm = load_sfm(run_dir)
     split = json.loads((run_dir / "occupancy" / "split.json").read_text())
     pool = split["pool"]
     grid = load_node_grid(run_dir)
-    budget = resolve_budget(_parse_budget(cfg.budget), len(pool))
+    budget = resolve_budget(parse_budget(cfg.budget), len(pool))
     pc = sfm.cameras[pool]
     t_vis = time.perf_counter()
     index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
@@ -231,11 +231,6 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     _summary("select", t0, False, f"{len(chosen)} of {len(pool)} pool images ({how}{e}), "
              f"{rec['n_nodes']} nodes, {sel.seconds:.2f}s", timings)
     return d
-
-
-def _parse_budget(b):
-    from .cli import _budget
-    return _budget(str(b))
 
 
 def eval_units(cfg: RunConfig, run_dir: Path):

@@ -5,6 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
+"""``SfmConfig.matcher`` choices (never a vocabulary-tree matcher: it would need a download)."""
+CAMERA_MODES = ("auto", "single", "per_image")
+"""``SfmConfig.camera_mode`` choices."""
+
+
 @dataclass
 class SfmConfig:
     """Options of the SfM stage. Every field but ``num_threads`` and ``progress`` is part of the stage key."""
@@ -49,8 +55,7 @@ class SfmConfig:
     progress: bool = True             # tqdm bars on the terminal
 
     def __post_init__(self) -> None:
-        choices = {"camera_mode": ("auto", "single", "per_image"), "matcher": ("auto", "exhaustive", "sequential",
-                   "spatial"), "dense": ("auto", "off")}
+        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off")}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:
                 raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")
