@@ -50,7 +50,15 @@ class MedoidsConfig:
     """Minimise the mean of ``d ** power``: 1 is k-medoids (the mean distance); larger values
     weigh far, badly covered views more, towards farthest-view sampling's largest distance."""
 
+    energy_share: float = 0.0
+    """Share of the budget chosen after the medoids by the paper's greedy energy, with the
+    medoids as the initial set (method "medoids" in :func:`curate.select.select`): the
+    medoids cover the path, the energy adds views that widen the directions each node is
+    seen from (for views off the path). 0: medoids only."""
+
     def __post_init__(self) -> None:
+        if not (0.0 <= self.energy_share <= 1.0):
+            raise ValueError(f"energy_share must be in [0, 1], got {self.energy_share}")
         if self.depth is not None and not (np.isfinite(self.depth) and self.depth > 0):
             raise ValueError(f"depth must be finite and > 0, got {self.depth}")
         if self.max_iters < 0:

@@ -154,7 +154,10 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         sel = Selection(cfg.method, chosen, initial, e, a, f, objective=obj)
     elif cfg.method == "medoids":
         from .medoids import medoids_select
-        chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)
+        n_med = budget - int(round(cfg.medoids.energy_share * max(0, budget)))
+        chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index)
+        if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
+            chosen += greedy_select(index, budget - n_med, cfg.energy, initial + chosen).chosen
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f, objective=cost)
     else:

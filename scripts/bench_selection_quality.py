@@ -8,14 +8,23 @@ SAME :class:`curate.evaluate.EvalConfig` through :func:`curate.evaluate.run_unit
 ``q_default-<hash of its SelectConfig>_...``, keyed with
 :func:`curate.stage.stage_key`, so a re-run skips finished trainings).
 
+Scenes: office, fox, templering, skull (real captures, held-out views on the capture path)
+and ``room``: a synthetic walk through the living room of :mod:`curate.synthetic`, rendered
+once by the harness (:func:`room_scene`), whose fields are also scored on views drawn at
+random in the room's free space, off the capture path (rows ``room-offpath``): the
+free-viewpoint navigation the paper is about, which no real capture here can test.
+
 Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
 (the paper), ``fvs`` (farthest-view sampling), ``random`` (seeds 0..n-1, one training
 each), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.select.METHODS`.
 
 Cheap proxies (seconds, no training) for every method: from each held-out view to the
 chosen cameras, the nearest centre distance (``pos``, ``pos90``: mean, 90th percentile),
-the smallest viewing-direction angle (``ang``, ``ang90``, degrees), and the best
-single-view overlap of its (node, direction-bin) cells (``cell``).
+the smallest viewing-direction angle (``ang``, ``ang90``, degrees), the best
+single-view overlap of its (node, direction-bin) cells (``cell``) and the nearest view in
+view medoids' distance (``view``). ``r_loss``: the correlation, over the held-out views,
+between what a subset loses against all the pool (PSNR) and ``view``: near 0 when what
+is left to gain is no longer about where the chosen cameras are.
 
 Per-view paired differences (95% t intervals over the held-out views) of ``--candidate``
 (default: ``default``) against random (averaged over its seeds per view), fvs, energy,
@@ -79,9 +88,57 @@ def scene_cameras(scene: str):
     raise SystemExit(f"unknown scene {scene!r}")
 
 
+ROOM_WALK = (220, 80)
+"""Scene "room": frames on the walk's loop and around the coffee table (a denser
+``data_samples/room_walk`` walk: 300 frames instead of 160)."""
+ROOM_OFFPATH = 40
+"""Scene "room": random free-space test views off the walk (``curate simulate``'s random test set)."""
+
+
+def room_scene(dest: Path) -> Path:
+    """Render the synthetic "room" scene once into ``dest/room``: the walk's frames with a
+    transforms.json (the pool and its on-path held-out views, as for a real capture) and
+    ``offpath.json``, ``ROOM_OFFPATH`` views drawn at random in the room's free space (centre
+    free, nothing nearer than 0.3 m, pitch within 45 deg): a test set off the capture path
+    that only a synthetic scene has. Returns the transforms.json."""
+    d = dest / "room"
+    if (d / "transforms.json").is_file() and (d / "offpath.json").is_file():
+        return d / "transforms.json"
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from make_sample_pool import room_walk
+    from PIL import Image
+    from curate.progressive import CameraSpec, ProgressiveConfig, draw_acceptable, scene_oracle
+    from curate.synthetic import make_scene
+    from curate.transforms_json import write_transforms
+    scene = make_scene("livingroom", seed=0)
+    walk = room_walk(*ROOM_WALK)
+    lo, hi = scene.interior
+    pc = ProgressiveConfig(camera=CameraSpec(int(walk.width[0]), int(walk.height[0]), 60.0))
+    off = draw_acceptable(np.random.default_rng(7), lo + 0.05, hi - 0.05, ROOM_OFFPATH, pc, *scene_oracle(scene))
+    (d / "images").mkdir(parents=True, exist_ok=True)
+    for cams, stem, js in ((walk, "frame", "transforms.json"), (off, "offpath", "offpath.json")):
+        rel = [f"images/{stem}_{i:04d}.jpg" for i in range(len(cams))]
+        for i in range(0, len(cams), 20):
+            for k, rgb in enumerate(scene.render(cams[i:i + 20])[0]):
+                Image.fromarray(rgb).save(d / rel[i + k], quality=95)
+        write_transforms(d / js, cams, rel)
+    print(f"rendered room: {len(walk)} walk frames, {len(off)} off-path test views -> {d}")
+    return d / "transforms.json"
+
+
+def offpath_views(scene: str, out: Path, data: Path | None):
+    """(cameras, image paths) of the scene's test views off the capture path, or None (real scenes)."""
+    if scene != "room":
+        return None
+    from curate.transforms_json import read_transforms
+    return read_transforms((data or out) / "room" / "offpath.json")
+
+
 def scene_poses(scene: str, out: Path, data: Path | None = None) -> Path:
     """A transforms.json for ``scene``: under ``data`` when packed (``--pack``), else written
     under ``out`` with absolute paths to the photos in ``../shared/data``."""
+    if scene == "room":
+        return room_scene(data or out)
     if data is not None:
         p = data / scene / "transforms.json"
         if not p.is_file():
@@ -149,6 +206,8 @@ def _variants():
     from curate.medoids import MedoidsConfig
     from curate.select import SelectConfig
     return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),
+            "medoids_p05": SelectConfig("medoids", medoids=MedoidsConfig(power=0.5)),
+            "medoids_e25": SelectConfig("medoids", medoids=MedoidsConfig(energy_share=0.25)),
             "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
@@ -156,15 +215,26 @@ def _variants():
 
 
 # ------------------------------------------------------------------ proxies
-def proxies(pc, hc, cell_sim_hold, chosen) -> dict:
-    """Held-out view -> chosen cameras: nearest centre, smallest angle, best cell overlap."""
+def proxies(pc, hc, cell_sim_hold, chosen, view_dist_hold) -> dict:
+    """Held-out view -> chosen cameras: nearest centre, smallest angle, best cell overlap,
+    nearest view in view medoids' distance (``view``; ``view_per``: per held-out view)."""
     ch = np.asarray(chosen, int)
     d = np.linalg.norm(hc.centres[:, None] - pc.centres[ch][None], axis=2).min(1)
     a = np.degrees(np.arccos(np.clip(hc.view_dirs @ pc.view_dirs[ch].T, -1, 1))).min(1)
     ov = cell_sim_hold[:, ch].max(1)
+    v = view_dist_hold[:, ch].min(1)
     r = lambda x: round(float(x), 4)  # noqa: E731
     return {"pos": r(d.mean()), "pos90": r(np.percentile(d, 90)), "ang": r(a.mean()),
-            "ang90": r(np.percentile(a, 90)), "cell": r(ov.mean())}
+            "ang90": r(np.percentile(a, 90)), "cell": r(ov.mean()), "view": r(v.mean()), "view_per": v}
+
+
+def holdout_view_distance(cams, pool, hold, grid, bins) -> np.ndarray:
+    """[H, K] view medoids' distance (:func:`curate.medoids.view_distance`, per-camera depths
+    from the selection nodes) from each held-out view to each pool view."""
+    from curate.medoids import embed, view_depths, view_distance
+    from curate.visibility import build_pair_index
+    c, a = embed(cams, view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), bins)))
+    return view_distance(c, a, hold, pool)
 
 
 def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
@@ -181,7 +251,9 @@ def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
 def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", default="office,fox,templering")
+    ap.add_argument("--scenes", default="office,fox,templering",
+                    help="office, fox, templering, skull (real captures) and room (a synthetic walk, "
+                    "rendered by the harness, with test views off the path too)")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)
@@ -213,7 +285,7 @@ def main(argv=None) -> int:
 
     import logging
     logging.basicConfig(level=logging.WARNING)
-    from curate.cli import _budget, resolve_budget
+    from curate.budget import parse_budget, resolve_budget
     from curate.evaluate import EvalConfig, Unit, eval_cameras, run_units
     from curate.pipeline import load_split
     from curate.select import SelectConfig, select
@@ -240,12 +312,21 @@ def main(argv=None) -> int:
         pc, hc = sfm.cameras[pool], sfm.cameras[hold]
         grid = node_grid(run, sfm.cameras)
         cs_hold = holdout_cell_similarity(pc, hc, grid, default.energy.bins)
-        cams = eval_cameras(sfm.cameras, ev.max_side)
+        vd_hold = holdout_view_distance(sfm.cameras, pool, hold, grid, default.energy.bins)
+        tests, all_cams, all_paths = list(hold), sfm.cameras, list(paths)   # evaluated views
+        off = offpath_views(scene, out, data)
+        if off is not None:                                  # appended after the registered cameras
+            from curate.cameras import Cameras
+            all_cams, all_paths = Cameras.concat([sfm.cameras, off[0]]), all_paths + list(off[1])
+            tests += list(range(len(sfm.cameras), len(all_cams)))
+        parts = [(scene, np.arange(len(tests)) < len(hold))] + (
+            [(f"{scene}-offpath", np.arange(len(tests)) >= len(hold))] if off is not None else [])
+        cams = eval_cameras(all_cams, ev.max_side)
         box = default_box(sfm.cameras)
         sfm_key = read_stage(run / "sfm")["key"]
         occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
         for b in [x for x in args.budgets.split(",") if x]:
-            B = resolve_budget(_budget(b), len(pool))
+            B = resolve_budget(parse_budget(b), len(pool))
             subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
             timing = {}
             for m in methods:
@@ -260,7 +341,7 @@ def main(argv=None) -> int:
                     s = select(pc, grid, B, c)
                     subsets[m].append(s.chosen)
                     timing[m] = round(s.seconds, 3)
-            prox = {m: [proxies(pc, hc, cs_hold, ch) for ch in v] for m, v in subsets.items()}
+            prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
             groups = {}
             label = {"default": f"default-{default_tag}"}   # the folder names a default's variant
             if not args.proxy_only:
@@ -277,10 +358,10 @@ def main(argv=None) -> int:
             for t, us in sorted(groups.items()):
                 cfg_t = replace(ev, train_seed=t)
                 train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
-                keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": hold},
+                keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
                                          [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
                 fp = {"all": str(run / "occupancy" / "field.pt")}
-                results.update(run_units(run, us, keys, cfg_t, cams, paths, hold, box, fp, progress=False))
+                results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
             # per method: per-view PSNR averaged over its trainings (random: over its seeds)
             per_view, per_run = {}, {}
             for m in methods:
@@ -289,41 +370,52 @@ def main(argv=None) -> int:
                 if not rs:
                     continue
                 per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)
-                per_run[m] = [round(r["psnr"], 3) for r in rs]
-            print(f"\n{scene}: {B} of {len(pool)} pool images, {len(hold)} held out "
-                  f"(max_side {ev.max_side}, {ev.iters} it)")
-            print(f"{'method':10s} {'PSNR':>7s}  {'runs':28s} {'pos':>6s} {'pos90':>6s} {'ang':>5s} {'ang90':>6s} "
-                  f"{'cell':>6s} {'sel s':>6s}")
-            for m in methods:
-                pr = prox.get(m)
-                pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0]} if pr else {}
-                row = {"scene": scene, "budget": B, "pool": len(pool), "method": m,
-                       "method_name": default.method if m == "default" else m,
-                       "psnr": round(float(per_view[m].mean()), 3) if m in per_view else None,
-                       "runs": per_run.get(m, []), **{k: round(v, 4) for k, v in pm.items()},
-                       "select_s": timing.get(m)}
-                rows.append(row)
-                ps = f"{row['psnr']:7.2f}" if row["psnr"] is not None else "      -"
-                px = (f"{pm['pos']:6.3f} {pm['pos90']:6.3f} {pm['ang']:5.1f} {pm['ang90']:6.1f} {pm['cell']:6.3f}"
-                      if pm else " " * 34)
-                print(f"{m:10s} {ps}  {str(per_run.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
-                if row["psnr"] is not None:
-                    series.setdefault(scene, {}).setdefault(m, []).append((B, row["psnr"]))
-            cand = args.candidate
-            if cand in per_view:
-                for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
-                    if o in per_view:
-                        d = paired_difference(per_view[cand], per_view[o])
-                        d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
-                        paired.append({"scene": scene, "budget": B, "pair": f"{cand}-{o}", **d})
-                        print(f"  {cand} - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
-                              f"{d['n']} views)")
-                if all(m in per_view for m in ("random", "all")):
-                    room = per_view["all"].mean() - per_view["random"].mean()
-                    if room > 1e-6:
-                        g = (per_view[cand].mean() - per_view["random"].mean()) / room
-                        paired.append({"scene": scene, "budget": B, "pair": f"gap_closed_{cand}", "mean": round(float(g), 3)})
-                        print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
+                per_run[m] = [np.array([v["psnr"] for v in r["per_view"]]) for r in rs]   # [runs][views]
+            for part, mask in parts:   # on the capture path (held out); off it (synthetic scenes)
+                pv = {m: v[mask] for m, v in per_view.items()}
+                runs = {m: [round(float(x[mask].mean()), 3) for x in v] for m, v in per_run.items()}
+                on = part == scene
+                what = f"{len(hold)} held out" if on else f"{int(mask.sum())} test views off the capture path"
+                print(f"\n{part}: {B} of {len(pool)} pool images, {what} "
+                      f"(max_side {ev.max_side}, {ev.iters} it)")
+                print(f"{'method':10s} {'PSNR':>7s}  {'runs':28s} {'pos':>6s} {'pos90':>6s} {'ang':>5s} {'ang90':>6s} "
+                      f"{'cell':>6s} {'view':>6s} {'r_loss':>6s} {'sel s':>6s}")
+                for m in methods:
+                    pr = prox.get(m) if on else None
+                    pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0] if k != "view_per"} if pr else {}
+                    if pr and m in pv and "all" in pv and m != "all" and len(pv[m]) > 2:
+                        # does what this subset loses against all the pool, view by view, follow the
+                        # distance to its nearest chosen view? (r near 0: not a coverage problem)
+                        loss, near = pv["all"] - pv[m], np.mean([p["view_per"] for p in pr], axis=0)
+                        if loss.std() > 0 and near.std() > 0:
+                            pm["r_loss_view"] = float(np.corrcoef(loss, near)[0, 1])
+                    row = {"scene": part, "budget": B, "pool": len(pool), "method": m,
+                           "method_name": default.method if m == "default" else m,
+                           "psnr": round(float(pv[m].mean()), 3) if m in pv else None,
+                           "runs": runs.get(m, []), **{k: round(v, 4) for k, v in pm.items()},
+                           "select_s": timing.get(m)}
+                    rows.append(row)
+                    ps = f"{row['psnr']:7.2f}" if row["psnr"] is not None else "      -"
+                    px = (f"{pm['pos']:6.3f} {pm['pos90']:6.3f} {pm['ang']:5.1f} {pm['ang90']:6.1f} {pm['cell']:6.3f} "
+                          f"{pm['view']:6.3f} {pm.get('r_loss_view', float('nan')):6.2f}" if pm else " " * 48)
+                    print(f"{m:10s} {ps}  {str(runs.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
+                    if row["psnr"] is not None:
+                        series.setdefault(part, {}).setdefault(m, []).append((B, row["psnr"]))
+                cand = args.candidate
+                if cand in pv:
+                    for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
+                        if o in pv:
+                            d = paired_difference(pv[cand], pv[o])
+                            d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
+                            paired.append({"scene": part, "budget": B, "pair": f"{cand}-{o}", **d})
+                            print(f"  {cand} - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
+                                  f"{d['n']} views)")
+                    if all(m in pv for m in ("random", "all")):
+                        room = pv["all"].mean() - pv["random"].mean()
+                        if room > 1e-6:
+                            g = (pv[cand].mean() - pv["random"].mean()) / room
+                            paired.append({"scene": part, "budget": B, "pair": f"gap_closed_{cand}", "mean": round(float(g), 3)})
+                            print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
     if series:
         from curate.plots import line_chart
         svg = []

@@ -196,3 +196,27 @@ def test_select_medoids_end_to_end_and_config_roundtrip():
         with pytest.raises(ValueError):
             MedoidsConfig(power=bad)
 
+
+
+@pytest.mark.parametrize("share, budget, initial", [(0.25, 8, ()), (0.5, 7, [3]), (0.01, 6, ()), (1.0, 5, [2])])
+def test_energy_share_medoids_then_the_paper_greedy(share, budget, initial):
+    """energy_share: round(share * budget) cameras by the paper's greedy on top of the medoids
+    of the rest; share 0 is plain medoids, share 1 the paper's greedy alone."""
+    from curate.greedy import greedy_select
+    cams = random_pool(30, seed=11)
+    idx = build_pair_index(cams, GRID.nodes(), EnergyConfig().bins)
+    s = select(cams, GRID, budget, SelectConfig("medoids", medoids=MedoidsConfig(energy_share=share)),
+               initial=initial, index=idx)
+    check_basic(s.chosen, 30, budget, initial)
+    n_e = int(round(share * budget))
+    med = medoids_select(cams, budget - n_e, MedoidsConfig(), initial, GRID.nodes(), idx)[0]
+    assert s.chosen[:budget - n_e] == med
+    assert s.chosen[budget - n_e:] == greedy_select(idx, n_e, EnergyConfig(), list(initial) + med).chosen
+    assert np.all(np.isfinite(s.energy)) and len(s.energy) == budget
+    if share == 1.0:
+        assert s.chosen == select(cams, GRID, budget, SelectConfig("energy"), initial=initial, index=idx).chosen
+    plain = select(cams, GRID, budget, SelectConfig("medoids", medoids=MedoidsConfig(energy_share=0.0)), index=idx)
+    assert plain.chosen == medoids_select(cams, budget, MedoidsConfig(), (), GRID.nodes(), idx)[0]
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError):
+            MedoidsConfig(energy_share=bad)
