@@ -161,6 +161,9 @@ def pack(scenes: list[str], dest: Path, side: int) -> None:
     from curate.transforms_json import write_transforms
     from curate.train import load_image
     for scene in scenes:
+        if scene == "room":                       # synthetic: rendered straight into dest
+            room_scene(dest)
+            continue
         cams, files = scene_cameras(scene)
         f = np.minimum(1.0, side / np.maximum(cams.width, cams.height))
         small = cams.scaled_images(f)
@@ -262,7 +265,8 @@ def main(argv=None) -> int:
     ap.add_argument("--extra", default="", help="more selection methods: METHODS names, or variants "
                     "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1), "
                     "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone), "
-                    "'medoids_p2' (medoids minimising the mean squared view distance)")
+                    "'medoids_p2' / 'medoids_p05' (medoids minimising the mean of the view distance ** 2 / ** 0.5), "
+                    "'medoids_e25' (medoids for 75%% of the budget, the paper's greedy energy for the rest)")
     ap.add_argument("--max-side", type=int, default=160)
     ap.add_argument("--iters", type=int, default=600)
     ap.add_argument("--holdout-every", type=int, default=14)
