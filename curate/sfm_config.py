@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 
 MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
-"""``SfmConfig.matcher`` choices (never a vocabulary-tree matcher: it would need a download)."""
+"""``SfmConfig.matcher`` choices. No vocabulary-tree matcher: a pre-trained tree is a download;
+``sequential`` finds loops with a tree trained on the capture itself (``loop_detection``)."""
 CAMERA_MODES = ("auto", "single", "per_image")
 """``SfmConfig.camera_mode`` choices."""
 

@@ -250,6 +250,60 @@ def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
     return S[len(pc):, :len(pc)].toarray()
 
 
+def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int, methods, per_view: dict,
+                per_run: dict, prox: dict, timing: dict, ev, default_method: str, cand: str,
+                rows: list, paired: list, series: dict) -> None:
+    """Print and record one table: the views of ``mask`` (on the capture path, or off it).
+
+    ``per_view``: method -> [tests] PSNR averaged over its trainings; ``per_run``: method ->
+    [runs][tests]; ``prox``: method -> proxies per subset (on-path views only). Appends to
+    ``rows``, ``paired`` and ``series``.
+    """
+    from curate.stats import paired_difference
+    pv = {m: v[mask] for m, v in per_view.items()}
+    runs = {m: [round(float(x[mask].mean()), 3) for x in v] for m, v in per_run.items()}
+    what = f"{n_hold} held out" if on_path else f"{int(mask.sum())} test views off the capture path"
+    print(f"\n{part}: {B} of {n_pool} pool images, {what} "
+          f"(max_side {ev.max_side}, {ev.iters} it)")
+    print(f"{'method':10s} {'PSNR':>7s}  {'runs':28s} {'pos':>6s} {'pos90':>6s} {'ang':>5s} {'ang90':>6s} "
+          f"{'cell':>6s} {'view':>6s} {'r_loss':>6s} {'sel s':>6s}")
+    for m in methods:
+        pr = prox.get(m) if on_path else None
+        pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0] if k != "view_per"} if pr else {}
+        if pr and m in pv and "all" in pv and m != "all" and len(pv[m]) > 2:
+            # does what this subset loses against all the pool, view by view, follow the
+            # distance to its nearest chosen view? (r near 0: not a coverage problem)
+            loss, near = pv["all"] - pv[m], np.mean([p["view_per"] for p in pr], axis=0)
+            if loss.std() > 0 and near.std() > 0:
+                pm["r_loss_view"] = float(np.corrcoef(loss, near)[0, 1])
+        row = {"scene": part, "budget": B, "pool": n_pool, "method": m,
+               "method_name": default_method if m == "default" else m,
+               "psnr": round(float(pv[m].mean()), 3) if m in pv else None,
+               "runs": runs.get(m, []), **{k: round(v, 4) for k, v in pm.items()},
+               "select_s": timing.get(m)}
+        rows.append(row)
+        ps = f"{row['psnr']:7.2f}" if row["psnr"] is not None else "      -"
+        px = (f"{pm['pos']:6.3f} {pm['pos90']:6.3f} {pm['ang']:5.1f} {pm['ang90']:6.1f} {pm['cell']:6.3f} "
+              f"{pm['view']:6.3f} {pm.get('r_loss_view', float('nan')):6.2f}" if pm else " " * 48)
+        print(f"{m:10s} {ps}  {str(runs.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
+        if row["psnr"] is not None:
+            series.setdefault(part, {}).setdefault(m, []).append((B, row["psnr"]))
+    if cand in pv:
+        for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
+            if o in pv:
+                d = paired_difference(pv[cand], pv[o])
+                d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
+                paired.append({"scene": part, "budget": B, "pair": f"{cand}-{o}", **d})
+                print(f"  {cand} - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
+                      f"{d['n']} views)")
+        if all(m in pv for m in ("random", "all")):
+            room = pv["all"].mean() - pv["random"].mean()
+            if room > 1e-6:
+                g = (pv[cand].mean() - pv["random"].mean()) / room
+                paired.append({"scene": part, "budget": B, "pair": f"gap_closed_{cand}", "mean": round(float(g), 3)})
+                print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
+
+
 # ------------------------------------------------------------------ the harness
 def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
@@ -294,7 +348,6 @@ def main(argv=None) -> int:
     from curate.pipeline import load_split
     from curate.select import SelectConfig, select
     from curate.stage import read_stage, stage_key
-    from curate.stats import paired_difference
     from curate.train import default_box
 
     VARIANTS = _variants()
@@ -376,50 +429,8 @@ def main(argv=None) -> int:
                 per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)
                 per_run[m] = [np.array([v["psnr"] for v in r["per_view"]]) for r in rs]   # [runs][views]
             for part, mask in parts:   # on the capture path (held out); off it (synthetic scenes)
-                pv = {m: v[mask] for m, v in per_view.items()}
-                runs = {m: [round(float(x[mask].mean()), 3) for x in v] for m, v in per_run.items()}
-                on = part == scene
-                what = f"{len(hold)} held out" if on else f"{int(mask.sum())} test views off the capture path"
-                print(f"\n{part}: {B} of {len(pool)} pool images, {what} "
-                      f"(max_side {ev.max_side}, {ev.iters} it)")
-                print(f"{'method':10s} {'PSNR':>7s}  {'runs':28s} {'pos':>6s} {'pos90':>6s} {'ang':>5s} {'ang90':>6s} "
-                      f"{'cell':>6s} {'view':>6s} {'r_loss':>6s} {'sel s':>6s}")
-                for m in methods:
-                    pr = prox.get(m) if on else None
-                    pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0] if k != "view_per"} if pr else {}
-                    if pr and m in pv and "all" in pv and m != "all" and len(pv[m]) > 2:
-                        # does what this subset loses against all the pool, view by view, follow the
-                        # distance to its nearest chosen view? (r near 0: not a coverage problem)
-                        loss, near = pv["all"] - pv[m], np.mean([p["view_per"] for p in pr], axis=0)
-                        if loss.std() > 0 and near.std() > 0:
-                            pm["r_loss_view"] = float(np.corrcoef(loss, near)[0, 1])
-                    row = {"scene": part, "budget": B, "pool": len(pool), "method": m,
-                           "method_name": default.method if m == "default" else m,
-                           "psnr": round(float(pv[m].mean()), 3) if m in pv else None,
-                           "runs": runs.get(m, []), **{k: round(v, 4) for k, v in pm.items()},
-                           "select_s": timing.get(m)}
-                    rows.append(row)
-                    ps = f"{row['psnr']:7.2f}" if row["psnr"] is not None else "      -"
-                    px = (f"{pm['pos']:6.3f} {pm['pos90']:6.3f} {pm['ang']:5.1f} {pm['ang90']:6.1f} {pm['cell']:6.3f} "
-                          f"{pm['view']:6.3f} {pm.get('r_loss_view', float('nan')):6.2f}" if pm else " " * 48)
-                    print(f"{m:10s} {ps}  {str(runs.get(m, '')):28s} {px} {timing.get(m, 0) or 0:6.2f}")
-                    if row["psnr"] is not None:
-                        series.setdefault(part, {}).setdefault(m, []).append((B, row["psnr"]))
-                cand = args.candidate
-                if cand in pv:
-                    for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
-                        if o in pv:
-                            d = paired_difference(pv[cand], pv[o])
-                            d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
-                            paired.append({"scene": part, "budget": B, "pair": f"{cand}-{o}", **d})
-                            print(f"  {cand} - {o:7s} {d['mean']:+.2f} dB  (95% CI {d['lo']:+.2f} to {d['hi']:+.2f}, "
-                                  f"{d['n']} views)")
-                    if all(m in pv for m in ("random", "all")):
-                        room = pv["all"].mean() - pv["random"].mean()
-                        if room > 1e-6:
-                            g = (pv[cand].mean() - pv["random"].mean()) / room
-                            paired.append({"scene": part, "budget": B, "pair": f"gap_closed_{cand}", "mean": round(float(g), 3)})
-                            print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
+                report_part(part, part == scene, len(hold), mask, B, len(pool), methods, per_view, per_run, prox,
+                            timing, ev, default.method, args.candidate, rows, paired, series)
     if series:
         from curate.plots import line_chart
         svg = []
