@@ -231,23 +231,18 @@ def proxies(pc, hc, cell_sim_hold, chosen, view_dist_hold) -> dict:
             "ang90": r(np.percentile(a, 90)), "cell": r(ov.mean()), "view": r(v.mean()), "view_per": v}
 
 
-def holdout_view_distance(cams, pool, hold, grid, bins) -> np.ndarray:
-    """[H, K] view medoids' distance (:func:`curate.medoids.view_distance`, per-camera depths
-    from the selection nodes) from each held-out view to each pool view."""
+def holdout_measures(cams, pool, hold, grid, bins) -> tuple[np.ndarray, np.ndarray]:
+    """From each held-out view to each pool view, both [H, K] and from one pair index of all
+    ``cams``: the share of the held-out view's (node, bin) cells that the pool view also
+    observes, and view medoids' distance (:func:`curate.medoids.view_distance`, per-camera
+    depths from the selection nodes)."""
+    from curate.coverage import cell_similarity
     from curate.medoids import embed, view_depths, view_distance
     from curate.visibility import build_pair_index
-    c, a = embed(cams, view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), bins)))
-    return view_distance(c, a, hold, pool)
-
-
-def holdout_cell_similarity(pc, hc, grid, bins) -> np.ndarray:
-    """[H, K] share of each held-out view's (node, bin) cells that pool camera k also observes."""
-    from curate.cameras import Cameras
-    from curate.coverage import cell_similarity
-    from curate.visibility import build_pair_index
-    idx = build_pair_index(Cameras.concat([pc, hc]), grid.nodes(), bins)
-    S = cell_similarity(idx, 0.0).tocsr()
-    return S[len(pc):, :len(pc)].toarray()
+    idx = build_pair_index(cams, grid.nodes(), bins)
+    cells = cell_similarity(idx, 0.0).tocsr()[hold][:, pool].toarray()
+    c, a = embed(cams, view_depths(cams, grid.nodes(), idx))
+    return cells, view_distance(c, a, hold, pool)
 
 
 def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int, methods, per_view: dict,
@@ -368,8 +363,7 @@ def main(argv=None) -> int:
         sfm, paths, pool, hold = load_split(run, ev.holdout_every)
         pc, hc = sfm.cameras[pool], sfm.cameras[hold]
         grid = node_grid(run, sfm.cameras)
-        cs_hold = holdout_cell_similarity(pc, hc, grid, default.energy.bins)
-        vd_hold = holdout_view_distance(sfm.cameras, pool, hold, grid, default.energy.bins)
+        cs_hold, vd_hold = holdout_measures(sfm.cameras, pool, hold, grid, default.energy.bins)
         tests, all_cams, all_paths = list(hold), sfm.cameras, list(paths)   # evaluated views
         off = offpath_views(scene, out, data)
         if off is not None:                                  # appended after the registered cameras
