@@ -228,13 +228,14 @@ def _copy_unit(ev_dir: Path, src_key: str, unit: Unit, metrics: dict) -> dict:
     """Copy the finished unit ``src_key`` as ``unit`` (same key: same subset and settings);
     its record last, so a crash leaves no stale record."""
     import shutil
+    from .stage import STAGE_FILE, write_json_atomic, write_text_atomic
     src, dst = ev_dir / src_key, ev_dir / unit.key
     if dst.exists():
         shutil.rmtree(dst)
-    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("stage.json"))
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns(STAGE_FILE))
     m = {**metrics, "method": unit.method, "seed": unit.seed, "copied_from": src_key}
-    (dst / "metrics.json").write_text(json.dumps(m, indent=1))
-    shutil.copy2(src / "stage.json", dst / "stage.json")
+    write_json_atomic(dst / "metrics.json", m)
+    write_text_atomic(dst / STAGE_FILE, (src / STAGE_FILE).read_text())
     return m
 
 

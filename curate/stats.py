@@ -8,13 +8,17 @@ import math
 import numpy as np
 
 
-def holdout_split(n: int, every: int = 14) -> tuple[np.ndarray, np.ndarray]:
-    """(pool [n - t], held_out [t]) indices: every ``every``-th image (0, every, 2 every, ...)
-    is held out, as in the LLFF / mip-NeRF protocol. ``every <= 0`` holds out nothing."""
+def holdout_split(n: int, every: int = 14, offset: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(pool [n - t], held_out [t]) indices: every ``every``-th image (offset, offset + every,
+    ...) is held out, as in the LLFF / mip-NeRF protocol. ``every <= 0`` holds out nothing.
+    The offsets ``0 .. every - 1`` are the folds of a cross-validation: each image is held
+    out by exactly one of them."""
     idx = np.arange(n)
     if every <= 0:
         return idx, idx[:0]
-    test = idx % every == 0
+    if not 0 <= offset < every:
+        raise ValueError(f"hold-out offset {offset} outside 0..{every - 1}")
+    test = idx % every == offset
     return idx[~test], idx[test]
 
 

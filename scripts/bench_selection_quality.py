@@ -48,7 +48,7 @@ import json
 import re
 import sys
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -299,6 +299,132 @@ def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int
                 print(f"  gap closed ({cand} - random) / (all - random): {g:.2f}")
 
 
+@dataclass
+class Bench:
+    """What every fold of every scene shares: the options, the methods, and the tables the
+    harness appends to (``rows``, ``paired``, ``series``)."""
+    args: argparse.Namespace
+    ev: object                     # curate.evaluate.EvalConfig
+    methods: list
+    default: object                # curate.select.SelectConfig
+    label: dict                    # method -> its unit folders' name
+    rows: list
+    paired: list
+    series: dict
+
+
+def run_fold(h: Bench, scene: str, run: Path, fold: int, out: Path, data: Path | None) -> dict:
+    """Select, train and report every budget of one hold-out fold (images ``fold``,
+    ``fold + every``, ... held out). Unit folders of fold o > 0 end in ``_o<o>``, so fold 0
+    keeps the names (and finished units) of a single hold-out. Returns budget -> (per_view,
+    per_run, prox, n_hold, B, n_pool) of its on-path views, for :func:`report_folds`."""
+    from curate.budget import parse_budget, resolve_budget
+    from curate.evaluate import Unit, eval_cameras, run_units
+    from curate.pipeline import load_split
+    from curate.select import SelectConfig, select
+    from curate.stage import read_stage, stage_key
+    from curate.stats import holdout_split
+    from curate.train import default_box
+    args, ev, methods = h.args, h.ev, h.methods
+    sfm, paths, _, _ = load_split(run, ev.holdout_every)
+    pool, hold = holdout_split(len(sfm.cameras), ev.holdout_every, fold)
+    pool, hold = pool.tolist(), hold.tolist()
+    suffix, name = (f"_o{fold}", f"{scene}@{fold}") if fold else ("", scene)
+    pc, hc = sfm.cameras[pool], sfm.cameras[hold]
+    grid = node_grid(run, sfm.cameras)
+    cs_hold, vd_hold = holdout_measures(sfm.cameras, pool, hold, grid, h.default.energy.bins)
+    tests, all_cams, all_paths = list(hold), sfm.cameras, list(paths)   # evaluated views
+    off = offpath_views(scene, out, data)
+    if off is not None:                                  # appended after the registered cameras
+        from curate.cameras import Cameras
+        all_cams, all_paths = Cameras.concat([sfm.cameras, off[0]]), all_paths + list(off[1])
+        tests += list(range(len(sfm.cameras), len(all_cams)))
+    on = np.arange(len(tests)) < len(hold)
+    parts = [(name, on)] + ([(f"{name}-offpath", ~on)] if off is not None else [])
+    cams = eval_cameras(all_cams, ev.max_side)
+    box = default_box(sfm.cameras)
+    sfm_key = read_stage(run / "sfm")["key"]
+    occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
+    found = {}
+    for b in [x for x in args.budgets.split(",") if x]:
+        B = resolve_budget(parse_budget(b), len(pool))
+        subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
+        timing = {}
+        for m in methods:
+            if m == "all":
+                continue
+            if m == "random":
+                cfgs = [SelectConfig("random", seed=s) for s in range(args.random_seeds)]
+            else:
+                cfgs = [h.default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
+            subsets[m] = []
+            for c in cfgs:
+                s = select(pc, grid, B, c)
+                subsets[m].append(s.chosen)
+                timing[m] = round(s.seconds, 3)
+        prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
+        if args.proxy_only:
+            for part, mask in parts:
+                report_part(part, part == name, len(hold), mask, B, len(pool), methods, {}, {}, prox,
+                            timing, ev, h.default.method, args.candidate, h.rows, h.paired, h.series)
+            continue
+        groups = {}
+        for m, subs in subsets.items():
+            for si, ch in enumerate(subs):
+                seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
+                for t in seeds:
+                    key = f"q_{h.label.get(m, m)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}{suffix}"
+                    u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
+                    groups.setdefault(t, []).append(u)
+        if "all" in methods:
+            groups.setdefault(0, []).append(Unit(f"all{suffix}", "all", None, list(pool)))
+        results: dict[str, dict] = {}
+        for t, us in sorted(groups.items()):
+            cfg_t = replace(ev, train_seed=t)
+            train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
+            keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
+                                     [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
+            # the occupancy stage's field was trained on fold 0's pool: the 'all' ceiling of fold 0 only
+            fp = {"all": str(run / "occupancy" / "field.pt")}
+            results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
+        # per method: per-view PSNR averaged over its trainings (random: over its seeds)
+        per_view, per_run = {}, {}
+        for m in methods:
+            pat = re.compile(rf"q_{re.escape(h.label.get(m, m))}(_s\d+)?_b{B}_t\d+{suffix}")  # not q_<m>_p2_...
+            rs = [r for k, r in results.items() if (k == f"all{suffix}" if m == "all" else pat.fullmatch(k))]
+            if not rs:
+                continue
+            per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)
+            per_run[m] = [np.array([v["psnr"] for v in r["per_view"]]) for r in rs]   # [runs][views]
+        for part, mask in parts:   # on the capture path (held out); off it (synthetic scenes)
+            report_part(part, part == name, len(hold), mask, B, len(pool), methods, per_view, per_run, prox,
+                        timing, ev, h.default.method, args.candidate, h.rows, h.paired, h.series)
+        found[b] = ({m: v[on] for m, v in per_view.items()}, {m: [x[on] for x in v] for m, v in per_run.items()},
+                    prox, len(hold), B, len(pool))
+    return found
+
+
+def report_folds(h: Bench, scene: str, folds: list) -> None:
+    """One table (``<scene>-folds``) over the on-path held-out views of every fold of one
+    budget: each method's per-view PSNRs are concatenated over the folds (its run r of every
+    fold make its run r), and the paired differences pair views across all folds."""
+    methods = [m for m in h.methods if all(m in f[0] for f in folds)]
+    per_view = {m: np.concatenate([f[0][m] for f in folds]) for m in methods}
+    n_runs = {m: min(len(f[1][m]) for f in folds) for m in methods}
+    per_run = {m: [np.concatenate([f[1][m][r] for f in folds]) for r in range(n_runs[m])] for m in methods}
+    prox = {}
+    for m in [m for m in methods if all(m in f[2] for f in folds)]:
+        n = min(len(f[2][m]) for f in folds)
+        prox[m] = [{k: (np.concatenate([f[2][m][i][k] for f in folds]) if k == "view_per"
+                        else float(np.mean([f[2][m][i][k] for f in folds]))) for k in folds[0][2][m][0]}
+                   for i in range(n)]
+    n_hold, B = sum(f[3] for f in folds), folds[0][4]
+    n_pool = int(round(np.mean([f[5] for f in folds])))
+    print(f"\n{len(folds)} folds pooled (budgets {sorted({f[4] for f in folds})}):", end="")
+    report_part(f"{scene}-folds", True, n_hold, np.ones(n_hold, bool), B, n_pool, methods, per_view, per_run,
+                prox, {}, h.ev, h.default.method, h.args.candidate, h.rows, h.paired, h.series)
+
+
 # ------------------------------------------------------------------ the harness
 def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
@@ -319,6 +445,9 @@ def main(argv=None) -> int:
     ap.add_argument("--max-side", type=int, default=160)
     ap.add_argument("--iters", type=int, default=600)
     ap.add_argument("--holdout-every", type=int, default=14)
+    ap.add_argument("--holdout-offsets", default="0", help="hold-out folds, comma list ('all': 0..every-1): "
+                    "fold o holds out images o, o + every, ... and selects from the rest; with more than one, "
+                    "a pooled table (<scene>-folds) pairs the methods over every fold's held-out views")
     ap.add_argument("--candidate", default="default", help="the method compared (paired, per view) with the others")
     ap.add_argument("--workers", type=int, default=1, help="trainings at once (processes; e.g. 4 on one GPU)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "quality"))
@@ -338,12 +467,9 @@ def main(argv=None) -> int:
 
     import logging
     logging.basicConfig(level=logging.WARNING)
-    from curate.budget import parse_budget, resolve_budget
-    from curate.evaluate import EvalConfig, Unit, eval_cameras, run_units
-    from curate.pipeline import load_split
-    from curate.select import SelectConfig, select
-    from curate.stage import read_stage, stage_key
-    from curate.train import default_box
+    from curate.evaluate import EvalConfig
+    from curate.select import SelectConfig
+    from curate.stage import stage_key
 
     VARIANTS = _variants()
     out = Path(args.out)
@@ -354,77 +480,20 @@ def main(argv=None) -> int:
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
     rows, paired, series = [], [], {}
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
+                "holdout_offsets": args.holdout_offsets,
                 "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
                 "random_seeds": args.random_seeds, "default_method": default.method,
                 "default_config": asdict(default)}
     t_all = time.perf_counter()
+    h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)
+    offsets = list(range(ev.holdout_every)) if args.holdout_offsets == "all" else \
+        [int(x) for x in args.holdout_offsets.split(",") if x]
     for scene in scenes:
         run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
-        sfm, paths, pool, hold = load_split(run, ev.holdout_every)
-        pc, hc = sfm.cameras[pool], sfm.cameras[hold]
-        grid = node_grid(run, sfm.cameras)
-        cs_hold, vd_hold = holdout_measures(sfm.cameras, pool, hold, grid, default.energy.bins)
-        tests, all_cams, all_paths = list(hold), sfm.cameras, list(paths)   # evaluated views
-        off = offpath_views(scene, out, data)
-        if off is not None:                                  # appended after the registered cameras
-            from curate.cameras import Cameras
-            all_cams, all_paths = Cameras.concat([sfm.cameras, off[0]]), all_paths + list(off[1])
-            tests += list(range(len(sfm.cameras), len(all_cams)))
-        parts = [(scene, np.arange(len(tests)) < len(hold))] + (
-            [(f"{scene}-offpath", np.arange(len(tests)) >= len(hold))] if off is not None else [])
-        cams = eval_cameras(all_cams, ev.max_side)
-        box = default_box(sfm.cameras)
-        sfm_key = read_stage(run / "sfm")["key"]
-        occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
-        for b in [x for x in args.budgets.split(",") if x]:
-            B = resolve_budget(parse_budget(b), len(pool))
-            subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
-            timing = {}
-            for m in methods:
-                if m == "all":
-                    continue
-                if m == "random":
-                    cfgs = [SelectConfig("random", seed=s) for s in range(args.random_seeds)]
-                else:
-                    cfgs = [default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
-                subsets[m] = []
-                for c in cfgs:
-                    s = select(pc, grid, B, c)
-                    subsets[m].append(s.chosen)
-                    timing[m] = round(s.seconds, 3)
-            prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
-            groups = {}
-            label = {"default": f"default-{default_tag}"}   # the folder names a default's variant
-            if not args.proxy_only:
-                for m, subs in subsets.items():
-                    for si, ch in enumerate(subs):
-                        seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
-                        for t in seeds:
-                            key = f"q_{label.get(m, m)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}"
-                            u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
-                            groups.setdefault(t, []).append(u)
-                if "all" in methods:
-                    groups.setdefault(0, []).append(Unit("all", "all", None, list(pool)))
-            results: dict[str, dict] = {}
-            for t, us in sorted(groups.items()):
-                cfg_t = replace(ev, train_seed=t)
-                train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
-                keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
-                                         [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
-                fp = {"all": str(run / "occupancy" / "field.pt")}
-                results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
-            # per method: per-view PSNR averaged over its trainings (random: over its seeds)
-            per_view, per_run = {}, {}
-            for m in methods:
-                pat = re.compile(rf"q_{re.escape(label.get(m, m))}(_s\d+)?_b{B}_t\d+")  # not q_<m>_p2_...
-                rs = [r for k, r in results.items() if (k == "all" if m == "all" else pat.fullmatch(k))]
-                if not rs:
-                    continue
-                per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)
-                per_run[m] = [np.array([v["psnr"] for v in r["per_view"]]) for r in rs]   # [runs][views]
-            for part, mask in parts:   # on the capture path (held out); off it (synthetic scenes)
-                report_part(part, part == scene, len(hold), mask, B, len(pool), methods, per_view, per_run, prox,
-                            timing, ev, default.method, args.candidate, rows, paired, series)
+        folds = [run_fold(h, scene, run, fold, out, data) for fold in offsets]
+        if len(folds) > 1 and not args.proxy_only:
+            for b in folds[0]:
+                report_folds(h, scene, [f[b] for f in folds])
     if series:
         from curate.plots import line_chart
         svg = []

@@ -13,6 +13,16 @@ def test_holdout_every_14th():
     assert holdout_split(5, 0)[1].size == 0
 
 
+def test_holdout_offsets_are_folds():
+    """Offsets 0..every-1 hold out each image exactly once; a bad offset is an error."""
+    held = np.concatenate([holdout_split(66, 7, o)[1] for o in range(7)])
+    assert sorted(held.tolist()) == list(range(66))
+    pool, test = holdout_split(66, 7, 3)
+    assert test.tolist()[:2] == [3, 10] and not set(pool) & set(test) and len(pool) + len(test) == 66
+    with pytest.raises(ValueError, match="offset"):
+        holdout_split(66, 7, 7)
+
+
 def test_t_quantile_and_ci_by_hand():
     assert abs(t_quantile(0.975, 9) - 2.2622) < 1e-3
     x = np.array([1.0, 2.0, 3.0, 4.0, 5.0])

@@ -1,0 +1,65 @@
+"""The selection-quality harness pools hold-out folds the way its README table says."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+
+
+@pytest.fixture(scope="module")
+def harness():
+    spec = importlib.util.spec_from_file_location("bench_selection_quality",
+                                                  REPO / "scripts" / "bench_selection_quality.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _fold(rng, n_views: int, shift: float, n_random: int = 2):
+    """(per_view, per_run, prox, n_hold, B, n_pool) as run_fold returns it: 'a' beats random by ``shift``."""
+    rand_runs = [rng.normal(20, 1, n_views) for _ in range(n_random)]
+    rand = np.mean(rand_runs, axis=0)
+    a = rand + shift + rng.normal(0, 0.1, n_views)
+    prox = {m: [{"pos": 1.0, "pos90": 2.0, "ang": 3.0, "ang90": 4.0, "cell": 0.5, "view": 1.5,
+                 "view_per": rng.uniform(0, 1, n_views)} for _ in range(k)]
+            for m, k in (("a", 1), ("random", n_random))}
+    return {"a": a, "random": rand}, {"a": [a], "random": rand_runs}, prox, n_views, 7, 50
+
+
+def test_folds_pool_every_view_once(harness, capsys):
+    """The pooled table pairs the methods over the views of all folds: its PSNR is the mean
+    of the concatenated views and its paired difference counts every fold's views."""
+    rng = np.random.default_rng(0)
+    folds = [_fold(rng, n, s) for n, s in ((10, 1.0), (9, 0.5), (10, 0.8))]
+    args = argparse.Namespace(candidate="a")
+    ev = argparse.Namespace(max_side=160, iters=600)
+    default = argparse.Namespace(method="auto")
+    h = harness.Bench(args, ev, ["a", "random"], default, {}, [], [], {})
+    harness.report_folds(h, "fox", folds)
+    rows = {r["method"]: r for r in h.rows}
+    assert {r["scene"] for r in h.rows} == {"fox-folds"}
+    want = np.concatenate([f[0]["a"] for f in folds]).mean()
+    assert rows["a"]["psnr"] == pytest.approx(want, abs=1e-3)
+    assert len(rows["random"]["runs"]) == 2          # run r of every fold make run r
+    (pair,) = [p for p in h.paired if p["pair"] == "a-random"]
+    assert pair["n"] == 29
+    diffs = np.concatenate([f[0]["a"] - f[0]["random"] for f in folds])
+    assert pair["mean"] == pytest.approx(diffs.mean(), abs=1e-3) and pair["lo"] > 0
+    assert "3 folds pooled" in capsys.readouterr().out
+
+
+def test_folds_drop_a_method_missing_from_a_fold(harness):
+    rng = np.random.default_rng(1)
+    folds = [_fold(rng, 8, 1.0), _fold(rng, 8, 1.0)]
+    del folds[1][0]["a"], folds[1][1]["a"]
+    h = harness.Bench(argparse.Namespace(candidate="a"), argparse.Namespace(max_side=160, iters=600),
+                      ["a", "random"], argparse.Namespace(method="auto"), {}, [], [], {})
+    harness.report_folds(h, "skull", folds)
+    assert [r["method"] for r in h.rows] == ["random"] and not h.paired
