@@ -63,3 +63,14 @@ def test_folds_drop_a_method_missing_from_a_fold(harness):
                       ["a", "random"], argparse.Namespace(method="auto"), {}, [], [], {})
     harness.report_folds(h, "skull", folds)
     assert [r["method"] for r in h.rows] == ["random"] and not h.paired
+
+
+def test_oracle_takes_each_held_out_views_nearest_first(harness):
+    """Round robin: every held-out view gets its nearest pool view before any gets a second;
+    no view twice; a budget above the pool takes the pool."""
+    d = np.array([[0.1, 0.2, 5.0, 6.0, 7.0],
+                  [0.3, 9.0, 0.2, 0.4, 8.0]])        # [H=2, K=5]
+    assert harness.oracle_subset(d, 2) == [0, 2]
+    assert harness.oracle_subset(d, 4) == [0, 2, 1, 3]
+    assert sorted(harness.oracle_subset(d, 50)) == [0, 1, 2, 3, 4]
+    assert harness.oracle_subset(d[:0], 3) == []
