@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -74,3 +75,23 @@ def test_oracle_takes_each_held_out_views_nearest_first(harness):
     assert harness.oracle_subset(d, 4) == [0, 2, 1, 3]
     assert sorted(harness.oracle_subset(d, 50)) == [0, 1, 2, 3, 4]
     assert harness.oracle_subset(d[:0], 3) == []
+
+
+def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monkeypatch):
+    """The synthetic room (small here): a walk with its photos, and off-path test views in
+    free space, rendered once; real scenes have no off-path views."""
+    from curate.progressive import scene_oracle
+    from curate.synthetic import make_scene
+    from curate.transforms_json import read_transforms
+    monkeypatch.setattr(harness, "ROOM_WALK", (12, 6))
+    monkeypatch.setattr(harness, "ROOM_OFFPATH", 5)
+    tj = harness.room_scene(tmp_path)
+    walk, walk_paths = read_transforms(tj)
+    off, off_paths = harness.offpath_views("room", tmp_path, None)
+    assert len(walk) == 18 and len(off) == 5
+    assert all(Path(p).is_file() for p in list(walk_paths) + list(off_paths))
+    occupied, min_depth = scene_oracle(make_scene("livingroom", seed=0))
+    assert not np.any(occupied(off.centres)) and np.all(min_depth(off) >= 0.3)
+    stamp = tj.stat().st_mtime_ns
+    assert harness.room_scene(tmp_path) == tj and tj.stat().st_mtime_ns == stamp    # not rendered again
+    assert harness.offpath_views("fox", tmp_path, None) is None
