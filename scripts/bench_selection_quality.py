@@ -425,7 +425,8 @@ def run_fold(h: Bench, scene: str, run: Path, fold: int, out: Path, data: Path |
             per_run[m] = [np.array([v["psnr"] for v in r["per_view"]]) for r in rs]   # [runs][views]
         for part, mask in parts:   # on the capture path (held out); off it (synthetic scenes)
             report_part(part, part == name, len(hold), mask, B, len(pool), methods, per_view, per_run, prox,
-                        timing, ev, h.default.method, args.candidate, h.rows, h.paired, h.series)
+                        timing, ev, h.default.method, args.candidate, h.rows, h.paired,
+                        {} if fold else h.series)        # plotted: fold 0 and the pooled folds
         found[b] = ({m: v[on] for m, v in per_view.items()}, {m: [x[on] for x in v] for m, v in per_run.items()},
                     prox, len(hold), B, len(pool))
     return found
