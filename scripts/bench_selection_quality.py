@@ -241,6 +241,14 @@ def oracle_subset(view_dist_hold: np.ndarray, budget: int) -> list[int]:
     return taken
 
 
+def stride_subset(n_pool: int, budget: int) -> list[int]:
+    """A baseline, not a curate method: ``budget`` pool frames evenly spaced in capture order
+    (every (n_pool / budget)-th frame, centred), what people do with a video. Assumes the
+    pool is in capture order (true of the harness's scenes). Returns pool-relative indices."""
+    b = min(max(budget, 0), n_pool)
+    return ((np.arange(b) + 0.5) * n_pool / max(b, 1)).astype(int).tolist()
+
+
 # ------------------------------------------------------------------ proxies
 def proxies(pc, hc, cell_sim_hold, chosen, view_dist_hold) -> dict:
     """Held-out view -> chosen cameras: nearest centre, smallest angle, best cell overlap,
@@ -377,8 +385,9 @@ def run_fold(h: Bench, scene: str, run: Path, fold: int, out: Path, data: Path |
         for m in methods:
             if m == "all":
                 continue
-            if m == "oracle":
-                subsets[m], timing[m] = [oracle_subset(vd_hold, B)], 0.0
+            if m in ("oracle", "stride"):
+                subsets[m] = [oracle_subset(vd_hold, B) if m == "oracle" else stride_subset(len(pool), B)]
+                timing[m] = 0.0
                 continue
             if m == "random":
                 cfgs = [SelectConfig("random", seed=s) for s in range(args.random_seeds)]
@@ -470,7 +479,8 @@ def main(argv=None) -> int:
                     "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone), "
                     "'medoids_p2' / 'medoids_p05' (medoids minimising the mean of the view distance ** 2 / ** 0.5), "
                     "'medoids_e25' (medoids for 75%% of the budget, the paper's greedy energy for the rest), "
-                    "'oracle' (NOT a method: the held-out views' nearest pool views, an upper bound)")
+                    "'oracle' (NOT a method: the held-out views' nearest pool views, an upper bound), "
+                    "'stride' (every (pool / budget)-th frame in capture order: a video's usual subsampling)")
     ap.add_argument("--max-side", type=int, default=160)
     ap.add_argument("--iters", type=int, default=600)
     ap.add_argument("--holdout-every", type=int, default=14)

@@ -95,3 +95,11 @@ def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monk
     stamp = tj.stat().st_mtime_ns
     assert harness.room_scene(tmp_path) == tj and tj.stat().st_mtime_ns == stamp    # not rendered again
     assert harness.offpath_views("fox", tmp_path, None) is None
+
+
+def test_stride_spaces_frames_evenly_in_capture_order(harness):
+    assert harness.stride_subset(12, 3) == [2, 6, 10]
+    s = harness.stride_subset(346, 59)
+    assert len(set(s)) == 59 and s == sorted(s) and 0 <= s[0] and s[-1] < 346
+    assert set(np.diff(s)) <= {5, 6}
+    assert harness.stride_subset(5, 9) == [0, 1, 2, 3, 4] and harness.stride_subset(5, 0) == []
