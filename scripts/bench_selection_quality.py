@@ -16,15 +16,21 @@ free-viewpoint navigation the paper is about, which no real capture here can tes
 
 Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
 (the paper), ``fvs`` (farthest-view sampling), ``random`` (seeds 0..n-1, one training
-each), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.select.METHODS`.
+each), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.methods.METHODS`,
+the variants of :func:`_variants`, ``stride`` (every n-th frame in capture order) and
+``oracle`` (not a method: it sees the held-out views; an upper bound on placement).
+
+Hold-out folds (``--holdout-offsets``): fold o holds out images o, o + every, ...; with
+several folds, a ``<scene>-folds`` table pools their held-out views (:func:`report_folds`).
 
 Cheap proxies (seconds, no training) for every method: from each held-out view to the
 chosen cameras, the nearest centre distance (``pos``, ``pos90``: mean, 90th percentile),
 the smallest viewing-direction angle (``ang``, ``ang90``, degrees), the best
 single-view overlap of its (node, direction-bin) cells (``cell``) and the nearest view in
 view medoids' distance (``view``). ``r_loss``: the correlation, over the held-out views,
-between what a subset loses against all the pool (PSNR) and ``view``: near 0 when what
-is left to gain is no longer about where the chosen cameras are.
+between what a subset loses against all the pool (PSNR) and ``view``. It only sees the
+range of distances the subset leaves: near 0 for an even subset even where distance still
+matters, which the ``oracle`` rows measure (a camera beside every held-out view).
 
 Per-view paired differences (95% t intervals over the held-out views) of ``--candidate``
 (default: ``default``) against random (averaged over its seeds per view), fvs, energy,
@@ -299,7 +305,7 @@ def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int
         pm = {k: float(np.mean([p[k] for p in pr])) for k in pr[0] if k != "view_per"} if pr else {}
         if pr and m in pv and "all" in pv and m != "all" and len(pv[m]) > 2:
             # does what this subset loses against all the pool, view by view, follow the
-            # distance to its nearest chosen view? (r near 0: not a coverage problem)
+            # distance to its nearest chosen view? (over the distances this subset leaves)
             loss, near = pv["all"] - pv[m], np.mean([p["view_per"] for p in pr], axis=0)
             if loss.std() > 0 and near.std() > 0:
                 pm["r_loss_view"] = float(np.corrcoef(loss, near)[0, 1])
