@@ -34,8 +34,8 @@ matters, which the ``oracle`` rows measure (a camera beside every held-out view)
 
 Per-view paired differences (95% t intervals over the held-out views) of ``--candidate``
 (default: ``default``) against random (averaged over its seeds per view), fvs, energy,
-default and coverage where present; each method's per-view PSNR is first averaged over
-its training seeds.
+default, coverage, medoids, stride, oracle and all where present; each method's per-view PSNR
+is first averaged over its training seeds.
 
 Prints a table per scene and budget, and ONE JSON line last; writes
 ``<out>/quality_psnr_<scenes>.svg`` (PSNR against budget per method, one chart per scene).
@@ -322,7 +322,8 @@ def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int
         if row["psnr"] is not None:
             series.setdefault(part, {}).setdefault(m, []).append((B, row["psnr"]))
     if cand in pv:
-        for o in [m for m in ("random", "fvs", "energy", "default", "coverage") if m != cand]:
+        for o in [m for m in ("random", "fvs", "energy", "default", "coverage", "medoids", "stride", "oracle", "all")
+                  if m != cand]:
             if o in pv:
                 d = paired_difference(pv[cand], pv[o])
                 d = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in d.items()}
