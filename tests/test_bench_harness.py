@@ -1,4 +1,4 @@
-"""The selection-quality harness pools hold-out folds the way its README table says."""
+"""The selection-quality harness: pooling hold-out folds, the oracle and stride subsets, the synthetic room."""
 
 from __future__ import annotations
 
