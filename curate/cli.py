@@ -9,7 +9,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .budget import budget_text, parse_budget, resolve_budget  # noqa: F401  (resolve_budget re-exported)
+from .budget import budget_text, parse_budget, resolve_budget
 from .methods import DEFAULT_METHOD, METHOD_HELP, METHODS
 from .sfm_config import CAMERA_MODES, MATCHERS
 from .sfm_config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy

@@ -269,18 +269,29 @@ def proxies(pc, hc, cell_sim_hold, chosen, view_dist_hold) -> dict:
             "ang90": r(np.percentile(a, 90)), "cell": r(ov.mean()), "view": r(v.mean()), "view_per": v}
 
 
-def holdout_measures(cams, pool, hold, grid, bins) -> tuple[np.ndarray, np.ndarray]:
-    """From each held-out view to each pool view, both [H, K] and from one pair index of all
-    ``cams``: the share of the held-out view's (node, bin) cells that the pool view also
-    observes, and view medoids' distance (:func:`curate.medoids.view_distance`, per-camera
-    depths from the selection nodes)."""
-    from curate.coverage import cell_similarity
-    from curate.medoids import embed, view_depths, view_distance
-    from curate.visibility import build_pair_index
-    idx = build_pair_index(cams, grid.nodes(), bins)
-    cells = cell_similarity(idx, 0.0).tocsr()[hold][:, pool].toarray()
-    c, a = embed(cams, view_depths(cams, grid.nodes(), idx))
-    return cells, view_distance(c, a, hold, pool)
+@dataclass
+class PairMeasures:
+    """Camera-to-camera measures over all of a scene's cameras, from one pair index; every
+    hold-out fold slices them (:meth:`fold`)."""
+    cells: object                  # scipy CSR [N, N]: share of i's (node, bin) cells that j also observes
+    centres: np.ndarray            # [N, 3] view medoids' embedding: camera centres
+    looks: np.ndarray              # [N, 3] and look-at points
+
+    @classmethod
+    def build(cls, cams, grid, bins) -> "PairMeasures":
+        from curate.coverage import cell_similarity
+        from curate.medoids import embed, view_depths
+        from curate.visibility import build_pair_index
+        idx = build_pair_index(cams, grid.nodes(), bins)
+        c, a = embed(cams, view_depths(cams, grid.nodes(), idx))
+        return cls(cell_similarity(idx, 0.0).tocsr(), c, a)
+
+    def fold(self, pool, hold) -> tuple[np.ndarray, np.ndarray]:
+        """From each held-out view to each pool view, both [H, K]: the share of the held-out
+        view's (node, bin) cells that the pool view also observes, and view medoids'
+        distance (:func:`curate.medoids.view_distance`, per-camera depths from the nodes)."""
+        from curate.medoids import view_distance
+        return self.cells[hold][:, pool].toarray(), view_distance(self.centres, self.looks, hold, pool)
 
 
 def report_part(part: str, on_path: bool, n_hold: int, mask, B: int, n_pool: int, methods, per_view: dict,
@@ -352,26 +363,26 @@ class Bench:
     series: dict
 
 
-def run_fold(h: Bench, scene: str, run: Path, fold: int, out: Path, data: Path | None) -> dict:
+def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMeasures, fold: int,
+             out: Path, data: Path | None) -> dict:
     """Select, train and report every budget of one hold-out fold (images ``fold``,
-    ``fold + every``, ... held out). Unit folders of fold o > 0 end in ``_o<o>``, so fold 0
-    keeps the names (and finished units) of a single hold-out. Returns budget -> (per_view,
-    per_run, prox, n_hold, B, n_pool) of its on-path views, for :func:`report_folds`."""
+    ``fold + every``, ... held out) of the scene's run folder ``run`` (its ``sfm`` result,
+    image ``paths``, selection nodes ``grid`` and camera ``measures`` are the same for every
+    fold). Unit folders of fold o > 0 end in ``_o<o>``, so fold 0 keeps the names (and
+    finished units) of a single hold-out. Returns budget -> (per_view, per_run, prox,
+    n_hold, B, n_pool) of its on-path views, for :func:`report_folds`."""
     from curate.budget import parse_budget, resolve_budget
     from curate.evaluate import Unit, eval_cameras, run_units
-    from curate.pipeline import load_split
     from curate.select import SelectConfig, select
     from curate.stage import read_stage, stage_key
     from curate.stats import holdout_split
     from curate.train import default_box
     args, ev, methods = h.args, h.ev, h.methods
-    sfm, paths, _, _ = load_split(run, ev.holdout_every)
     pool, hold = holdout_split(len(sfm.cameras), ev.holdout_every, fold)
     pool, hold = pool.tolist(), hold.tolist()
     suffix, name = (f"_o{fold}", f"{scene}@{fold}") if fold else ("", scene)
     pc, hc = sfm.cameras[pool], sfm.cameras[hold]
-    grid = node_grid(run, sfm.cameras)
-    cs_hold, vd_hold = holdout_measures(sfm.cameras, pool, hold, grid, h.default.energy.bins)
+    cs_hold, vd_hold = measures.fold(pool, hold)
     tests, all_cams, all_paths = list(hold), sfm.cameras, list(paths)   # evaluated views
     off = offpath_views(scene, out, data)
     if off is not None:                                  # appended after the registered cameras
@@ -406,20 +417,15 @@ def run_fold(h: Bench, scene: str, run: Path, fold: int, out: Path, data: Path |
                 subsets[m].append(s.chosen)
                 timing[m] = round(s.seconds, 3)
         prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
-        if args.proxy_only:
-            for part, mask in parts:
-                report_part(part, part == name, len(hold), mask, B, len(pool), methods, {}, {}, prox,
-                            timing, ev, h.default.method, args.candidate, h.rows, h.paired, h.series)
-            continue
         groups = {}
-        for m, subs in subsets.items():
+        for m, subs in ({} if args.proxy_only else subsets).items():
             for si, ch in enumerate(subs):
                 seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
                 for t in seeds:
                     key = f"q_{h.label.get(m, m)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}{suffix}"
                     u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
                     groups.setdefault(t, []).append(u)
-        if "all" in methods:
+        if "all" in methods and not args.proxy_only:
             groups.setdefault(0, []).append(Unit(f"all{suffix}", "all", None, list(pool)))
         results: dict[str, dict] = {}
         for t, us in sorted(groups.items()):
@@ -534,9 +540,13 @@ def main(argv=None) -> int:
     h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)
     offsets = list(range(ev.holdout_every)) if args.holdout_offsets == "all" else \
         [int(x) for x in args.holdout_offsets.split(",") if x]
+    from curate.pipeline import load_split
     for scene in scenes:
         run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
-        folds = [run_fold(h, scene, run, fold, out, data) for fold in offsets]
+        sfm, paths, _, _ = load_split(run, ev.holdout_every)
+        grid = node_grid(run, sfm.cameras)
+        measures = PairMeasures.build(sfm.cameras, grid, default.energy.bins)
+        folds = [run_fold(h, scene, run, sfm, paths, grid, measures, fold, out, data) for fold in offsets]
         if len(folds) > 1 and not args.proxy_only:
             for b in folds[0]:
                 report_folds(h, scene, [f[b] for f in folds])
