@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .batch_summary import make_row, write_summary_html
-from .report import _num
+from .report import fmt_num
 
 log = logging.getLogger(__name__)
 
@@ -442,7 +442,7 @@ def run_batch(folders: Iterable[str | Path], out: str | Path, cfg, executor: str
                 if row["status"] == "ok":
                     p = row["psnr"]
                     msg = (f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, PSNR selection "
-                           f"{_num(p['energy'])} / random {_num(p['random'])} / fvs {_num(p['fvs'])} / all {_num(p['all'])} "
+                           f"{fmt_num(p['energy'])} / random {fmt_num(p['random'])} / fvs {fmt_num(p['fvs'])} / all {fmt_num(p['all'])} "
                            f"({row['wall_seconds']:.0f}s)")
                 else:
                     msg = f"{it.name}: FAILED in {row.get('failed_stage')}: {row['reason']}"

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .report import _num
+from .report import fmt_num
 
 if TYPE_CHECKING:
     from .batch import Folder
@@ -74,15 +74,15 @@ def write_summary_html(out: Path, summ: dict) -> Path:
         status = (f"<span class=ok>ok</span>{' (resumed)' if r.get('resumed') else ''}" if st == "ok" else
                   f"<span class=bad>failed</span> in {e(str(r.get('failed_stage')))}<br><small>{e(r['reason'])}</small>"
                   if st == "failed" else e(st))
-        rnd = _num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
+        rnd = fmt_num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
         dif = r.get("energy_minus_random")
         link = f'<a href="{e(r["report"])}">report</a>' if r.get("report") else ""
         wall = "—" if r.get("wall_seconds") is None else f"{r['wall_seconds']:.0f} s"
         body.append(f"<tr><td class=l><b>{e(r['name'])}</b><br><small>{e(r['folder'])} ({e(r['poses'])})</small></td>"
                     f"<td>{status}</td><td>{_n(r.get('photos'))}</td><td>{_n(r.get('registered'))}</td>"
-                    f"<td>{_n(r.get('chosen'))}</td><td><b>{_num(p.get('energy'))}</b></td><td>{rnd}</td>"
-                    f"<td>{_num(p.get('fvs'))}</td><td>{_num(p.get('all'))}</td>"
-                    f"<td>{_num(dif, 2, True)}</td>"
+                    f"<td>{_n(r.get('chosen'))}</td><td><b>{fmt_num(p.get('energy'))}</b></td><td>{rnd}</td>"
+                    f"<td>{fmt_num(p.get('fvs'))}</td><td>{fmt_num(p.get('all'))}</td>"
+                    f"<td>{fmt_num(dif, 2, True)}</td>"
                     f"<td>{wall}</td>"
                     f"<td class=l>{link}</td></tr>")
     css = ("body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px;color:#222}"

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from .budget import budget_text, parse_budget, resolve_budget
-from .methods import DEFAULT_METHOD, METHOD_HELP, METHODS
+from .methods import DEFAULT_METHOD, METHOD_HELP, METHODS, SHARPNESS_HELP, SHARPNESS_WEIGHT
 from .sfm_config import CAMERA_MODES, MATCHERS
 from .sfm_config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy
 
@@ -68,6 +68,25 @@ def _add_energy_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--bins", type=_bins, default=(5, 10), help="direction bins THETAxPHI (default 5x10)")
     g.add_argument("--equal-area", action="store_true", help="bins uniform in cos(theta) instead of theta")
     g.add_argument("--device", default=None, help="torch device for visibility (default: cuda if available)")
+
+
+def _add_method(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
+    s.add_argument("--sharpness-weight", type=float, default=SHARPNESS_WEIGHT, help=SHARPNESS_HELP)
+
+
+def _select_cfg(args, base=None):
+    """SelectConfig from the options of ``_add_method`` and ``_add_energy_args`` (over ``base``)."""
+    from dataclasses import replace
+    from .medoids import MedoidsConfig
+    from .select import SelectConfig
+    base = base if base is not None else SelectConfig(device=args.device)
+    try:
+        return replace(base, method=args.method, energy=_energy_cfg(args), seed=args.seed,
+                       medoids=replace(base.medoids if base.medoids is not None else MedoidsConfig(),
+                                       sharpness_weight=args.sharpness_weight))
+    except ValueError as e:
+        raise CliError(str(e))
 
 
 def _energy_cfg(args):
@@ -155,7 +174,7 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    from .select import SelectConfig, select
+    from .select import select
     from .transforms_json import write_transforms
     from .stage import write_json_atomic, config_dict
 
@@ -167,9 +186,16 @@ def cmd_select(args) -> int:
     if len(cams) == 0:
         raise CliError("the pool has no cameras")
     budget = resolve_budget(args.budget, len(cams))
-    cfg = SelectConfig(method=args.method, energy=_energy_cfg(args), seed=args.seed, device=args.device)
+    cfg = _select_cfg(args)
     grid = _grid(args, cams)
-    sel = select(cams, grid, budget, cfg, progress=not args.json)
+    sharp = None
+    if cfg.medoids.sharpness_weight > 0 and cfg.method in ("medoids", "auto"):
+        from .quality import files_sharpness
+        if all(Path(f).is_file() for f in files):
+            sharp = files_sharpness(files, progress=not args.json)      # [K]
+        else:
+            logging.getLogger(__name__).warning("select: the pool's photos are not all found: sharpness ignored")
+    sel = select(cams, grid, budget, cfg, progress=not args.json, sharpness=sharp)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     chosen = sel.chosen
@@ -251,15 +277,13 @@ def _run_cfg(args):
     from .evaluate import EvalConfig
     from .occupancy import OccupancyConfig
     from .pipeline import RunConfig
-    from .select import SelectConfig
     from .sfm_config import SfmConfig
     try:
         ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.eval_size, iters=args.iters,
                         random_seeds=args.random_seeds, workers=args.workers)
         return RunConfig(budget=budget_text(args.budget), sfm=SfmConfig(max_image_size=args.max_size, matcher=args.matcher),
                          occupancy=OccupancyConfig(res=args.res),
-                         select=SelectConfig(method=args.method, energy=_energy_cfg(args), seed=args.seed,
-                                             device=args.device),
+                         select=_select_cfg(args),
                          evaluate=ev, run_evaluation=not args.no_evaluate, export_mode=args.export_mode)
     except ValueError as e:
         raise CliError(str(e))
@@ -352,7 +376,7 @@ def _select_stage(args) -> int:
     from . import pipeline as pl
     run_dir = Path(args.input)
     cfg, _ = _saved_cfg(run_dir)
-    sel = replace(cfg.select, method=args.method, energy=_energy_cfg(args), seed=args.seed)
+    sel = _select_cfg(args, cfg.select)
     cfg = replace(cfg, budget=budget_text(args.budget), select=sel)
     try:
         pl.stage_select(cfg, run_dir, getattr(args, "force", False))
@@ -373,7 +397,7 @@ def _size(text: str):
 def _add_run_options(s: argparse.ArgumentParser) -> None:
     """The options of `curate run` that `curate batch` shares."""
     _add_budget(s)
-    s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
+    _add_method(s)
     s.add_argument("--seed", type=int, default=0, help="seed of the random selection method")
     s.add_argument("--holdout-every", type=int, default=14, help="hold out every n-th image (default 14)")
     s.add_argument("--random-seeds", type=int, default=3, help="random subsets to compare with (default 3)")
@@ -431,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "transforms.json, selected.txt and selection.json in --out.")
     s.add_argument("input", help="transforms.json, a COLMAP model folder, cameras.json, or a run folder")
     _add_budget(s)
-    s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
+    _add_method(s)
     s.add_argument("--seed", type=int, default=0, help="seed of the random baseline")
     s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
     s.add_argument("--json", action="store_true", help="print one JSON object")

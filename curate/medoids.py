@@ -29,12 +29,14 @@ assignment and [m, m] per cluster, never [K, K].
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from .baselines import farthest_point
 from .cameras import Cameras
+from .methods import SHARPNESS_WEIGHT
 
 
 @dataclass(frozen=True)
@@ -56,7 +58,15 @@ class MedoidsConfig:
     medoids cover the path, the energy adds views that widen the directions each node is
     seen from (for views off the path). 0: medoids only."""
 
+    sharpness_weight: float = SHARPNESS_WEIGHT
+    """How much a blurry view is avoided as a medoid: a view whose image sharpness is
+    ``r`` times the median of its nearest pool views counts as ``sharpness_weight * tau *
+    -ln(r)`` farther from every view (``tau``: the pool's median distance from a view to its
+    nearest other view; ``ln r`` clipped to [-1, 1]). 0: sharpness is ignored."""
+
     def __post_init__(self) -> None:
+        if not (np.isfinite(self.sharpness_weight) and self.sharpness_weight >= 0):
+            raise ValueError(f"sharpness_weight must be finite and >= 0, got {self.sharpness_weight}")
         if not (0.0 <= self.energy_share <= 1.0):
             raise ValueError(f"energy_share must be in [0, 1], got {self.energy_share}")
         if self.depth is not None and not (np.isfinite(self.depth) and self.depth > 0):
@@ -101,13 +111,71 @@ def view_distance(c: np.ndarray, a: np.ndarray, rows, cols) -> np.ndarray:
     return dc + da
 
 
+SHARP_NEIGHBOURS = 6
+"""A view's sharpness is compared with the median over itself and this many nearest views."""
+
+
+def blur_penalty(c: np.ndarray, a: np.ndarray, sharp,
+                 neighbours: int = SHARP_NEIGHBOURS) -> tuple[np.ndarray, float, np.ndarray]:
+    """Blur penalty of embedded views ``c``, ``a`` [K, 3] with image sharpness ``sharp`` [K].
+
+    Returns (penalty [K], tau, nearest [K, k]). penalty_i = -clip(ln(s_i / m_i), -1, 1), m_i
+    the median sharpness of view i and its ``k = min(neighbours, K - 1)`` nearest views (view
+    distance, listed in ``nearest``): a frame is compared with frames of the same content (a
+    blurred video frame with its sharp neighbours), not textured walls with plain ones. A
+    view whose sharpness is missing, non-finite or not positive (unreadable, flat) gets the
+    full penalty 1 when its neighbours have usable values, 0 when none has. tau: the median
+    distance from a view to its nearest other view (0 when every view coincides). Memory [1024, K]."""
+    K = len(c)
+    s = np.asarray(sharp, np.float64).reshape(-1)
+    if len(s) != K:
+        raise ValueError(f"sharpness has {len(s)} entries for {K} views")
+    pen, nearest = np.zeros(K), np.zeros(K)
+    k = max(0, min(int(neighbours), K - 1))
+    nbrs = np.zeros((K, k), np.int64)
+    if K < 2 or k == 0:
+        return pen, 0.0, nbrs
+    allk = np.arange(K)
+    tiny = np.finfo(np.float64).tiny
+    ok = np.isfinite(s) & (s > 0)
+    for lo in range(0, K, 1024):
+        rows = allk[lo:lo + 1024]
+        d = view_distance(c, a, rows, allk)                    # [r, K]
+        d[np.arange(len(rows)), rows] = np.inf
+        nn = np.argpartition(d, k - 1, axis=1)[:, :k]          # [r, k]
+        nbrs[rows] = nn
+        nearest[rows] = d[np.arange(len(rows)), nn.T].min(0)
+        grp = np.where(ok[np.c_[rows[:, None], nn]], s[np.c_[rows[:, None], nn]], np.nan)
+        with warnings.catch_warnings():                          # all-NaN groups give NaN: handled below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(grp, axis=1)
+        both = ok[rows] & np.isfinite(med)
+        lr = np.zeros(len(rows))
+        lr[both] = np.log(s[rows][both] / np.maximum(med[both], tiny))
+        lr[~ok[rows] & np.isfinite(med)] = -1.0                # an unusable image next to usable ones
+        pen[rows] = -np.clip(lr, -1.0, 1.0)
+    tau = float(np.median(nearest))
+    if not tau > 0:
+        pos = nearest[nearest > 0]
+        tau = float(pos.mean()) if len(pos) else 0.0
+    return pen, tau, nbrs
+
+
 def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfig(), initial=(),
-                   nodes: np.ndarray | None = None, index=None) -> tuple[list[int], list[float]]:
+                   nodes: np.ndarray | None = None, index=None, sharpness=None) -> tuple[list[int], list[float]]:
     """Choose ``budget`` more pool views (k-medoids with ``initial`` fixed).
 
+    ``sharpness`` [K] (image sharpness, e.g. :func:`curate.quality.sharpness`) is used when
+    ``cfg.sharpness_weight`` > 0: a medoid m then costs ``d(i, m) ** power + off_m`` for each
+    view i it serves, ``off_m = sharpness_weight * tau ** power * blur_penalty_m``
+    (:func:`blur_penalty`), so a blurred frame gives way to a sharp neighbour. A medoid may
+    then also move to one of its nearest views outside its cluster, and one that serves no
+    view moves to the view whose cost it lowers most.
+
     Returns (chosen, cost): chosen in the order of their farthest-point initialisation,
-    cost the mean (view distance ** ``cfg.power``) from a pool view to its nearest medoid
-    after each Voronoi iteration (the first entry: after initialisation).
+    cost the mean of that per-view cost (view distance ** ``cfg.power`` when sharpness is
+    ignored) from a pool view to its medoid after each Voronoi iteration (the first entry:
+    after initialisation).
     """
     K = len(cams)
     initial = [int(k) for k in dict.fromkeys(initial)]
@@ -123,6 +191,13 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0],
                             int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1))), initial)
 
+    off, nbrs = np.zeros(K), None                                 # [K] per-medoid cost offset
+    if cfg.sharpness_weight > 0 and sharpness is not None:
+        pen, tau, nbrs = blur_penalty(c, a, sharpness)
+        off = cfg.sharpness_weight * tau ** cfg.power * pen
+        if not np.any(off):
+            nbrs = None
+
     # Voronoi iteration; medoids 0..len(initial)-1 are fixed
     med = np.array(initial + chosen, np.int64)
     n_fixed = len(initial)
@@ -130,23 +205,30 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     for _ in range(cfg.max_iters + 1):
         D = np.empty((K, len(med)))
         for s in range(0, K, 2048):                               # [K, B] in chunks
-            D[s:s + 2048] = view_distance(c, a, allk[s:s + 2048], med)
+            D[s:s + 2048] = view_distance(c, a, allk[s:s + 2048], med) ** cfg.power + off[med]
         assign = np.argmin(D, axis=1)                             # ties: the earlier medoid
-        costs.append(float((D[allk, assign] ** cfg.power).mean()))
+        costs.append(float(D[allk, assign].mean()))
         if len(costs) > cfg.max_iters:
             break
         moved = False
         for j in range(n_fixed, len(med)):
-            members = np.flatnonzero(assign == j)
-            others = np.delete(med, j)
-            members = members[~np.isin(members, others)]      # exact duplicates of another medoid
-            if len(members) <= 1:
+            served = np.flatnonzero(assign == j)                 # the views medoid j serves
+            if len(served) == 0:
+                if nbrs is not None:                             # a blurred medoid nobody wants: move
+                    gain = np.where(np.isin(allk, med), -np.inf, D[allk, assign] - off)   # it to the view
+                    if gain.max() > 1e-12 * max(1.0, abs(costs[-1])):                  # that gains most
+                        med[j] = int(np.argmax(gain))
+                        moved = True
                 continue
-            tot = (view_distance(c, a, members, members) ** cfg.power).sum(1)   # [m]
-            best = members[int(np.argmin(tot))]                  # ties: the lowest index
-            cur = tot[np.searchsorted(members, med[j])] if med[j] in members else np.inf
+            cand = served if nbrs is None else np.union1d(served, nbrs[med[j]])   # with sharpness: the
+            cand = cand[~np.isin(cand, np.delete(med, j))]       # medoid's nearest views too; never another medoid
+            if len(cand) == 0:
+                continue
+            tot = ((view_distance(c, a, cand, served) ** cfg.power).sum(1)
+                   + len(served) * off[cand])                    # [m] cluster cost with each as medoid
+            cur = float((view_distance(c, a, [med[j]], served) ** cfg.power).sum() + len(served) * off[med[j]])
             if tot.min() < cur - 1e-12 * abs(cur):
-                med[j] = best
+                med[j] = cand[int(np.argmin(tot))]               # ties: the lowest index
                 moved = True
         if not moved:
             break

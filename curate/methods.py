@@ -17,3 +17,9 @@ DEFAULT_METHOD = "auto"
 
 METHOD_HELP = ("selection method (default %(default)s; energy: the paper's, unchanged; "
                "see the README's 'Which selection method, and why')")
+
+SHARPNESS_WEIGHT = 0.0
+"""Default of ``MedoidsConfig.sharpness_weight`` (README, 'Which selection method, and why')."""
+
+SHARPNESS_HELP = ("view medoids: how strongly a frame blurrier than its nearest views is avoided "
+                  "(0 ignores sharpness; default %(default)s)")

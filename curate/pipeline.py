@@ -15,7 +15,8 @@ change. Run-folder contract (besides ``RUN/sfm/``, see :mod:`curate.sfm`):
 * ``RUN/select/``: ``selection.json`` (``method``, ``budget``, ``holdout_every``,
   ``holdout``, ``pool``, ``chosen`` (camera indices in the order chosen),
   ``chosen_names``, per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``,
-  ``n_nodes``, ``up_axis``) and ``nodes.npz`` (``nodes`` [M,3], per-node ``angular``
+  ``n_nodes``, ``up_axis``, ``sharpness``: [pool] image sharpness when view medoids used
+  it, else null) and ``nodes.npz`` (``nodes`` [M,3], per-node ``angular``
   and ``frequency`` of the chosen set, ``flat`` [M] grid indices, ``res``, ``box_min``,
   ``box_max``).
 * ``RUN/evaluate/``: see :mod:`curate.evaluate`.
@@ -97,6 +98,25 @@ def image_paths(run_dir: Path, names: list[str], records: dict) -> list[str]:
             raise FileNotFoundError(f"no photo recorded for camera {n!r} in {run_dir}/sfm/images.json")
         kind, r = by[n]
         out.append(str(run_dir / "sfm" / "images" / n) if kind == "working" else r["original"])
+    return out
+
+
+def photo_sharpness(run_dir: Path, sfm, idx: list[int]) -> np.ndarray:
+    """[len(idx)] image sharpness of the photos of cameras ``idx``: as the SfM stage recorded
+    it (``sfm/images.json``), else measured now (imported poses); NaN when unreadable."""
+    from .quality import files_sharpness
+    by: dict[str, float] = {}
+    for r in sfm.records.get("photos", []):
+        v = (r.get("extra") or {}).get("sharpness")
+        for k in (r.get("working"), r.get("rel")):
+            if k and v is not None:
+                by[k] = float(v)
+    names = [sfm.cameras.names[i] for i in idx]
+    out = np.array([by.get(n, np.nan) for n in names], np.float64)
+    miss = np.flatnonzero(~np.isfinite(out))
+    if len(miss):
+        paths = image_paths(run_dir, names, sfm.records)
+        out[miss] = files_sharpness([paths[i] for i in miss], progress=True)
     return out
 
 
@@ -192,7 +212,7 @@ def load_node_grid(run_dir: Path):
 def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
     """Greedy selection over the pool -> ``RUN/select``."""
     from .energy import energy_of_subset
-    from .select import select
+    from .select import capture_kind, select
     from .stage import begin_stage, finish_stage, stage_key, write_json_atomic
     from .visibility import build_pair_index
 
@@ -213,7 +233,11 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     t_vis = time.perf_counter()
     index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
     t_vis = time.perf_counter() - t_vis
-    sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
+    sharp = None
+    if cfg.select.medoids.sharpness_weight > 0 and (cfg.select.method == "medoids" or (
+            cfg.select.method == "auto" and capture_kind(pc)[0] == "walk")):
+        sharp = photo_sharpness(run_dir, sfm, pool)      # [pool]: view medoids avoid blurred frames
+    sel = select(pc, grid, budget, cfg.select, progress=True, index=index, sharpness=sharp)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     chosen = [pool[k] for k in sel.chosen]
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
@@ -222,7 +246,8 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
                         res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
     rec = {**sel.to_dict(), "chosen": chosen, "initial": [], "chosen_names": [sfm.cameras.names[i] for i in chosen],
            "budget": budget, "holdout_every": split["holdout_every"], "holdout": split["holdout"], "pool": pool,
-           "n_nodes": int(grid.mask.sum()), "up_axis": up_axis(sfm.cameras)}
+           "n_nodes": int(grid.mask.sum()), "up_axis": up_axis(sfm.cameras),
+           "sharpness": None if sharp is None else [None if not np.isfinite(v) else float(v) for v in sharp]}
     write_json_atomic(d / "selection.json", rec)
     finish_stage(d, key, {"select": cfg.select, "budget": cfg.budget}, t0,
                  outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)

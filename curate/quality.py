@@ -98,3 +98,17 @@ def assess(sharp: np.ndarray, hashes: np.ndarray, blur_fraction: float = 0.3,
         dup_of[close] = i
         dup_dist[close] = dist[i, close]
     return blurry, dup_of, dup_dist
+
+
+def files_sharpness(paths, progress: bool = False) -> np.ndarray:
+    """[N] :func:`sharpness` of the image files ``paths`` (any format ``curate.ingest``
+    reads, RAW included); NaN for a file that cannot be read (logged)."""
+    from tqdm import tqdm
+    from .ingest import read_image
+    out = np.full(len(paths), np.nan)
+    for i, p in enumerate(tqdm(paths, desc="sharpness", disable=not progress, leave=False)):
+        try:
+            out[i] = sharpness(read_image(p)[0])
+        except (OSError, ValueError) as e:
+            logger.warning("sharpness: cannot read %s (%s)", p, e)
+    return out

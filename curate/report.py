@@ -65,7 +65,7 @@ def _e(x) -> str:
     return html.escape(str(x))
 
 
-def _num(v, nd: int = 2, signed: bool = False) -> str:
+def fmt_num(v, nd: int = 2, signed: bool = False) -> str:
     """A number for a table cell; '—' for None / NaN."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "—"
@@ -187,8 +187,8 @@ def _header(run: _Run) -> str:
     if p and "energy" in run.methods and "random" in run.methods:
         gap = r.get("gap_closed")
         sig = "significant" if p.get("lo") is not None and p["lo"] > 0 else "not significant at 95%"
-        out.append(f'<div class="verdict">{_e(_selection_label(run)).capitalize()}: <b>{_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
-                   f'random subsets of the same size (95% CI {_num(p["lo"], 2, True)} .. {_num(p["hi"], 2, True)}, '
+        out.append(f'<div class="verdict">{_e(_selection_label(run)).capitalize()}: <b>{fmt_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
+                   f'random subsets of the same size (95% CI {fmt_num(p["lo"], 2, True)} .. {fmt_num(p["hi"], 2, True)}, '
                    f'{p.get("n", "?")} views; {sig})'
                    + (f"; closes <b>{100 * gap:.0f}%</b> of the gap from random to all pool images" if gap is not None
                       else "") + ".</div>")
@@ -209,13 +209,13 @@ def _method_table(run: _Run) -> str:
         v = m[k]
         if k == "random":
             seeds = v.get("seeds") or list((v.get("runs") or {}).keys())
-            psnr = f"{_num(v.get('psnr'))} ± {_num(v.get('psnr_std'))}"
-            ssim = f"{_num(v.get('ssim'), 3)} ± {_num(v.get('ssim_std'), 3)}"
+            psnr = f"{fmt_num(v.get('psnr'))} ± {fmt_num(v.get('psnr_std'))}"
+            ssim = f"{fmt_num(v.get('ssim'), 3)} ± {fmt_num(v.get('ssim_std'), 3)}"
             secs = [r.get("train_seconds") for r in (v.get("runs") or {}).values() if r.get("train_seconds") is not None]
-            t = _num(float(np.mean(secs)), 0) + " (mean)" if secs else "—"
+            t = fmt_num(float(np.mean(secs)), 0) + " (mean)" if secs else "—"
             name = f"random (mean ± std over {len(seeds)} seeds)"
         else:
-            psnr, ssim, t, name = _num(v.get("psnr")), _num(v.get("ssim"), 3), _num(v.get("train_seconds"), 0), \
+            psnr, ssim, t, name = fmt_num(v.get("psnr")), fmt_num(v.get("ssim"), 3), fmt_num(v.get("train_seconds"), 0), \
                 _selection_label(run) if k == "energy" else METHOD_LABEL.get(k, k)
         cls = ' class="hl"' if k == "energy" else ""
         rows.append(f'<tr{cls}><td class="l">{_e(name)}</td><td>{psnr}</td><td>{ssim}</td>'
@@ -225,8 +225,8 @@ def _method_table(run: _Run) -> str:
     if run.paired:
         pr = []
         for k, p in run.paired.items():
-            pr.append(f'<tr><td class="l">{_e(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{_num(p.get("mean"), 2, True)}</td>'
-                      f'<td>{_num(p.get("lo"), 2, True)} .. {_num(p.get("hi"), 2, True)}</td><td>{_e(p.get("n", "—"))}'
+            pr.append(f'<tr><td class="l">{_e(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
+                      f'<td>{fmt_num(p.get("lo"), 2, True)} .. {fmt_num(p.get("hi"), 2, True)}</td><td>{_e(p.get("n", "—"))}'
                       f'</td></tr>')
         out.append('<p class="small">Paired per-view PSNR differences on the held-out views (random: each view\'s '
                    'mean over seeds), with a 95% t confidence interval:</p>'
@@ -362,7 +362,7 @@ def _renders(run: _Run) -> str:
         for label, key, pv in cols:
             r = _load_rgb(run.dir / "evaluate" / key / "renders" / f"{stem}.png", 200)
             score = pv.get(n, {})
-            txt = f"PSNR {_num(score.get('psnr'))} dB" if score else ""
+            txt = f"PSNR {fmt_num(score.get('psnr'))} dB" if score else ""
             cells.append(f"<td>{_img(plots.jpeg_data_uri(r, 200, 85), label) if r is not None else 'missing'}"
                          f"{txt}</td>")
         rows.append("<tr>" + "".join(cells) + "</tr>")
@@ -392,12 +392,12 @@ def _timings(run: _Run) -> str:
     def status(t: dict) -> str:
         return {True: "skipped (unchanged)", False: "run"}.get(t.get("skipped"), "—")
 
-    rows = "".join(f'<tr><td class="l">{_e(t.get("name"))}</td><td>{_num(t.get("seconds"), 1)}</td>'
-                   f'<td>{_num(t.get("compute_seconds"), 1)}</td><td class="l">{status(t)}</td></tr>' for t in st)
+    rows = "".join(f'<tr><td class="l">{_e(t.get("name"))}</td><td>{fmt_num(t.get("seconds"), 1)}</td>'
+                   f'<td>{fmt_num(t.get("compute_seconds"), 1)}</td><td class="l">{status(t)}</td></tr>' for t in st)
     return ('<table><tr><th class="l">stage</th><th>seconds (this run)</th><th>seconds (when computed)</th>'
             '<th class="l">status</th></tr>' + rows
-            + f'<tr><td class="l"><b>wall time</b></td><td>{_num(run.rep.get("wall_seconds"), 1)}</td>'
-            f'<td>{_num(run.rep.get("compute_seconds"), 1)}</td><td></td></tr></table>'
+            + f'<tr><td class="l"><b>wall time</b></td><td>{fmt_num(run.rep.get("wall_seconds"), 1)}</td>'
+            f'<td>{fmt_num(run.rep.get("compute_seconds"), 1)}</td><td></td></tr></table>'
             '<p class="small">Evaluation: the trainings\' seconds summed (they run in parallel).</p>')
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from . import plots
-from .report import CSS, _duration, _e, _note, _num, _read_json, _safe, top_down_axes
+from .report import CSS, _duration, _e, _note, _read_json, _safe, fmt_num, top_down_axes
 
 logger = logging.getLogger(__name__)
 
@@ -33,7 +33,7 @@ def _sim_tables(rep: dict) -> str:
     head = ('<tr><th class="l">train set ↓ / test set →</th>' + "".join(f"<th>{_e(c)}</th>" for c in cols) + "</tr>")
     rows = []
     for m, row in table.items():
-        cells = "".join(f"<td>{'<b>' if row.get(c) == best[c] else ''}{_num(row.get(c))}"
+        cells = "".join(f"<td>{'<b>' if row.get(c) == best[c] else ''}{fmt_num(row.get(c))}"
                         f"{'</b>' if row.get(c) == best[c] else ''}</td>" for c in cols)
         cls = ' class="hl"' if m == "ours" else ""
         rows.append(f'<tr{cls}><td class="l">{_e(SIM_LABEL.get(m, m))}</td>{cells}</tr>')
@@ -44,7 +44,7 @@ def _sim_tables(rep: dict) -> str:
            "method's cameras (best of each column in bold):</p><table>" + head + "".join(rows) + "</table>"]
     if ssim:
         srows = "".join(f'<tr><td class="l">{_e(SIM_LABEL.get(m, m))}</td>'
-                        + "".join(f"<td>{_num(row.get(t), 3)}</td>" for t in tests) + "</tr>" for m, row in ssim.items())
+                        + "".join(f"<td>{fmt_num(row.get(t), 3)}</td>" for t in tests) + "</tr>" for m, row in ssim.items())
         out.append("<p>SSIM:</p><table>" + '<tr><th class="l">train set</th>' + "".join(f"<th>{_e(t)}</th>" for t in tests)
                    + "</tr>" + srows + "</table>")
     if "ours" in pv:
@@ -55,8 +55,8 @@ def _sim_tables(rep: dict) -> str:
             for t in tests:
                 try:
                     d = paired_difference(pv["ours"][t]["psnr"], pv[m][t]["psnr"])
-                    cells.append(f"<td>{_num(d['mean'], 2, True)} <span class='small'>[{_num(d['lo'], 2, True)}, "
-                                 f"{_num(d['hi'], 2, True)}]</span></td>")
+                    cells.append(f"<td>{fmt_num(d['mean'], 2, True)} <span class='small'>[{fmt_num(d['lo'], 2, True)}, "
+                                 f"{fmt_num(d['hi'], 2, True)}]</span></td>")
                 except (KeyError, ValueError):
                     cells.append("<td>—</td>")
             prow.append(f'<tr><td class="l">ours − {_e(m)}</td>{"".join(cells)}</tr>')
@@ -101,7 +101,7 @@ def write_simulate_html(out_dir: str | Path) -> Path:
         items = [("scene", f"{rep.get('scene', '—')} (seed {rep.get('scene_seed', '—')})"),
                  ("budget", f"{rep.get('budget', '—')} training cameras per method"),
                  ("nodes", rep.get("n_nodes", "—")),
-                 ("proposal time", f"{_num(rep.get('propose_seconds_per_camera'), 2)} s per camera (ours, median)"),
+                 ("proposal time", f"{fmt_num(rep.get('propose_seconds_per_camera'), 2)} s per camera (ours, median)"),
                  ("wall time", _duration(rep.get("wall_seconds")))]
         return ("<h1>curate simulate: camera placement comparison</h1><dl class='kv'>"
                 + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items) + "</dl>")
@@ -126,7 +126,7 @@ def write_simulate_html(out_dir: str | Path) -> Path:
         if not t:
             return _note("No timings.")
         return ('<table><tr><th class="l">step</th><th>seconds</th></tr>' + "".join(
-            f'<tr><td class="l">{_e(k)}</td><td>{_num(v, 2)}</td></tr>' for k, v in t.items()) + "</table>")
+            f'<tr><td class="l">{_e(k)}</td><td>{fmt_num(v, 2)}</td></tr>' for k, v in t.items()) + "</table>")
 
     body = [_safe(header, rep)]
     for title, fn in (("Results", _sim_tables), ("Average PSNR", bars), ("Training cameras", _sim_layouts),

@@ -119,13 +119,15 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
-           progress: bool = False, index=None) -> Selection:
+           progress: bool = False, index=None, sharpness=None) -> Selection:
     """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).
 
     The energy curve is filled for every method (for baselines, it is evaluated after
     the choice, so they can be compared on the same footing). ``index``: the pair index
     of ``cams`` over the grid's nodes with ``cfg.energy.bins`` when the caller already
-    built it (its time is then not in ``Selection.seconds``).
+    built it (its time is then not in ``Selection.seconds``). ``sharpness``: [K] image
+    sharpness of the pool's photos (:func:`curate.quality.sharpness`), used by view medoids
+    when ``cfg.medoids.sharpness_weight`` > 0.
     """
     from .baselines import farthest_view, hemisphere_subset, random_subset
     from .greedy import greedy_select, trace_energy
@@ -155,7 +157,7 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     elif cfg.method == "medoids":
         from .medoids import medoids_select
         n_med = budget - int(round(cfg.medoids.energy_share * max(0, budget)))
-        chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index)
+        chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index, sharpness)
         if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
             chosen += greedy_select(index, budget - n_med, cfg.energy, initial + chosen).chosen
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)

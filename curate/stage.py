@@ -32,6 +32,16 @@ def config_dict(cfg: Any) -> dict:
     return cfg
 
 
+def _record(cfg: Any) -> Any:
+    """:func:`config_dict`, also inside plain dicts (a stage's config may be ``{"select":
+    SelectConfig, ...}``). Not used for keys: :func:`stage_key` keeps its hashing unchanged."""
+    if isinstance(cfg, dict):
+        return {k: _record(v) for k, v in cfg.items()}
+    if isinstance(cfg, (list, tuple)) and not dataclasses.is_dataclass(cfg):
+        return [_record(v) for v in cfg]
+    return config_dict(cfg)
+
+
 def hash_files(paths: Iterable[str | Path], h: "hashlib._Hash | None" = None) -> str:
     """SHA-256 over the names, sizes and content of ``paths`` (in the given order)."""
     h = h or hashlib.sha256()
@@ -121,7 +131,7 @@ def write_json_atomic(path: str | Path, obj: Any) -> Path:
 def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outputs: dict | None = None,
                  seed: int | None = None, **extra: Any) -> dict:
     """Write the stage record; call last, once every output file is in place."""
-    rec = {"key": key, "config": config_dict(cfg), "versions": versions(), "seed": seed,
+    rec = {"key": key, "config": _record(cfg), "versions": versions(), "seed": seed,
            "seconds": round(time.perf_counter() - started, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
            "outputs": outputs or {}, **extra}
     write_json_atomic(Path(stage_dir) / STAGE_FILE, rec)

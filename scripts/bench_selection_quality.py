@@ -217,6 +217,7 @@ def _variants():
     return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),
             "medoids_p05": SelectConfig("medoids", medoids=MedoidsConfig(power=0.5)),
             "medoids_e25": SelectConfig("medoids", medoids=MedoidsConfig(energy_share=0.25)),
+            "medoids_sharp": SelectConfig("medoids", medoids=MedoidsConfig(sharpness_weight=1.0)),
             "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
@@ -276,15 +277,19 @@ class PairMeasures:
     cells: object                  # scipy CSR [N, N]: share of i's (node, bin) cells that j also observes
     centres: np.ndarray            # [N, 3] view medoids' embedding: camera centres
     looks: np.ndarray              # [N, 3] and look-at points
+    sharpness: np.ndarray          # [N] image sharpness (curate.quality.sharpness) of each camera's photo
 
     @classmethod
-    def build(cls, cams, grid, bins) -> "PairMeasures":
+    def build(cls, cams, grid, bins, paths) -> "PairMeasures":
         from curate.coverage import cell_similarity
         from curate.medoids import embed, view_depths
+        from curate.quality import sharpness
         from curate.visibility import build_pair_index
+        from PIL import Image
         idx = build_pair_index(cams, grid.nodes(), bins)
         c, a = embed(cams, view_depths(cams, grid.nodes(), idx))
-        return cls(cell_similarity(idx, 0.0).tocsr(), c, a)
+        sharp = np.array([sharpness(np.asarray(Image.open(p).convert("RGB"))) for p in paths])
+        return cls(cell_similarity(idx, 0.0).tocsr(), c, a, sharp)
 
     def fold(self, pool, hold) -> tuple[np.ndarray, np.ndarray]:
         """From each held-out view to each pool view, both [H, K]: the share of the held-out
@@ -413,7 +418,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                 cfgs = [h.default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
             subsets[m] = []
             for c in cfgs:
-                s = select(pc, grid, B, c)
+                s = select(pc, grid, B, c, sharpness=measures.sharpness[pool])
                 subsets[m].append(s.chosen)
                 timing[m] = round(s.seconds, 3)
         prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
@@ -492,6 +497,7 @@ def main(argv=None) -> int:
                     "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone), "
                     "'medoids_p2' / 'medoids_p05' (medoids minimising the mean of the view distance ** 2 / ** 0.5), "
                     "'medoids_e25' (medoids for 75%% of the budget, the paper's greedy energy for the rest), "
+                    "'medoids_sharp' (medoids avoiding frames blurrier than their neighbours, sharpness_weight 1), "
                     "'oracle' (NOT a method: the held-out views' nearest pool views, an upper bound), "
                     "'stride' (every (pool / budget)-th frame in capture order: a video's usual subsampling)")
     ap.add_argument("--max-side", type=int, default=160)
@@ -545,7 +551,7 @@ def main(argv=None) -> int:
         run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
         sfm, paths, _, _ = load_split(run, ev.holdout_every)
         grid = node_grid(run, sfm.cameras)
-        measures = PairMeasures.build(sfm.cameras, grid, default.energy.bins)
+        measures = PairMeasures.build(sfm.cameras, grid, default.energy.bins, paths)
         folds = [run_fold(h, scene, run, sfm, paths, grid, measures, fold, out, data) for fold in offsets]
         if len(folds) > 1 and not args.proxy_only:
             for b in folds[0]:

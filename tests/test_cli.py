@@ -117,3 +117,28 @@ def test_sfm_command_imports_poses_and_skips_unchanged(tmp_path):
     assert out["n_cameras"] == 67
     p = run("sfm", "--out", str(tmp_path / "r2"), check=False)
     assert p.returncode == 2 and "photo folder" in p.stderr
+
+
+def test_select_sharpness_weight_avoids_a_blank_photo(tmp_path):
+    """`curate select --sharpness-weight` reads the pool's photos: a blank (flat) photo that
+    view medoids would choose gives way; without the photos the weight is ignored, with a
+    warning; a negative weight is a clear error."""
+    from PIL import Image
+    cams = random_pool(30, seed=5)
+    files = [f"img_{i:03d}.png" for i in range(30)]
+    path = write_transforms(tmp_path / "transforms.json", cams, files)
+    common = ["select", str(path), "--budget", "6", "--res", "8", "--method", "medoids", "--json"]
+    missing = run(*common, "--sharpness-weight", "3", "--out", str(tmp_path / "m"))
+    assert "not all found: sharpness ignored" in missing.stderr
+    plain = json.loads(run(*common, "--out", str(tmp_path / "p")).stdout)["chosen"]
+    assert json.loads(missing.stdout)["chosen"] == plain
+    rng = np.random.default_rng(0)
+    for i, f in enumerate(files):
+        img = np.full((48, 64, 3), 128, np.uint8) if i == plain[0] else rng.integers(0, 256, (48, 64, 3), np.uint8)
+        Image.fromarray(img).save(tmp_path / f)
+    out = tmp_path / "s"
+    got = json.loads(run(*common, "--sharpness-weight", "3", "--out", str(out)).stdout)["chosen"]
+    assert plain[0] not in got and len(got) == 6
+    assert json.loads((out / "selection.json").read_text())["config"]["medoids"]["sharpness_weight"] == 3.0
+    bad = run(*common, "--sharpness-weight", "-1", "--out", str(tmp_path / "b"), check=False)
+    assert bad.returncode == 2 and "sharpness_weight" in bad.stderr and "Traceback" not in bad.stderr

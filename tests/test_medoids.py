@@ -220,3 +220,89 @@ def test_energy_share_medoids_then_the_paper_greedy(share, budget, initial):
     for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError):
             MedoidsConfig(energy_share=bad)
+
+
+# ------------------------------------------------------------------ sharpness (blurred frames give way)
+def ref_blur_penalty(D, sharp, k=6):
+    """Plain loops: -clip(ln(s_i / median(s_i and its k nearest)), -1, 1) and tau."""
+    K = len(D)
+    pen, near = np.zeros(K), np.zeros(K)
+    for i in range(K):
+        others = sorted((D[i, j], j) for j in range(K) if j != i)
+        near[i] = others[0][0]
+        group = [sharp[i]] + [sharp[j] for _, j in others[:min(k, K - 1)]]
+        pen[i] = -np.clip(np.log(sharp[i] / np.median(group)), -1, 1)
+    return pen, float(np.median(near))
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("weight,power", [(0.5, 1.0), (3.0, 1.0), (1.0, 2.0)])
+def test_sharpness_local_optimum_against_reference(seed, weight, power):
+    from curate.medoids import blur_penalty, embed
+    K, budget = 14, 3
+    cams, nodes, idx = pool_index(K, seed)
+    sharp = np.random.default_rng(seed).lognormal(0.0, 0.6, K)
+    depths = view_depths(cams, nodes, idx)
+    D = ref_distances(cams, depths)
+    pen, tau = ref_blur_penalty(D, sharp)
+    got_pen, got_tau, _ = blur_penalty(*embed(cams, depths), sharp)
+    assert np.allclose(got_pen, pen, atol=1e-12) and np.isclose(got_tau, tau, rtol=1e-12)
+    cfg = MedoidsConfig(power=power, sharpness_weight=weight)
+    chosen, cost = medoids_select(cams, budget, cfg, (), nodes, idx, sharp)
+    check_basic(chosen, K, budget)
+    C = D ** power + weight * tau ** power * pen[None, :]          # [view, medoid] per-view cost
+    assign = [min(chosen, key=lambda m: (C[i, m], chosen.index(m))) for i in range(K)]
+    for m in chosen:               # no member, nor any of the medoid's 6 nearest views, is a cheaper medoid
+        members = [i for i in range(K) if assign[i] == m]
+        near = [j for _, j in sorted((D[m, j], j) for j in range(K) if j != m)[:6] if j not in chosen]
+        cur = sum(C[i, m] for i in members)
+        assert all(sum(C[i, x] for i in members) >= cur - 1e-9 * max(1.0, abs(cur)) for x in members + near)
+        if not members:            # a medoid serving nobody: no view would be cheaper serving itself
+            assert all(C[x, assign[x]] - C[x, x] <= 1e-9 * max(1.0, abs(cost[-1])) for x in range(K)
+                       if x not in chosen)
+    assert np.isclose(cost[-1], np.mean([C[i, assign[i]] for i in range(K)]), rtol=1e-10, atol=1e-12)
+    assert np.all(np.isfinite(cost)) and np.all(np.diff(cost) <= 1e-12 * max(1.0, abs(cost[0])))
+
+
+def test_blurred_frame_gives_way_to_a_sharp_neighbour():
+    x = np.linspace(0.0, 2.0, 9)                       # a straight walk, every frame looking ahead (+y)
+    c = np.c_[x, np.zeros(9), np.zeros(9)]
+    cams = Cameras(look_at(c, c + [0.0, 1.0, 0.0]), 300.0, 300.0, 160, 120, 320, 240)
+    sharp = np.ones(9)
+    sharp[4] = 0.3                                     # the middle frame: motion blur
+    cfg = MedoidsConfig(depth=1.0)
+    assert medoids_select(cams, 1, cfg)[0] == [4]       # the medoid of the walk
+    assert medoids_select(cams, 1, cfg, sharpness=sharp)[0] == [4]      # weight 0: sharpness ignored
+    assert medoids_select(cams, 1, dataclasses.replace(cfg, sharpness_weight=1.0))[0] == [4]   # no sharpness given
+    got = medoids_select(cams, 1, dataclasses.replace(cfg, sharpness_weight=1.0), sharpness=sharp)[0]
+    assert got in ([3], [5])                           # the nearest sharp frame
+    with pytest.raises(ValueError, match="sharpness has 3 entries"):
+        medoids_select(cams, 1, dataclasses.replace(cfg, sharpness_weight=1.0), sharpness=np.ones(3))
+
+
+def test_blur_penalty_degenerate_inputs_never_nan():
+    from curate.medoids import blur_penalty, embed
+    cams = random_pool(8, seed=2)
+    c, a = embed(cams, np.ones(8))
+    pen, tau, nbrs = blur_penalty(c, a, np.ones(8))
+    assert np.all(pen == 0) and tau > 0 and nbrs.shape == (8, 6)   # uniform sharpness: no penalty
+    assert all(i not in nbrs[i] for i in range(8))
+    s = np.array([1.0, 0.0, np.nan, np.inf, -1.0, 1.0, 1.0, 1e-300])
+    pen = blur_penalty(c, a, s)[0]
+    assert np.all(np.isfinite(pen)) and np.all(np.abs(pen) <= 1)
+    assert np.all(pen[[1, 2, 3, 4]] == 1.0) and pen[7] == 1.0       # unusable / black images: avoided
+    assert np.all(blur_penalty(c, a, np.full(8, np.nan))[0] == 0)   # nothing to compare with
+    pen, tau, _ = blur_penalty(*embed(cams.transformed(1e4), np.full(8, 1e4)), np.linspace(1, 2, 8) * 1e6)
+    ref, ref_tau, _ = blur_penalty(c, a, np.linspace(1, 2, 8))
+    assert np.allclose(pen, ref) and np.isclose(tau / 1e4, ref_tau)  # scale-free in both
+    dup = Cameras.concat([random_pool(1, seed=3)] * 5)
+    pen, tau, _ = blur_penalty(*embed(dup, np.ones(5)), np.arange(1.0, 6.0))
+    assert tau == 0.0 and np.all(np.isfinite(pen))                  # coincident views: no offset
+    chosen, cost = medoids_select(dup, 3, MedoidsConfig(sharpness_weight=2.0), sharpness=np.arange(1.0, 6.0))
+    check_basic(chosen, 5, 3)
+    assert np.all(np.isfinite(cost))
+    pen, tau, nbrs = blur_penalty(c[:1], a[:1], [1.0])
+    assert np.all(pen == 0) and tau == 0.0 and nbrs.shape == (1, 0)
+    for bad in (-0.1, np.nan, np.inf):
+        with pytest.raises(ValueError, match="sharpness_weight"):
+            MedoidsConfig(sharpness_weight=bad)

@@ -156,3 +156,33 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     assert all(Path(p).is_absolute() and Path(p).is_file() for p in paths)
     assert np.array_equal(oc.fx, res.cameras.fx) and np.array_equal(oc.width, res.cameras.width)
     assert image_paths(tmp_path, list(res.cameras.names), res.records) == paths
+
+
+def test_sharpness_weight_reaches_view_medoids_and_reruns_only_the_selection(tmp_path):
+    """`--sharpness-weight` is measured from the photos of an import, recorded per pool image in
+    selection.json, and a changed weight redoes the select stage only."""
+    from curate.pipeline import image_paths, photo_sharpness
+    from curate.quality import files_sharpness
+    from curate.sfm_io import load_sfm
+    out = tmp_path / "run"
+    base = _cmd(out, "--no-evaluate", "--method", "medoids")
+    subprocess.run(base, check=True, capture_output=True, env=_env(), timeout=600)
+    sel0 = json.loads((out / "select" / "selection.json").read_text())
+    assert sel0["sharpness"] is None                          # weight 0: not measured
+    before = _mtimes(out)
+    subprocess.run(base + ["--sharpness-weight", "2"], check=True, capture_output=True, env=_env(), timeout=600)
+    after = _mtimes(out)
+    assert after["sfm/stage.json"] == before["sfm/stage.json"]
+    assert after["occupancy/stage.json"] == before["occupancy/stage.json"]
+    assert after["select/stage.json"] != before["select/stage.json"]
+    sel = json.loads((out / "select" / "selection.json").read_text())
+    assert json.loads((out / "select" / "stage.json").read_text())["config"]["select"]["medoids"][
+        "sharpness_weight"] == 2.0
+    res = load_sfm(out)
+    ref = files_sharpness([image_paths(out, list(res.cameras.names), res.records)[i] for i in sel["pool"]])
+    assert len(sel["sharpness"]) == len(sel["pool"]) and np.allclose(sel["sharpness"], ref)
+    assert np.all(ref > 0) and len(sel["chosen"]) == len(sel0["chosen"])
+    # a sharpness the SfM stage recorded is used as is (no file is read for it)
+    res.records["photos"][0].setdefault("extra", {})["sharpness"] = 123.0
+    k = list(res.cameras.names).index(res.records["photos"][0]["rel"])
+    assert photo_sharpness(out, res, [k])[0] == 123.0
