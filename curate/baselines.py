@@ -19,6 +19,15 @@ def random_subset(n_pool: int, budget: int, seed: int = 0, initial=()) -> list[i
     return [int(k) for k in rng.permutation(avail)[:max(0, int(budget))]]
 
 
+def stride_subset(n_pool: int, budget: int, initial=()) -> list[int]:
+    """``budget`` pool indices evenly spaced in index order (every (n / budget)-th of the n
+    indices not in ``initial``, centred): what people do with a video, since curate keeps
+    cameras sorted by name and numbered frames sort in capture order."""
+    avail = np.setdiff1d(np.arange(n_pool), np.asarray(list(initial), np.int64))
+    b = min(max(0, int(budget)), len(avail))
+    return [int(k) for k in avail[((np.arange(b) + 0.5) * len(avail) / max(b, 1)).astype(np.int64)]]
+
+
 def farthest_view(cams: Cameras, budget: int, initial=(), rot_weight: float = 0.0) -> list[int]:
     """Farthest-view sampling (as in NeRF Director): repeatedly add the camera farthest
     from every camera chosen so far.

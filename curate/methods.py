@@ -3,13 +3,14 @@
 "energy" is the paper's greedy on its energy, unchanged; "coverage" is facility location
 over the pool's own views (:mod:`curate.coverage`); "coverage+energy" adds the paper's
 energy to it as a second term; "medoids" is k-medoids of the pool's views in a centre +
-look-at distance (:mod:`curate.medoids`); "fvs" is farthest-view sampling; "random" and
+look-at distance (:mod:`curate.medoids`); "fvs" is farthest-view sampling; "stride" takes
+every n-th camera in name order (every n-th frame of a video); "random" and
 "hemisphere" are baselines. "auto" picks by the kind of capture
 (:func:`curate.select.capture_kind`): "medoids" for a walk-through (viewing axes that
 meet nowhere, or near-parallel ones), "fvs" for an object capture (cameras around a point, looking at it).
 """
 
-METHODS = ("auto", "energy", "random", "fvs", "hemisphere", "coverage", "coverage+energy", "medoids")
+METHODS = ("auto", "energy", "random", "fvs", "stride", "hemisphere", "coverage", "coverage+energy", "medoids")
 """Every selection method :func:`curate.select.select` knows."""
 
 DEFAULT_METHOD = "auto"

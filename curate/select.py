@@ -30,7 +30,8 @@ class SelectConfig:
     "fvs" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
     pool's views, :mod:`curate.medoids`), "energy" (the paper: greedy on its energy), "coverage" (facility
     location over the pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms),
-    "random", "fvs" (farthest-view sampling), "hemisphere"."""
+    "random", "fvs" (farthest-view sampling), "stride" (every n-th camera in name order: every
+    n-th frame of a video), "hemisphere"."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
     """Energy parameters (method "energy", and the energy reported for every method)."""
     seed: int = 0
@@ -129,7 +130,7 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     sharpness of the pool's photos (:func:`curate.quality.sharpness`), used by view medoids
     when ``cfg.medoids.sharpness_weight`` > 0.
     """
-    from .baselines import farthest_view, hemisphere_subset, random_subset
+    from .baselines import farthest_view, hemisphere_subset, random_subset, stride_subset
     from .greedy import greedy_select, trace_energy
     from .visibility import build_pair_index
 
@@ -167,6 +168,8 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
             chosen = random_subset(len(cams), budget, cfg.seed, initial)
         elif cfg.method == "fvs":
             chosen = farthest_view(cams, budget, initial, cfg.fvs_rot_weight)
+        elif cfg.method == "stride":
+            chosen = stride_subset(len(cams), budget, initial)
         else:
             chosen = hemisphere_subset(cams, budget, initial=initial)
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)

@@ -248,14 +248,6 @@ def oracle_subset(view_dist_hold: np.ndarray, budget: int) -> list[int]:
     return taken
 
 
-def stride_subset(n_pool: int, budget: int) -> list[int]:
-    """A baseline, not a curate method: ``budget`` pool frames evenly spaced in capture order
-    (every (n_pool / budget)-th frame, centred), what people do with a video. Assumes the
-    pool is in capture order (true of the harness's scenes). Returns pool-relative indices."""
-    b = min(max(budget, 0), n_pool)
-    return ((np.arange(b) + 0.5) * n_pool / max(b, 1)).astype(int).tolist()
-
-
 # ------------------------------------------------------------------ proxies
 def proxies(pc, hc, cell_sim_hold, chosen, view_dist_hold) -> dict:
     """Held-out view -> chosen cameras: nearest centre, smallest angle, best cell overlap,
@@ -408,8 +400,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
         for m in methods:
             if m == "all":
                 continue
-            if m in ("oracle", "stride"):
-                subsets[m] = [oracle_subset(vd_hold, B) if m == "oracle" else stride_subset(len(pool), B)]
+            if m == "oracle":
+                subsets[m] = [oracle_subset(vd_hold, B)]
                 timing[m] = 0.0
                 continue
             if m == "random":

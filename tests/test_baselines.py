@@ -1,8 +1,9 @@
-"""Baselines: random, farthest-view sampling, hemisphere."""
+"""Baselines: random, farthest-view sampling, every n-th frame, hemisphere."""
 
 import numpy as np
 
-from curate.baselines import farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset, random_subset
+from curate.baselines import (farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset, random_subset,
+                              stride_subset)
 from curate.cameras import Cameras, look_at
 from curate.grid import NodeGrid
 from curate.select import SelectConfig, select
@@ -62,3 +63,16 @@ def test_select_dispatch_fills_energy_for_every_method():
     # Greedy maximises the energy step by step: its first pick beats any other single camera,
     # and its final value is at least that of the baselines here.
     assert all(results["energy"].energy[-1] >= r.energy[-1] for r in results.values())
+
+
+def test_stride_spaces_frames_evenly_in_name_order():
+    assert stride_subset(12, 3) == [2, 6, 10]
+    s = stride_subset(346, 59)
+    assert len(set(s)) == 59 and s == sorted(s) and 0 <= s[0] and s[-1] < 346
+    assert set(np.diff(s)) <= {5, 6}
+    assert stride_subset(5, 9) == [0, 1, 2, 3, 4] and stride_subset(5, 0) == [] and stride_subset(0, 3) == []
+    got = stride_subset(12, 3, initial=[0, 1, 2])          # spaced over the 9 views not fixed
+    assert got == [4, 7, 10] and not {0, 1, 2} & set(got)
+    cams = random_pool(20, seed=1)
+    sel = select(cams, NodeGrid([-1] * 3, [1] * 3, 6), 4, SelectConfig("stride"))
+    assert sel.chosen == stride_subset(20, 4) and len(sel.energy) == 4 and np.all(np.isfinite(sel.energy))

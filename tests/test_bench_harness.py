@@ -1,4 +1,4 @@
-"""The selection-quality harness: pooling hold-out folds, the oracle and stride subsets, the synthetic room."""
+"""The selection-quality harness: pooling hold-out folds, the oracle subset, the synthetic room, hold-out holes."""
 
 from __future__ import annotations
 
@@ -97,9 +97,15 @@ def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monk
     assert harness.offpath_views("fox", tmp_path, None) is None
 
 
-def test_stride_spaces_frames_evenly_in_capture_order(harness):
-    assert harness.stride_subset(12, 3) == [2, 6, 10]
-    s = harness.stride_subset(346, 59)
-    assert len(set(s)) == 59 and s == sorted(s) and 0 <= s[0] and s[-1] < 346
-    assert set(np.diff(s)) <= {5, 6}
-    assert harness.stride_subset(5, 9) == [0, 1, 2, 3, 4] and harness.stride_subset(5, 0) == []
+def test_beside_holes_marks_the_neighbours_of_held_out_frames():
+    """scripts/holdout_holes.py: a pool frame is beside a hole when frame i - 1 or i + 1 is held out."""
+    spec = importlib.util.spec_from_file_location("holdout_holes", REPO / "scripts" / "holdout_holes.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    from curate.stats import holdout_split
+    pool, hold = holdout_split(30, 7, 2)                       # held out: 2, 9, 16, 23
+    got = pool[mod.beside_holes(pool, hold)]
+    assert got.tolist() == [1, 3, 8, 10, 15, 17, 22, 24]
+    pool, hold = holdout_split(30, 7, 0)                       # frame 0 held out: only frame 1 beside it
+    assert pool[mod.beside_holes(pool, hold)].tolist() == [1, 6, 8, 13, 15, 20, 22, 27, 29]
+    assert not mod.beside_holes(np.arange(5), np.zeros(0, int)).any()

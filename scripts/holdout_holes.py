@@ -1,0 +1,86 @@
+"""Do the selections avoid the frames next to the held-out ones? (a bias of the hold-out protocol)
+
+Holding out every n-th frame of a video leaves a hole in the pool at each held-out frame,
+and the test is exactly in those holes. A selection that centres its frames on where the
+pool is dense (view medoids) may drift away from the holes; one blind to the pool's
+density (every n-th frame) does not. For each hold-out fold of a harness run folder
+(``scripts/bench_selection_quality.py --out DIR`` writes ``DIR/<scene>``), this prints, per
+method:
+
+* ``adjacent``: the share of chosen frames whose neighbour in capture order is held out
+  (cameras sorted by name, as curate stores them: frame numbers in capture order), and
+  ``adjacent_pool``: the same share over the whole pool (what an unbiased choice gives);
+* ``view``: the mean view-medoids distance from a held-out view to its nearest chosen view.
+
+The last line is JSON. Example::
+
+    python scripts/holdout_holes.py --run .gpudata/quality/office --budget 17%
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+def beside_holes(pool: np.ndarray, hold: np.ndarray) -> np.ndarray:
+    """[len(pool)] bool: pool frame (an index in capture order) has a held-out frame next to it."""
+    return np.isin(pool, np.r_[hold - 1, hold + 1])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--run", required=True, help="a harness run folder (with sfm/ and occupancy/)")
+    ap.add_argument("--every", type=int, default=14, help="hold out every n-th frame (default 14)")
+    ap.add_argument("--budget", default="17%", help="frames to choose: a count or a share of the pool")
+    ap.add_argument("--folds", default="all", help="hold-out offsets: comma list or 'all'")
+    ap.add_argument("--methods", default="medoids,stride,fvs,random", help="comma list")
+    args = ap.parse_args(argv)
+
+    from curate.budget import parse_budget, resolve_budget
+    from curate.medoids import embed, view_depths, view_distance
+    from curate.pipeline import load_node_grid, load_split
+    from curate.select import SelectConfig, select
+    from curate.stats import holdout_split
+    from curate.visibility import build_pair_index
+
+    run = Path(args.run)
+    sfm, _, _, _ = load_split(run, args.every)
+    cams = sfm.cameras
+    grid = load_node_grid(run)
+    c, a = embed(cams, view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), SelectConfig().energy.bins)))
+    folds = range(args.every) if args.folds == "all" else [int(x) for x in args.folds.split(",") if x]
+    methods = [m for m in args.methods.split(",") if m]
+    per: dict[str, dict[str, list]] = {m: {"adjacent": [], "adjacent_pool": [], "view": []} for m in methods}
+    for f in folds:
+        pool, hold = holdout_split(len(cams), args.every, f)
+        B = resolve_budget(parse_budget(args.budget), len(pool))
+        near_hole = beside_holes(pool, hold)                        # [pool]
+        vd = view_distance(c, a, hold, pool)                         # [H, pool]
+        for m in methods:
+            chosen = np.asarray(select(cams[pool.tolist()], grid, B, SelectConfig(m)).chosen, int)
+            per[m]["adjacent"].append(float(near_hole[chosen].mean()))
+            per[m]["adjacent_pool"].append(float(near_hole.mean()))
+            per[m]["view"].append(float(vd[:, chosen].min(1).mean()))
+    print(f"{run.name}: budget {args.budget}, folds {list(folds)}")
+    print(f"{'method':10s} {'adjacent':>9s} {'(pool)':>7s} {'view':>7s}   per fold: adjacent")
+    out = {}
+    for m, v in per.items():
+        out[m] = {k: round(float(np.mean(x)), 4) for k, x in v.items()}
+        out[m]["adjacent_per_fold"] = [round(x, 3) for x in v["adjacent"]]
+        print(f"{m:10s} {out[m]['adjacent']:9.3f} {out[m]['adjacent_pool']:7.3f} {out[m]['view']:7.3f}   "
+              + " ".join(f"{x:.2f}" for x in v["adjacent"]))
+    print(json.dumps({"run": str(run), "budget": args.budget, "every": args.every, "folds": list(folds),
+                      "methods": out}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
