@@ -78,13 +78,11 @@ def _add_method(s: argparse.ArgumentParser) -> None:
 def _select_cfg(args, base=None):
     """SelectConfig from the options of ``_add_method`` and ``_add_energy_args`` (over ``base``)."""
     from dataclasses import replace
-    from .medoids import MedoidsConfig
     from .select import SelectConfig
     base = base if base is not None else SelectConfig(device=args.device)
     try:
         return replace(base, method=args.method, energy=_energy_cfg(args), seed=args.seed,
-                       medoids=replace(base.medoids if base.medoids is not None else MedoidsConfig(),
-                                       sharpness_weight=args.sharpness_weight))
+                       medoids=replace(base.medoids, sharpness_weight=args.sharpness_weight))
     except ValueError as e:
         raise CliError(str(e))
 
@@ -174,7 +172,7 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    from .select import select
+    from .select import capture_kind, select
     from .transforms_json import write_transforms
     from .stage import write_json_atomic, config_dict
 
@@ -189,7 +187,8 @@ def cmd_select(args) -> int:
     cfg = _select_cfg(args)
     grid = _grid(args, cams)
     sharp = None
-    if cfg.medoids.sharpness_weight > 0 and cfg.method in ("medoids", "auto"):
+    if cfg.medoids.sharpness_weight > 0 and (cfg.method == "medoids" or (
+            cfg.method == "auto" and capture_kind(cams)[0] == "walk")):
         from .quality import files_sharpness
         if all(Path(f).is_file() for f in files):
             sharp = files_sharpness(files, progress=not args.json)      # [K]
