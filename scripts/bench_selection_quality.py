@@ -447,14 +447,17 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                         timing, ev, h.default.method, args.candidate, h.rows, h.paired,
                         {} if fold else h.series)        # plotted: fold 0 and the pooled folds
         found[b] = ({m: v[on] for m, v in per_view.items()}, {m: [x[on] for x in v] for m, v in per_run.items()},
-                    prox, len(hold), B, len(pool))
+                    prox, len(hold), B, len(pool),
+                    {m: v[~on] for m, v in per_view.items()} if off is not None else None)   # off-path views
     return found
 
 
 def report_folds(h: Bench, scene: str, folds: list) -> None:
     """One table (``<scene>-folds``) over the on-path held-out views of every fold of one
     budget: each method's per-view PSNRs are concatenated over the folds (its run r of every
-    fold make its run r), and the paired differences pair views across all folds."""
+    fold make its run r), and the paired differences pair views across all folds. A scene
+    with test views off the path (every fold scores the same ones) adds
+    ``<scene>-offpath-folds``: each view's PSNR averaged over the folds, paired per view."""
     methods = [m for m in h.methods if all(m in f[0] for f in folds)]
     per_view = {m: np.concatenate([f[0][m] for f in folds]) for m in methods}
     n_runs = {m: min(len(f[1][m]) for f in folds) for m in methods}
@@ -470,6 +473,15 @@ def report_folds(h: Bench, scene: str, folds: list) -> None:
     print(f"\n{len(folds)} folds pooled (budgets {sorted({f[4] for f in folds})}):", end="")
     report_part(f"{scene}-folds", True, n_hold, np.ones(n_hold, bool), B, n_pool, methods, per_view, per_run,
                 prox, {}, h.ev, h.default.method, h.args.candidate, h.rows, h.paired, h.series)
+    if all(f[6] is not None for f in folds):
+        # off the path every fold scores the same views: each view's PSNR is averaged over the
+        # folds (one number per view and method), and the methods are paired over those views
+        off = {m: np.mean([f[6][m] for f in folds], axis=0) for m in methods}
+        n_off = len(next(iter(off.values())))
+        print(f"\n{len(folds)} folds averaged per off-path view:", end="")
+        report_part(f"{scene}-offpath-folds", False, n_hold, np.ones(n_off, bool), B, n_pool, methods, off,
+                    {m: [v] for m, v in off.items()}, {}, {}, h.ev, h.default.method, h.args.candidate,
+                    h.rows, h.paired, {})
 
 
 # ------------------------------------------------------------------ the harness

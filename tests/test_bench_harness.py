@@ -23,15 +23,16 @@ def harness():
     return mod
 
 
-def _fold(rng, n_views: int, shift: float, n_random: int = 2):
-    """(per_view, per_run, prox, n_hold, B, n_pool) as run_fold returns it: 'a' beats random by ``shift``."""
+def _fold(rng, n_views: int, shift: float, n_random: int = 2, off=None):
+    """(per_view, per_run, prox, n_hold, B, n_pool, off-path per_view) as run_fold returns it:
+    'a' beats random by ``shift``."""
     rand_runs = [rng.normal(20, 1, n_views) for _ in range(n_random)]
     rand = np.mean(rand_runs, axis=0)
     a = rand + shift + rng.normal(0, 0.1, n_views)
     prox = {m: [{"pos": 1.0, "pos90": 2.0, "ang": 3.0, "ang90": 4.0, "cell": 0.5, "view": 1.5,
                  "view_per": rng.uniform(0, 1, n_views)} for _ in range(k)]
             for m, k in (("a", 1), ("random", n_random))}
-    return {"a": a, "random": rand}, {"a": [a], "random": rand_runs}, prox, n_views, 7, 50
+    return {"a": a, "random": rand}, {"a": [a], "random": rand_runs}, prox, n_views, 7, 50, off
 
 
 def test_folds_pool_every_view_once(harness, capsys):
@@ -54,6 +55,25 @@ def test_folds_pool_every_view_once(harness, capsys):
     diffs = np.concatenate([f[0]["a"] - f[0]["random"] for f in folds])
     assert pair["mean"] == pytest.approx(diffs.mean(), abs=1e-3) and pair["lo"] > 0
     assert "3 folds pooled" in capsys.readouterr().out
+
+
+def test_offpath_views_are_averaged_over_folds_then_paired(harness, capsys):
+    """Every fold scores the same off-path views: each view's PSNR is averaged over the folds,
+    and the methods are paired over the views (n = views, not views x folds)."""
+    rng = np.random.default_rng(2)
+    offs = [{"a": rng.normal(22, 1, 6) + 0.3, "random": rng.normal(22, 1, 6)} for _ in range(3)]
+    folds = [_fold(rng, 10, 1.0, off=o) for o in offs]
+    h = harness.Bench(argparse.Namespace(candidate="a"), argparse.Namespace(max_side=160, iters=600),
+                      ["a", "random"], argparse.Namespace(method="auto"), {}, [], [], {})
+    harness.report_folds(h, "room", folds)
+    rows = {(r["scene"], r["method"]): r for r in h.rows}
+    assert rows[("room-offpath-folds", "a")]["psnr"] == pytest.approx(np.mean([o["a"] for o in offs]), abs=1e-3)
+    (pair,) = [p for p in h.paired if p["scene"] == "room-offpath-folds" and p["pair"] == "a-random"]
+    per_view = np.mean([o["a"] - o["random"] for o in offs], axis=0)
+    assert pair["n"] == 6 and pair["mean"] == pytest.approx(per_view.mean(), abs=1e-3)
+    assert "3 folds averaged per off-path view" in capsys.readouterr().out
+    harness.report_folds(h, "room", folds[:2] + [_fold(rng, 10, 1.0)])   # a fold without off-path views
+    assert sum(r["scene"] == "room-offpath-folds" for r in h.rows) == 2       # no second off-path table
 
 
 def test_folds_drop_a_method_missing_from_a_fold(harness):
