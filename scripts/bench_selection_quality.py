@@ -275,13 +275,11 @@ class PairMeasures:
     def build(cls, cams, grid, bins, paths) -> "PairMeasures":
         from curate.coverage import cell_similarity
         from curate.medoids import embed, view_depths
-        from curate.quality import sharpness
+        from curate.quality import files_sharpness
         from curate.visibility import build_pair_index
-        from PIL import Image
         idx = build_pair_index(cams, grid.nodes(), bins)
         c, a = embed(cams, view_depths(cams, grid.nodes(), idx))
-        sharp = np.array([sharpness(np.asarray(Image.open(p).convert("RGB"))) for p in paths])
-        return cls(cell_similarity(idx, 0.0).tocsr(), c, a, sharp)
+        return cls(cell_similarity(idx, 0.0).tocsr(), c, a, files_sharpness(paths))
 
     def fold(self, pool, hold) -> tuple[np.ndarray, np.ndarray]:
         """From each held-out view to each pool view, both [H, K]: the share of the held-out
