@@ -172,7 +172,7 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    from .select import capture_kind, select
+    from .select import select, uses_sharpness
     from .transforms_json import write_transforms
     from .stage import write_json_atomic, config_dict
 
@@ -187,8 +187,7 @@ def cmd_select(args) -> int:
     cfg = _select_cfg(args)
     grid = _grid(args, cams)
     sharp = None
-    if cfg.medoids.sharpness_weight > 0 and (cfg.method == "medoids" or (
-            cfg.method == "auto" and capture_kind(cams)[0] == "walk")):
+    if uses_sharpness(cams, cfg):
         from .quality import files_sharpness
         if all(Path(f).is_file() for f in files):
             sharp = files_sharpness(files, progress=not args.json)      # [K]

@@ -145,7 +145,8 @@ def blur_penalty(c: np.ndarray, a: np.ndarray, sharp,
         nn = np.argpartition(d, k - 1, axis=1)[:, :k]          # [r, k]
         nbrs[rows] = nn
         nearest[rows] = d[np.arange(len(rows)), nn.T].min(0)
-        grp = np.where(ok[np.c_[rows[:, None], nn]], s[np.c_[rows[:, None], nn]], np.nan)
+        grp_idx = np.c_[rows[:, None], nn]                      # [r, 1 + k]: the view and its nearest
+        grp = np.where(ok[grp_idx], s[grp_idx], np.nan)
         with warnings.catch_warnings():                          # all-NaN groups give NaN: handled below
             warnings.simplefilter("ignore", RuntimeWarning)
             med = np.nanmedian(grp, axis=1)

@@ -212,7 +212,7 @@ def load_node_grid(run_dir: Path):
 def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
     """Greedy selection over the pool -> ``RUN/select``."""
     from .energy import energy_of_subset
-    from .select import capture_kind, select
+    from .select import select, uses_sharpness
     from .stage import begin_stage, finish_stage, stage_key, write_json_atomic
     from .visibility import build_pair_index
 
@@ -234,8 +234,7 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
     t_vis = time.perf_counter() - t_vis
     sharp = None
-    if cfg.select.medoids.sharpness_weight > 0 and (cfg.select.method == "medoids" or (
-            cfg.select.method == "auto" and capture_kind(pc)[0] == "walk")):
+    if uses_sharpness(pc, cfg.select):
         sharp = photo_sharpness(run_dir, sfm, pool)      # [pool]: view medoids avoid blurred frames
     sel = select(pc, grid, budget, cfg.select, progress=True, index=index, sharpness=sharp)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)

@@ -119,6 +119,15 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
     return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
 
 
+def uses_sharpness(cams: Cameras, cfg: SelectConfig) -> bool:
+    """True when :func:`select` with ``cfg`` on ``cams`` would use the photos' sharpness:
+    view medoids (asked for, or what "auto" picks for a walk) with a sharpness weight > 0.
+    Callers measure sharpness (reading every photo) only then."""
+    if cfg.medoids.sharpness_weight <= 0:
+        return False
+    return cfg.method == "medoids" or (cfg.method == "auto" and capture_kind(cams)[0] == "walk")
+
+
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
            progress: bool = False, index=None, sharpness=None) -> Selection:
     """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).

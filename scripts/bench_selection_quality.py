@@ -365,7 +365,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     image ``paths``, selection nodes ``grid`` and camera ``measures`` are the same for every
     fold). Unit folders of fold o > 0 end in ``_o<o>``, so fold 0 keeps the names (and
     finished units) of a single hold-out. Returns budget -> (per_view, per_run, prox,
-    n_hold, B, n_pool) of its on-path views, for :func:`report_folds`."""
+    n_hold, B, n_pool) of its on-path views and the per_view of its off-path views (None for
+    a real scene), for :func:`report_folds`."""
     from curate.budget import parse_budget, resolve_budget
     from curate.evaluate import Unit, eval_cameras, run_units
     from curate.select import SelectConfig, select

@@ -306,3 +306,20 @@ def test_blur_penalty_degenerate_inputs_never_nan():
     for bad in (-0.1, np.nan, np.inf):
         with pytest.raises(ValueError, match="sharpness_weight"):
             MedoidsConfig(sharpness_weight=bad)
+
+
+def test_uses_sharpness_only_when_view_medoids_run_with_a_weight():
+    """Callers read every photo for sharpness only when select() would use it."""
+    from curate.baselines import hemisphere_cameras
+    from curate.select import capture_kind, uses_sharpness
+    x = np.linspace(0.0, 2.0, 9)
+    c = np.c_[x, np.zeros(9), np.zeros(9)]
+    walk = Cameras(look_at(c, c + [0.0, 1.0, 0.0]), 300.0, 300.0, 160, 120, 320, 240)
+    obj = hemisphere_cameras([0.0, 0.0, 0.0], 2.0, 12, 300.0, 320, 240)
+    assert capture_kind(walk)[0] == "walk" and capture_kind(obj)[0] == "object"
+    w = MedoidsConfig(sharpness_weight=1.0)
+    assert uses_sharpness(walk, SelectConfig("auto", medoids=w))
+    assert not uses_sharpness(obj, SelectConfig("auto", medoids=w))          # auto runs FVS there
+    assert uses_sharpness(obj, SelectConfig("medoids", medoids=w))
+    assert not uses_sharpness(walk, SelectConfig("medoids"))                  # weight 0
+    assert not uses_sharpness(walk, SelectConfig("fvs", medoids=w))
