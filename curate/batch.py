@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .batch_summary import make_row, write_summary_html
-from .report import fmt_num
+from .html_parts import fmt_num
 
 log = logging.getLogger(__name__)
 

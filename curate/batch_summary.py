@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .report import fmt_num
+from .html_parts import fmt_num
 
 if TYPE_CHECKING:
     from .batch import Folder

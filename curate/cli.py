@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 
 from .budget import budget_text, parse_budget, resolve_budget
-from .methods import DEFAULT_METHOD, METHOD_HELP, METHODS, SHARPNESS_HELP, SHARPNESS_WEIGHT
+from .methods import (DEFAULT_METHOD, METHOD_HELP, METHODS, PATH_HELP, PATH_WEIGHTS, SHARPNESS_HELP,
+                      SHARPNESS_WEIGHT)
 from .sfm_config import CAMERA_MODES, MATCHERS
 from .sfm_config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy
 
@@ -73,6 +74,7 @@ def _add_energy_args(p: argparse.ArgumentParser) -> None:
 def _add_method(s: argparse.ArgumentParser) -> None:
     s.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS, help=METHOD_HELP)
     s.add_argument("--sharpness-weight", type=float, default=SHARPNESS_WEIGHT, help=SHARPNESS_HELP)
+    s.add_argument("--path-weights", action=argparse.BooleanOptionalAction, default=PATH_WEIGHTS, help=PATH_HELP)
 
 
 def _select_cfg(args, base=None):
@@ -82,7 +84,8 @@ def _select_cfg(args, base=None):
     base = base if base is not None else SelectConfig(device=args.device)
     try:
         return replace(base, method=args.method, energy=_energy_cfg(args), seed=args.seed,
-                       medoids=replace(base.medoids, sharpness_weight=args.sharpness_weight))
+                       medoids=replace(base.medoids, sharpness_weight=args.sharpness_weight,
+                                       path_weights=args.path_weights))
     except ValueError as e:
         raise CliError(str(e))
 

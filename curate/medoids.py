@@ -25,6 +25,11 @@ pool view to its nearest medoid; move each medoid to the member with the least s
 distance to its cluster) until nothing moves. Each iteration lowers the summed distance
 or stops, so it ends. ``initial`` cameras are fixed medoids. Memory is [K, B] for the
 assignment and [m, m] per cluster, never [K, K].
+
+Path weights (``MedoidsConfig.path_weights``): a video samples its path unevenly (the
+walker lingers, speeds up; frames are dropped or held out), and the plain mean counts
+frames. Weighing each view by the stretch of path it stands for (:func:`path_weights`)
+makes the mean one along the path: a weighted k-medoids, same algorithm.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import numpy as np
 
 from .baselines import farthest_point
 from .cameras import Cameras
-from .methods import SHARPNESS_WEIGHT
+from .methods import PATH_WEIGHTS, SHARPNESS_WEIGHT
 
 
 @dataclass(frozen=True)
@@ -63,6 +68,15 @@ class MedoidsConfig:
     ``r`` times the median of its nearest pool views counts as ``sharpness_weight * tau *
     -ln(r)`` farther from every view (``tau``: the pool's median distance from a view to its
     nearest other view; ``ln r`` clipped to [-1, 1]). 0: sharpness is ignored."""
+
+    path_weights: bool = PATH_WEIGHTS
+    """Weigh each pool view by the stretch of the capture path it stands for (half the view
+    distance to the previous plus to the next view in name order, i.e. capture order for
+    numbered video frames; capped at ``PATH_CAP`` times the median step, mean 1): the mean is
+    then taken along the path, not over the frames, so a stretch sampled sparsely (a
+    dropped frame, a fast walk) counts as much as one sampled densely (the walker
+    lingering). Ignored (uniform weights, a warning) when the views are not in path order
+    (:func:`path_weights`)."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.sharpness_weight) and self.sharpness_weight >= 0):
@@ -162,8 +176,50 @@ def blur_penalty(c: np.ndarray, a: np.ndarray, sharp,
     return pen, tau, nbrs
 
 
+PATH_CAP = 4.0
+"""A step between consecutive views counts for at most this many median steps (a cut in
+the video, a second sequence)."""
+PATH_ORDER_MIN = 0.6
+"""Views count as a path when at least this share of them has its previous or next view
+among its two nearest views (measured: 0.86-0.99 on the office, the sample room and the
+object sets' frame sequences; 0.01-0.16 for 25-200 photos in random order)."""
+
+
+def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
+    """[K] weights, mean 1, of embedded views ``c``, ``a`` [K, 3] in capture order: half the
+    view distance to the previous plus to the next view (a path end: its one step), each
+    step capped at ``PATH_CAP`` median steps. None when the views do not form a path: fewer
+    than 3, every step 0, or less than ``PATH_ORDER_MIN`` of the views with a neighbour in
+    capture order among their two nearest views. Memory [1024, K]."""
+    K = len(c)
+    if K < 3:
+        return None
+    step = np.linalg.norm(c[1:] - c[:-1], axis=1) + np.linalg.norm(a[1:] - a[:-1], axis=1)   # [K-1]
+    med = float(np.median(step))
+    if not (np.isfinite(med) and med > 0):
+        return None
+    allk = np.arange(K)
+    in_order = np.zeros(K, bool)                                  # [K] an order neighbour is among the 2 nearest
+    for lo in range(0, K, 1024):                                  # [1024, K] at a time
+        rows = allk[lo:lo + 1024]
+        d = view_distance(c, a, rows, allk)
+        d[np.arange(len(rows)), rows] = np.inf
+        d2 = np.partition(d, 1, axis=1)[:, 1]                     # [r] the second-nearest distance
+        prev = np.where(rows > 0, d[np.arange(len(rows)), np.maximum(rows - 1, 0)], np.inf)
+        nxt = np.where(rows < K - 1, d[np.arange(len(rows)), np.minimum(rows + 1, K - 1)], np.inf)
+        in_order[rows] = np.minimum(prev, nxt) <= d2
+    if in_order.mean() < PATH_ORDER_MIN:
+        return None
+    step = np.minimum(step, PATH_CAP * med)
+    w = np.empty(K)
+    w[1:-1] = 0.5 * (step[:-1] + step[1:])
+    w[0], w[-1] = step[0], step[-1]
+    return w / w.mean()
+
+
 def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfig(), initial=(),
-                   nodes: np.ndarray | None = None, index=None, sharpness=None) -> tuple[list[int], list[float]]:
+                   nodes: np.ndarray | None = None, index=None, sharpness=None,
+                   weights=None) -> tuple[list[int], list[float]]:
     """Choose ``budget`` more pool views (k-medoids with ``initial`` fixed).
 
     ``sharpness`` [K] (image sharpness, e.g. :func:`curate.quality.sharpness`) is used when
@@ -173,8 +229,12 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     then also move to one of its nearest views outside its cluster, and one that serves no
     view moves to the view whose cost it lowers most.
 
+    With ``cfg.path_weights`` each view's cost is weighted by :func:`path_weights` (the
+    cameras in capture order): a weighted k-medoids. ``weights`` [K] (finite, >= 0, not all
+    0) gives the weights instead.
+
     Returns (chosen, cost): chosen in the order of their farthest-point initialisation,
-    cost the mean of that per-view cost (view distance ** ``cfg.power`` when sharpness is
+    cost the (weighted) mean of that per-view cost (view distance ** ``cfg.power`` when sharpness is
     ignored) from a pool view to its medoid after each Voronoi iteration (the first entry:
     after initialisation).
     """
@@ -199,6 +259,19 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
         if not np.any(off):
             nbrs = None
 
+    w = np.ones(K)                                                # [K] weight of each view's cost
+    if weights is not None:
+        w = np.asarray(weights, np.float64).reshape(-1)
+        if len(w) != K or not np.all(np.isfinite(w) & (w >= 0)) or not w.sum() > 0:
+            raise ValueError(f"weights must be {K} finite values >= 0, not all 0")
+        w = w / w.mean()
+    elif cfg.path_weights:
+        pw = path_weights(c, a)
+        if pw is None:
+            warnings.warn("medoids: the views are not in capture order (or too few); path weights ignored")
+        else:
+            w = pw
+
     # Voronoi iteration; medoids 0..len(initial)-1 are fixed
     med = np.array(initial + chosen, np.int64)
     n_fixed = len(initial)
@@ -208,7 +281,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
         for s in range(0, K, 2048):                               # [K, B] in chunks
             D[s:s + 2048] = view_distance(c, a, allk[s:s + 2048], med) ** cfg.power + off[med]
         assign = np.argmin(D, axis=1)                             # ties: the earlier medoid
-        costs.append(float(D[allk, assign].mean()))
+        costs.append(float((w * D[allk, assign]).mean()))
         if len(costs) > cfg.max_iters:
             break
         moved = False
@@ -216,7 +289,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
             served = np.flatnonzero(assign == j)                 # the views medoid j serves
             if len(served) == 0:
                 if nbrs is not None:                             # a blurred medoid nobody wants: move
-                    gain = np.where(np.isin(allk, med), -np.inf, D[allk, assign] - off)   # it to the view
+                    gain = np.where(np.isin(allk, med), -np.inf, w * (D[allk, assign] - off))   # to the view
                     if gain.max() > 1e-12 * max(1.0, abs(costs[-1])):                  # that gains most
                         med[j] = int(np.argmax(gain))
                         moved = True
@@ -225,9 +298,10 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
             cand = cand[~np.isin(cand, np.delete(med, j))]       # medoid's nearest views too; never another medoid
             if len(cand) == 0:
                 continue
-            tot = ((view_distance(c, a, cand, served) ** cfg.power).sum(1)
-                   + len(served) * off[cand])                    # [m] cluster cost with each as medoid
-            cur = float((view_distance(c, a, [med[j]], served) ** cfg.power).sum() + len(served) * off[med[j]])
+            ws = w[served]                                       # [s]
+            tot = ((view_distance(c, a, cand, served) ** cfg.power) @ ws
+                   + ws.sum() * off[cand])                       # [m] cluster cost with each as medoid
+            cur = float((view_distance(c, a, [med[j]], served)[0] ** cfg.power) @ ws + ws.sum() * off[med[j]])
             if tot.min() < cur - 1e-12 * abs(cur):
                 med[j] = cand[int(np.argmin(tot))]               # ties: the lowest index
                 moved = True

@@ -24,3 +24,10 @@ SHARPNESS_WEIGHT = 0.0
 
 SHARPNESS_HELP = ("view medoids: how strongly a frame blurrier than its nearest views is avoided "
                   "(0 ignores sharpness; default %(default)s)")
+
+PATH_WEIGHTS = True
+"""Default of ``MedoidsConfig.path_weights`` (README, 'Which selection method, and why')."""
+
+PATH_HELP = ("view medoids: weigh each frame by the stretch of the capture path it stands for, "
+             "so the subset covers the walk by distance, not by frame count (frames in name order; "
+             "default %(default)s)")

@@ -13,7 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from . import plots
-from .report import CSS, _duration, _e, _note, _read_json, _safe, fmt_num, top_down_axes
+from .html_parts import CSS, fmt_num
+from .html_parts import duration as _duration
+from .html_parts import esc as _e
+from .html_parts import note as _note
+from .html_parts import read_json as _read_json
+from .html_parts import safe_section as _safe
+from .plots import top_down_axes
 
 logger = logging.getLogger(__name__)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 from .cameras import Cameras
@@ -79,7 +80,8 @@ class Selection:
     to the nearest chosen view after each iteration (empty for the others)."""
 
     note: str = ""
-    """Method "auto": which method it ran and why (``method`` is the one it ran)."""
+    """Method "auto": which method it ran and why (``method`` is the one it ran); view medoids:
+    an option that did not apply (path weights on photos not in capture order)."""
 
     def to_dict(self) -> dict:
         return {"method": self.method, "chosen": self.chosen, "initial": self.initial, "energy": self.energy,
@@ -167,7 +169,12 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     elif cfg.method == "medoids":
         from .medoids import medoids_select
         n_med = budget - int(round(cfg.medoids.energy_share * max(0, budget)))
-        chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index, sharpness)
+        with warnings.catch_warnings(record=True) as caught:          # e.g. path weights ignored: a note
+            warnings.simplefilter("always")
+            chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index, sharpness)
+        for w in caught:
+            log.info("select %s", w.message)
+            note = "; ".join(x for x in (note, str(w.message)) if x)
         if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
             chosen += greedy_select(index, budget - n_med, cfg.energy, initial + chosen).chosen
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)

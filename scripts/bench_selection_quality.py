@@ -218,6 +218,8 @@ def _variants():
             "medoids_p05": SelectConfig("medoids", medoids=MedoidsConfig(power=0.5)),
             "medoids_e25": SelectConfig("medoids", medoids=MedoidsConfig(energy_share=0.25)),
             "medoids_sharp": SelectConfig("medoids", medoids=MedoidsConfig(sharpness_weight=1.0)),
+            "medoids_path": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=True)),
+            "medoids_plain": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=False)),
             "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
@@ -501,6 +503,7 @@ def main(argv=None) -> int:
                     "'medoids_p2' / 'medoids_p05' (medoids minimising the mean of the view distance ** 2 / ** 0.5), "
                     "'medoids_e25' (medoids for 75%% of the budget, the paper's greedy energy for the rest), "
                     "'medoids_sharp' (medoids avoiding frames blurrier than their neighbours, sharpness_weight 1), "
+                    "'medoids_path' / 'medoids_plain' (medoids with / without path weights; with is the default), "
                     "'oracle' (NOT a method: the held-out views' nearest pool views, an upper bound), "
                     "'stride' (every (pool / budget)-th frame in capture order: a video's usual subsampling)")
     ap.add_argument("--max-side", type=int, default=160)

@@ -12,6 +12,12 @@ method:
   ``adjacent_pool``: the same share over the whole pool (what an unbiased choice gives);
 * ``view``: the mean view-medoids distance from a held-out view to its nearest chosen view.
 
+Besides the methods and the harness's variants, ``medoids_path_full`` is a diagnostic (it
+sees the held-out frames, so it is no method): view medoids weighted by the path weights
+of the *whole* sequence, held-out frames included, so the holes give the frames beside
+them no extra weight. Against ``medoids_path`` it tells how much of what the path weights
+change comes from the holes.
+
 The last line is JSON. Example::
 
     python scripts/holdout_holes.py --run .gpudata/quality/office --budget 17%
@@ -41,16 +47,20 @@ def main(argv=None) -> int:
     ap.add_argument("--every", type=int, default=14, help="hold out every n-th frame (default 14)")
     ap.add_argument("--budget", default="17%", help="frames to choose: a count or a share of the pool")
     ap.add_argument("--folds", default="all", help="hold-out offsets: comma list or 'all'")
-    ap.add_argument("--methods", default="medoids,stride,fvs,random", help="comma list")
+    ap.add_argument("--methods", default="medoids,stride,fvs,random",
+                    help="comma list of methods or the harness's variants (e.g. medoids_path)")
     args = ap.parse_args(argv)
 
     from curate.budget import parse_budget, resolve_budget
-    from curate.medoids import embed, view_depths, view_distance
+    from curate.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
     from curate.pipeline import load_node_grid, load_split
     from curate.select import SelectConfig, select
     from curate.stats import holdout_split
     from curate.visibility import build_pair_index
 
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from bench_selection_quality import _variants                  # the harness's named variants
+    variants = _variants()
     run = Path(args.run)
     sfm, _, _, _ = load_split(run, args.every)
     cams = sfm.cameras
@@ -65,7 +75,15 @@ def main(argv=None) -> int:
         near_hole = beside_holes(pool, hold)                        # [pool]
         vd = view_distance(c, a, hold, pool)                         # [H, pool]
         for m in methods:
-            chosen = np.asarray(select(cams[pool.tolist()], grid, B, SelectConfig(m)).chosen, int)
+            if m == "medoids_path_full":                            # a diagnostic, not a method: the
+                w = path_weights(c, a)[pool]                        # weights of the whole sequence,
+                pc = cams[pool.tolist()]                            # so the held-out frames leave no hole
+                idx = build_pair_index(pc, grid.nodes(), SelectConfig().energy.bins)
+                chosen = np.asarray(medoids_select(pc, B, MedoidsConfig(), (), grid.nodes(), idx,
+                                                   weights=w)[0], int)
+            else:
+                cfg = variants[m] if m in variants else SelectConfig(m)
+                chosen = np.asarray(select(cams[pool.tolist()], grid, B, cfg).chosen, int)
             per[m]["adjacent"].append(float(near_hole[chosen].mean()))
             per[m]["adjacent_pool"].append(float(near_hole.mean()))
             per[m]["view"].append(float(vd[:, chosen].min(1).mean()))

@@ -16,6 +16,11 @@ from conftest import random_pool
 
 GRID = NodeGrid([-1, -1, -1], [1, 1, 1], 6)
 
+# plain view medoids (the reference tests set path_weights=False; tests/test_medoids_path.py
+# has the weighted ones). Random pools are no capture path: path weights (on by default)
+# fall back to plain ones, with a warning.
+pytestmark = pytest.mark.filterwarnings("ignore:medoids. the views are not in capture order")
+
 
 def pool_index(n, seed, scale=1.0):
     cams = random_pool(n, seed=seed, scale=scale)
@@ -65,7 +70,7 @@ def check_basic(chosen, K, budget, initial=()):
 def test_voronoi_local_optimum_and_cost(seed, initial, depth, power):
     K, budget = 12, 3
     cams, nodes, idx = pool_index(K, seed)
-    cfg = MedoidsConfig(depth=depth, power=power)
+    cfg = MedoidsConfig(depth=depth, power=power, path_weights=False)
     chosen, cost = medoids_select(cams, budget, cfg, initial, nodes, idx)
     check_basic(chosen, K, budget, initial)
     depths = np.full(K, depth) if depth is not None else view_depths(cams, nodes, idx)
@@ -75,13 +80,13 @@ def test_voronoi_local_optimum_and_cost(seed, initial, depth, power):
     assert np.all(np.diff(cost) <= 1e-12 * max(1.0, cost[0]))
     assert np.isclose(cost[-1], final, rtol=1e-10, atol=0)
     # the iteration is worth something: no worse than the greedy farthest-point start alone
-    start, _ = medoids_select(cams, budget, MedoidsConfig(depth=depth, max_iters=0, power=power), initial, nodes, idx)
+    start, _ = medoids_select(cams, budget, MedoidsConfig(depth=depth, max_iters=0, power=power, path_weights=False), initial, nodes, idx)
     assert final <= mean_min(D, list(initial) + start, power) + 1e-12
 
 
 def test_larger_pool_local_optimum():
     cams, nodes, idx = pool_index(40, 3)
-    chosen, cost = medoids_select(cams, 7, MedoidsConfig(), (), nodes, idx)
+    chosen, cost = medoids_select(cams, 7, MedoidsConfig(path_weights=False), (), nodes, idx)
     D = ref_distances(cams, view_depths(cams, nodes, idx))
     assert np.isclose(cost[-1], check_local_optimum(D, (), chosen), rtol=1e-10)
 
@@ -247,7 +252,7 @@ def test_sharpness_local_optimum_against_reference(seed, weight, power):
     pen, tau = ref_blur_penalty(D, sharp)
     got_pen, got_tau, _ = blur_penalty(*embed(cams, depths), sharp)
     assert np.allclose(got_pen, pen, atol=1e-12) and np.isclose(got_tau, tau, rtol=1e-12)
-    cfg = MedoidsConfig(power=power, sharpness_weight=weight)
+    cfg = MedoidsConfig(power=power, sharpness_weight=weight, path_weights=False)
     chosen, cost = medoids_select(cams, budget, cfg, (), nodes, idx, sharp)
     check_basic(chosen, K, budget)
     C = D ** power + weight * tau ** power * pen[None, :]          # [view, medoid] per-view cost
