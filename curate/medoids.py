@@ -176,6 +176,10 @@ def blur_penalty(c: np.ndarray, a: np.ndarray, sharp,
     return pen, tau, nbrs
 
 
+class PathOrderWarning(UserWarning):
+    """Path weights were asked for, but the views are not in capture order: plain weights."""
+
+
 PATH_CAP = 4.0
 """A step between consecutive views counts for at most this many median steps (a cut in
 the video, a second sequence)."""
@@ -183,6 +187,9 @@ PATH_ORDER_MIN = 0.6
 """Views count as a path when at least this share of them has its previous or next view
 among its two nearest views (measured: 0.86-0.99 on the office, the sample room and the
 object sets' frame sequences; 0.01-0.16 for 25-200 photos in random order)."""
+PATH_ORDER_SAMPLE = 512
+"""The share is measured on this many views, evenly spread in capture order (all of a
+smaller pool): memory and time [512, K]."""
 
 
 def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
@@ -190,7 +197,8 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
     view distance to the previous plus to the next view (a path end: its one step), each
     step capped at ``PATH_CAP`` median steps. None when the views do not form a path: fewer
     than 3, every step 0, or less than ``PATH_ORDER_MIN`` of the views with a neighbour in
-    capture order among their two nearest views. Memory [1024, K]."""
+    capture order among their two nearest views (on ``PATH_ORDER_SAMPLE`` of them). Memory
+    [512, K]."""
     K = len(c)
     if K < 3:
         return None
@@ -198,17 +206,13 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
     med = float(np.median(step))
     if not (np.isfinite(med) and med > 0):
         return None
-    allk = np.arange(K)
-    in_order = np.zeros(K, bool)                                  # [K] an order neighbour is among the 2 nearest
-    for lo in range(0, K, 1024):                                  # [1024, K] at a time
-        rows = allk[lo:lo + 1024]
-        d = view_distance(c, a, rows, allk)
-        d[np.arange(len(rows)), rows] = np.inf
-        d2 = np.partition(d, 1, axis=1)[:, 1]                     # [r] the second-nearest distance
-        prev = np.where(rows > 0, d[np.arange(len(rows)), np.maximum(rows - 1, 0)], np.inf)
-        nxt = np.where(rows < K - 1, d[np.arange(len(rows)), np.minimum(rows + 1, K - 1)], np.inf)
-        in_order[rows] = np.minimum(prev, nxt) <= d2
-    if in_order.mean() < PATH_ORDER_MIN:
+    rows = np.unique(np.linspace(0, K - 1, min(K, PATH_ORDER_SAMPLE)).astype(np.int64))   # [r] views tested
+    d = view_distance(c, a, rows, np.arange(K))                   # [r, K]
+    d[np.arange(len(rows)), rows] = np.inf
+    d2 = np.partition(d, 1, axis=1)[:, 1]                         # [r] the second-nearest distance
+    prev = np.where(rows > 0, d[np.arange(len(rows)), np.maximum(rows - 1, 0)], np.inf)
+    nxt = np.where(rows < K - 1, d[np.arange(len(rows)), np.minimum(rows + 1, K - 1)], np.inf)
+    if np.mean(np.minimum(prev, nxt) <= d2) < PATH_ORDER_MIN:    # an order neighbour among the 2 nearest
         return None
     step = np.minimum(step, PATH_CAP * med)
     w = np.empty(K)
@@ -268,7 +272,8 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     elif cfg.path_weights:
         pw = path_weights(c, a)
         if pw is None:
-            warnings.warn("medoids: the views are not in capture order (or too few); path weights ignored")
+            warnings.warn("medoids: the views are not in capture order (or too few); path weights ignored",
+                          PathOrderWarning)
         else:
             w = pw
 

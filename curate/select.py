@@ -167,14 +167,17 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f, objective=obj)
     elif cfg.method == "medoids":
-        from .medoids import medoids_select
+        from .medoids import PathOrderWarning, medoids_select
         n_med = budget - int(round(cfg.medoids.energy_share * max(0, budget)))
-        with warnings.catch_warnings(record=True) as caught:          # e.g. path weights ignored: a note
+        with warnings.catch_warnings(record=True) as caught:          # path weights ignored: a note
             warnings.simplefilter("always")
             chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index, sharpness)
         for w in caught:
-            log.info("select %s", w.message)
-            note = "; ".join(x for x in (note, str(w.message)) if x)
+            if issubclass(w.category, PathOrderWarning):
+                log.info("select %s", w.message)
+                note = "; ".join(x for x in (note, str(w.message)) if x)
+            else:                                                     # any other warning: passed on
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
             chosen += greedy_select(index, budget - n_med, cfg.energy, initial + chosen).chosen
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)

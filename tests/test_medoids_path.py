@@ -75,7 +75,8 @@ def test_shuffled_photos_are_not_a_path():
     cams = walk(rng.permutation(np.linspace(0.0, 10.0, 60)))   # a walk in shuffled name order
     c, a = embed(cams, np.ones(len(cams)))
     assert path_weights(c, a) is None
-    with pytest.warns(UserWarning, match="capture order"):
+    from curate.medoids import PathOrderWarning
+    with pytest.warns(PathOrderWarning, match="capture order"):
         got, _ = medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=True))
     assert got == medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=False))[0]    # falls back to plain medoids
     from curate.grid import NodeGrid
