@@ -15,8 +15,9 @@ Cases, each in its own subprocess so its peak memory (ru_maxrss) is its own:
   exact  150 candidates x 12^3 nodes, budget 25: choices identical to brute force?
   s1300  select 200 of 1300 at 32^3: wall time, visibility included.
   large  select 500 of 10000 at 64^3: wall time and peak memory.
-  methods, methods3000  every method (energy, coverage, medoids, fvs, random), 200 of 1000 and
-         300 of 3000 at 32^3 (index built once): seconds each and ratios to the energy greedy.
+  methods, methods3000  every method (energy, coverage, medoids, medoids_plain: no path
+         weights, fvs, random), 200 of 1000 and 300 of 3000 at 32^3 (index built once):
+         seconds each and ratios to the energy greedy.
 
 Prints one JSON object as its last line.
 Usage: python scripts/bench_selection.py [--skip-large] [--case NAME]
@@ -125,6 +126,7 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     steadier than absolute times on a shared machine)."""
     warm_up()
     from curate.grid import NodeGrid
+    from curate.medoids import MedoidsConfig
     from curate.select import SelectConfig, select
     from curate.visibility import build_pair_index
     cams = pool(n, 2)
@@ -133,12 +135,13 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     t0 = time.perf_counter()
     idx = build_pair_index(cams, grid.nodes(), cfg.energy.bins)
     out = {f"{key}_visibility_s": time.perf_counter() - t0}
-    for m in ("energy", "coverage", "medoids", "fvs", "random"):
+    plain = SelectConfig("medoids", medoids=MedoidsConfig(path_weights=False))   # no capture-order test
+    for m in ("energy", "coverage", "medoids", "medoids_plain", "fvs", "random"):
         t = time.perf_counter()
-        sel = select(cams, grid, budget, SelectConfig(m), index=idx)
+        sel = select(cams, grid, budget, plain if m == "medoids_plain" else SelectConfig(m), index=idx)
         assert len(sel.chosen) == budget
         out[f"{key}_{m}_s"] = time.perf_counter() - t
-    for m in ("coverage", "medoids", "fvs"):
+    for m in ("coverage", "medoids", "medoids_plain", "fvs"):
         out[f"{key}_{m}_over_energy"] = out[f"{key}_{m}_s"] / out[f"{key}_energy_s"]
     return out
 

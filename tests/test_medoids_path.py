@@ -178,3 +178,18 @@ def test_explicit_weights():
     for bad in (np.ones(39), np.zeros(40), np.r_[np.ones(39), np.nan], np.r_[np.ones(39), -1.0]):
         with pytest.raises(ValueError, match="weights"):
             medoids_select(cams, 6, cfg, weights=bad)
+
+
+@pytest.mark.parametrize("scene", ["office", "fox", "templering"])
+def test_real_frame_sequences_are_paths_and_shuffled_ones_are_not(scene):
+    """Path weights turn on for the real sets' frames in name order, and off once the
+    same cameras are shuffled (photos from several sessions, renamed files)."""
+    from conftest import shared_data
+    from curate.datasets import load_ground_truth
+    cams = load_ground_truth(shared_data(scene))
+    spread = float(np.median(np.linalg.norm(cams.centres - cams.centres.mean(0), axis=1)))
+    c, a = embed(cams, np.full(len(cams), spread))              # look-at depth: the centres' spread
+    w = path_weights(c, a)
+    assert w is not None and np.all(np.isfinite(w)) and np.isclose(w.mean(), 1.0)
+    order = np.random.default_rng(0).permutation(len(cams))
+    assert path_weights(c[order], a[order]) is None
