@@ -185,11 +185,25 @@ PATH_CAP = 4.0
 the video, a second sequence)."""
 PATH_ORDER_MIN = 0.6
 """Views count as a path when at least this share of them has its previous or next view
-among its two nearest views (measured: 0.86-0.99 on the office, the sample room and the
-object sets' frame sequences; 0.01-0.16 for 25-200 photos in random order)."""
+among its two nearest views (:func:`path_order_share`; ``scripts/holdout_holes.py`` prints
+it: 0.78-0.98 on the office, the synthetic room and the object sets)."""
 PATH_ORDER_SAMPLE = 512
 """The share is measured on this many views, evenly spread in capture order (all of a
 smaller pool): memory and time [512, K]."""
+
+
+def path_order_share(c: np.ndarray, a: np.ndarray) -> float:
+    """Share of the embedded views ``c``, ``a`` [K, 3] (K >= 3) whose previous or next view is
+    among their two nearest views, measured on ``PATH_ORDER_SAMPLE`` views evenly spread in
+    order (all of a smaller pool). Memory [512, K]."""
+    K = len(c)
+    rows = np.unique(np.linspace(0, K - 1, min(K, PATH_ORDER_SAMPLE)).astype(np.int64))   # [r] views tested
+    d = view_distance(c, a, rows, np.arange(K))                   # [r, K]
+    d[np.arange(len(rows)), rows] = np.inf
+    d2 = np.partition(d, 1, axis=1)[:, 1]                         # [r] the second-nearest distance
+    prev = np.where(rows > 0, d[np.arange(len(rows)), np.maximum(rows - 1, 0)], np.inf)
+    nxt = np.where(rows < K - 1, d[np.arange(len(rows)), np.minimum(rows + 1, K - 1)], np.inf)
+    return float(np.mean(np.minimum(prev, nxt) <= d2))
 
 
 def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
@@ -197,8 +211,7 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
     view distance to the previous plus to the next view (a path end: its one step), each
     step capped at ``PATH_CAP`` median steps. None when the views do not form a path: fewer
     than 3, every step 0, or less than ``PATH_ORDER_MIN`` of the views with a neighbour in
-    capture order among their two nearest views (on ``PATH_ORDER_SAMPLE`` of them). Memory
-    [512, K]."""
+    capture order among their two nearest views (:func:`path_order_share`). Memory [512, K]."""
     K = len(c)
     if K < 3:
         return None
@@ -206,13 +219,7 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
     med = float(np.median(step))
     if not (np.isfinite(med) and med > 0):
         return None
-    rows = np.unique(np.linspace(0, K - 1, min(K, PATH_ORDER_SAMPLE)).astype(np.int64))   # [r] views tested
-    d = view_distance(c, a, rows, np.arange(K))                   # [r, K]
-    d[np.arange(len(rows)), rows] = np.inf
-    d2 = np.partition(d, 1, axis=1)[:, 1]                         # [r] the second-nearest distance
-    prev = np.where(rows > 0, d[np.arange(len(rows)), np.maximum(rows - 1, 0)], np.inf)
-    nxt = np.where(rows < K - 1, d[np.arange(len(rows)), np.minimum(rows + 1, K - 1)], np.inf)
-    if np.mean(np.minimum(prev, nxt) <= d2) < PATH_ORDER_MIN:    # an order neighbour among the 2 nearest
+    if path_order_share(c, a) < PATH_ORDER_MIN:
         return None
     step = np.minimum(step, PATH_CAP * med)
     w = np.empty(K)

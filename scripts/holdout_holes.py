@@ -10,7 +10,8 @@ method:
 * ``adjacent``: the share of chosen frames whose neighbour in capture order is held out
   (cameras sorted by name, as curate stores them: frame numbers in capture order), and
   ``adjacent_pool``: the same share over the whole pool (what an unbiased choice gives);
-* ``view``: the mean view-medoids distance from a held-out view to its nearest chosen view.
+* ``view``: the mean view-medoids distance from a held-out view to its nearest chosen view;
+* the capture-order share of the whole sequence (:func:`curate.medoids.path_order_share`).
 
 Besides the methods and the harness's variants, ``medoids_path_full`` is a diagnostic (it
 sees the held-out frames, so it is no method): view medoids weighted by the path weights
@@ -52,7 +53,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from curate.budget import parse_budget, resolve_budget
-    from curate.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
+    from curate.medoids import (PATH_ORDER_MIN, MedoidsConfig, embed, medoids_select, path_order_share,
+                                path_weights, view_depths, view_distance)
     from curate.pipeline import load_node_grid, load_split
     from curate.select import SelectConfig, select
     from curate.stats import holdout_split
@@ -87,7 +89,9 @@ def main(argv=None) -> int:
             per[m]["adjacent"].append(float(near_hole[chosen].mean()))
             per[m]["adjacent_pool"].append(float(near_hole.mean()))
             per[m]["view"].append(float(vd[:, chosen].min(1).mean()))
-    print(f"{run.name}: budget {args.budget}, folds {list(folds)}")
+    share = path_order_share(c, a)                                   # the whole sequence, in name order
+    print(f"{run.name}: budget {args.budget}, folds {list(folds)}; capture-order share {share:.3f} "
+          f"(path weights need >= {PATH_ORDER_MIN})")
     print(f"{'method':10s} {'adjacent':>9s} {'(pool)':>7s} {'view':>7s}   per fold: adjacent")
     out = {}
     for m, v in per.items():
@@ -95,7 +99,7 @@ def main(argv=None) -> int:
         out[m]["adjacent_per_fold"] = [round(x, 3) for x in v["adjacent"]]
         print(f"{m:10s} {out[m]['adjacent']:9.3f} {out[m]['adjacent_pool']:7.3f} {out[m]['view']:7.3f}   "
               + " ".join(f"{x:.2f}" for x in v["adjacent"]))
-    print(json.dumps({"run": str(run), "budget": args.budget, "every": args.every, "folds": list(folds),
+    print(json.dumps({"run": str(run), "budget": args.budget, "every": args.every, "folds": list(folds), "order_share": round(share, 4),
                       "methods": out}))
     return 0
 
