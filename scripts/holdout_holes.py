@@ -78,8 +78,11 @@ def main(argv=None) -> int:
         vd = view_distance(c, a, hold, pool)                         # [H, pool]
         for m in methods:
             if m == "medoids_path_full":                            # a diagnostic, not a method: the
-                w = path_weights(c, a)[pool]                        # weights of the whole sequence,
-                pc = cams[pool.tolist()]                            # so the held-out frames leave no hole
+                w_all = path_weights(c, a)                          # weights of the whole sequence,
+                if w_all is None:                                   # so the held-out frames leave no hole
+                    raise SystemExit(f"{run}: the cameras are not in capture order: no medoids_path_full")
+                w = w_all[pool]
+                pc = cams[pool.tolist()]
                 idx = build_pair_index(pc, grid.nodes(), SelectConfig().energy.bins)
                 chosen = np.asarray(medoids_select(pc, B, MedoidsConfig(), (), grid.nodes(), idx,
                                                    weights=w)[0], int)
