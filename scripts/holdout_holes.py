@@ -67,7 +67,9 @@ def main(argv=None) -> int:
     sfm, _, _, _ = load_split(run, args.every)
     cams = sfm.cameras
     grid = load_node_grid(run)
-    c, a = embed(cams, view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), SelectConfig().energy.bins)))
+    bins = SelectConfig().energy.bins                                # every method and variant here uses these
+    c, a = embed(cams, view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), bins)))
+    w_all = path_weights(c, a) if "medoids_path_full" in args.methods.split(",") else None   # [K]
     folds = range(args.every) if args.folds == "all" else [int(x) for x in args.folds.split(",") if x]
     methods = [m for m in args.methods.split(",") if m]
     per: dict[str, dict[str, list]] = {m: {"adjacent": [], "adjacent_pool": [], "view": []} for m in methods}
@@ -76,19 +78,18 @@ def main(argv=None) -> int:
         B = resolve_budget(parse_budget(args.budget), len(pool))
         near_hole = beside_holes(pool, hold)                        # [pool]
         vd = view_distance(c, a, hold, pool)                         # [H, pool]
+        pc = cams[pool.tolist()]
+        idx = build_pair_index(pc, grid.nodes(), bins)              # once per fold, for every method
         for m in methods:
             if m == "medoids_path_full":                            # a diagnostic, not a method: the
-                w_all = path_weights(c, a)                          # weights of the whole sequence,
-                if w_all is None:                                   # so the held-out frames leave no hole
+                if w_all is None:                                   # weights of the whole sequence, so the
                     raise SystemExit(f"{run}: the cameras are not in capture order: no medoids_path_full")
-                w = w_all[pool]
-                pc = cams[pool.tolist()]
-                idx = build_pair_index(pc, grid.nodes(), SelectConfig().energy.bins)
-                chosen = np.asarray(medoids_select(pc, B, MedoidsConfig(), (), grid.nodes(), idx,
-                                                   weights=w)[0], int)
+                chosen = np.asarray(medoids_select(pc, B, MedoidsConfig(), (), grid.nodes(), idx,   # held-out
+                                                   weights=w_all[pool])[0], int)                  # frames leave no hole
             else:
                 cfg = variants[m] if m in variants else SelectConfig(m)
-                chosen = np.asarray(select(cams[pool.tolist()], grid, B, cfg).chosen, int)
+                assert cfg.energy.bins == bins
+                chosen = np.asarray(select(pc, grid, B, cfg, index=idx).chosen, int)
             per[m]["adjacent"].append(float(near_hole[chosen].mean()))
             per[m]["adjacent_pool"].append(float(near_hole.mean()))
             per[m]["view"].append(float(vd[:, chosen].min(1).mean()))
