@@ -6,7 +6,9 @@ method a subset of the pool, and one field trained per (subset, training seed) w
 SAME :class:`curate.evaluate.EvalConfig` through :func:`curate.evaluate.run_units`
 (units ``RUN/evaluate/q_<method>_b<budget>_t<seed>``, the default's folder named
 ``q_default-<hash of its SelectConfig>_...``, keyed with
-:func:`curate.stage.stage_key`, so a re-run skips finished trainings).
+:func:`curate.stage.stage_key`, so a re-run skips finished trainings; a unit whose folder
+holds another subset or settings, e.g. after a method's default changed, stops the run
+unless ``--overwrite`` is given, so no earlier result is lost).
 
 Scenes: office, fox, templering, skull (real captures, held-out views on the capture path)
 and ``room``: a synthetic walk through the living room of :mod:`curate.synthetic`, rendered
@@ -360,6 +362,19 @@ class Bench:
     series: dict
 
 
+def stale_units(run: Path, keys: dict[str, str]) -> list[str]:
+    """Unit keys of ``keys`` (unit key -> stage key) whose folder ``run/evaluate/<unit>`` holds a
+    finished training with another stage key: a different subset or settings under the same
+    name (e.g. a method whose default changed since). Training it would overwrite that result."""
+    from curate.stage import read_stage
+    out = []
+    for u, k in keys.items():
+        rec = read_stage(run / "evaluate" / u)
+        if rec is not None and rec.get("key") not in (None, k):
+            out.append(u)
+    return out
+
+
 def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMeasures, fold: int,
              out: Path, data: Path | None) -> dict:
     """Select, train and report every budget of one hold-out fold (images ``fold``,
@@ -433,6 +448,12 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                                      [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
             # the occupancy stage's field was trained on fold 0's pool: the 'all' ceiling of fold 0 only
             fp = {"all": str(run / "occupancy" / "field.pt")}
+            stale = stale_units(run, keys)
+            if stale and not args.overwrite:
+                raise SystemExit(f"{run}: {len(stale)} unit(s) already hold another subset or other settings "
+                                 f"under the same name ({', '.join(stale[:4])}{', ...' if len(stale) > 4 else ''}): "
+                                 "did a method's default change? Use another --out or a variant name "
+                                 "(e.g. --extra medoids_plain), or pass --overwrite to retrain them in place.")
             results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
         # per method: per-view PSNR averaged over its trainings (random: over its seeds)
         per_view, per_run = {}, {}
@@ -515,6 +536,8 @@ def main(argv=None) -> int:
     ap.add_argument("--candidate", default="default", help="the method compared (paired, per view) with the others")
     ap.add_argument("--workers", type=int, default=1, help="trainings at once (processes; e.g. 4 on one GPU)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "quality"))
+    ap.add_argument("--overwrite", action="store_true", help="retrain a unit whose folder holds another "
+                    "subset or settings under the same name (default: stop, so no earlier result is lost)")
     ap.add_argument("--proxy-only", action="store_true", help="selections and proxies only (no training)")
     ap.add_argument("--data", default="", help="read scenes packed by --pack from this folder (not ../shared)")
     ap.add_argument("--pack", default="", help="only pack --scenes (photos downscaled to --pack-side, "

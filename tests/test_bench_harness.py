@@ -129,3 +129,19 @@ def test_beside_holes_marks_the_neighbours_of_held_out_frames():
     pool, hold = holdout_split(30, 7, 0)                       # frame 0 held out: only frame 1 beside it
     assert pool[mod.beside_holes(pool, hold)].tolist() == [1, 6, 8, 13, 15, 20, 22, 27, 29]
     assert not mod.beside_holes(np.arange(5), np.zeros(0, int)).any()
+
+
+def test_stale_units_are_those_holding_another_subset_under_the_same_name(harness, tmp_path):
+    """A harness re-run must not silently retrain over an earlier result: a unit folder whose
+    finished record has another key (e.g. a method whose default changed) is reported; the same
+    key, no folder, or a half-written one (no record) is not."""
+    import time
+    from curate.stage import finish_stage
+    ev = tmp_path / "evaluate"
+    finish_stage(ev / "q_medoids_b59_t0", "k-old", {}, time.perf_counter())
+    finish_stage(ev / "q_stride_b59_t0", "k-same", {}, time.perf_counter())
+    (ev / "q_fvs_b59_t0").mkdir(parents=True)                 # a training that died before its record
+    keys = {"q_medoids_b59_t0": "k-new", "q_stride_b59_t0": "k-same", "q_fvs_b59_t0": "k-fvs",
+            "q_random_s0_b59_t0": "k-r"}
+    assert harness.stale_units(tmp_path, keys) == ["q_medoids_b59_t0"]
+    assert harness.stale_units(tmp_path, {"q_stride_b59_t0": "k-same"}) == []
