@@ -3,7 +3,8 @@
 One run folder per input folder, ``RUNS/<name>/`` (the same contents as ``curate run``
 plus ``run.log``, the folder's stage lines and log, and ``batch.json``, its summary row
 and resume key), and for the whole batch ``RUNS/summary.json``, ``RUNS/summary.html`` and
-``RUNS/batch.log`` (summary rows and page: :mod:`curate.batch_summary`).
+``RUNS/batch.log`` (summary rows and page: :mod:`curate.batch_summary`; the per-folder
+log: :mod:`curate.batch_log`).
 
 Poses of a folder: its ``transforms.json`` if it has one (image paths relative to it), else
 a COLMAP model in ``sparse/0`` (photos in ``images/`` if that exists, else the folder),
@@ -34,13 +35,11 @@ its finished stages and trainings by their keys. ``force`` redoes everything.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import logging
 import os
 import re
-import sys
 import threading
 import time
 import traceback
@@ -48,6 +47,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .batch_log import folder_log
 from .batch_summary import make_row, write_summary_html
 from .html_parts import fmt_num
 
@@ -148,68 +148,6 @@ def default_jobs(n_folders: int) -> int:
 
 
 # ------------------------------------------------------------------ one folder
-class _NoProgress:
-    """A text stream that drops progress-bar refreshes (writes with a carriage return or a cursor move)."""
-
-    def __init__(self, f):
-        self._f = f
-
-    def write(self, s: str) -> int:
-        if "\r" not in s and "\x1b[" not in s and s.strip():
-            self._f.write(s)
-        return len(s)
-
-    def flush(self) -> None:
-        self._f.flush()
-
-    def isatty(self) -> bool:
-        return False
-
-    def fileno(self) -> int:
-        return self._f.fileno()
-
-
-@contextlib.contextmanager
-def folder_log(run_dir: Path, fd_level: bool):
-    """Send this folder's stage lines (stdout), warnings and curate's INFO log to ``RUN/run.log``.
-
-    ``fd_level``: also redirect file descriptors 1 and 2 (a process of its own: the
-    training workers it spawns write there too).
-    """
-    run_dir.mkdir(parents=True, exist_ok=True)
-    f = open(run_dir / "run.log", "a", buffering=1, encoding="utf-8")
-    f.write(f"==== curate batch {time.strftime('%Y-%m-%d %H:%M:%S')} (pid {os.getpid()}) ====\n")
-    lg = logging.getLogger("curate")
-    handler = logging.StreamHandler(f)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
-    old_level, old_prop = lg.level, lg.propagate
-    lg.addHandler(handler)
-    lg.setLevel(logging.INFO)
-    lg.propagate = False
-    saved = None
-    if fd_level:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = (os.dup(1), os.dup(2))
-        os.dup2(f.fileno(), 1)
-        os.dup2(f.fileno(), 2)
-    try:
-        with contextlib.redirect_stdout(f), contextlib.redirect_stderr(_NoProgress(f)):
-            yield f
-    finally:
-        lg.removeHandler(handler)
-        lg.setLevel(old_level)
-        lg.propagate = old_prop
-        if saved:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
-        f.close()
-
-
 def _reason(e: BaseException) -> str:
     text = str(e).strip().splitlines()[0] if str(e).strip() else ""
     if isinstance(e, MemoryError):
