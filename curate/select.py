@@ -17,7 +17,7 @@ from .coverage import CoverageConfig
 from .energy import EnergyConfig, EnergyTerms
 from .grid import NodeGrid
 from .medoids import MedoidsConfig
-from .methods import DEFAULT_METHOD, METHODS  # noqa: F401  (METHODS re-exported)
+from .methods import DEFAULT_METHOD, METHODS, OBJECT_METHOD, WALK_METHOD  # noqa: F401  (METHODS re-exported)
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +28,7 @@ class SelectConfig:
 
     method: str = DEFAULT_METHOD
     """One of "auto" (the default, chosen by the harness: "medoids" for a walk-through,
-    "fvs" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
+    "energy" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
     pool's views, :mod:`curate.medoids`), "energy" (the paper: greedy on its energy), "coverage" (facility
     location over the pool's views, :mod:`curate.coverage`), "coverage+energy" (both terms),
     "random", "fvs" (farthest-view sampling), "stride" (every n-th camera in name order: every
@@ -127,7 +127,9 @@ def uses_sharpness(cams: Cameras, cfg: SelectConfig) -> bool:
     Callers measure sharpness (reading every photo) only then."""
     if cfg.medoids.sharpness_weight <= 0:
         return False
-    return cfg.method == "medoids" or (cfg.method == "auto" and capture_kind(cams)[0] == "walk")
+    if cfg.method == "auto":
+        return (WALK_METHOD if capture_kind(cams)[0] == "walk" else OBJECT_METHOD) == "medoids"
+    return cfg.method == "medoids"
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
@@ -150,7 +152,7 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     note = ""
     if cfg.method == "auto":
         kind, ang = capture_kind(cams)
-        cfg = replace(cfg, method="fvs" if kind == "object" else "medoids")
+        cfg = replace(cfg, method=OBJECT_METHOD if kind == "object" else WALK_METHOD)
         note = (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to the "
                 f"viewing axes' meeting point {ang:.1f} deg) -> {cfg.method}")
         log.info("select %s", note)

@@ -44,12 +44,13 @@ def test_capture_kind_degenerate():
     assert capture_kind(par)[0] == "walk"
 
 
-def test_auto_runs_fvs_on_an_object_and_medoids_on_a_walk():
+def test_auto_runs_the_energy_on_an_object_and_medoids_on_a_walk():
     grid = NodeGrid([-1, -1, -1], [1, 1, 1], 8)
     obj = orbit(40)
     a = select(obj, grid, 8, SelectConfig("auto"))
-    assert a.method == "fvs" and "object" in a.note
-    assert a.chosen == select(obj, grid, 8, SelectConfig("fvs")).chosen
+    assert a.method == "energy" and "object" in a.note
+    e = select(obj, grid, 8, SelectConfig("energy"))
+    assert a.chosen == e.chosen and a.energy == e.energy
     walk = random_pool(60, seed=2)
     b = select(walk, grid, 8, SelectConfig("auto"))
     assert b.method == "medoids" and "walk" in b.note and b.to_dict()["note"] == b.note

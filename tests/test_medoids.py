@@ -324,7 +324,7 @@ def test_uses_sharpness_only_when_view_medoids_run_with_a_weight():
     assert capture_kind(walk)[0] == "walk" and capture_kind(obj)[0] == "object"
     w = MedoidsConfig(sharpness_weight=1.0)
     assert uses_sharpness(walk, SelectConfig("auto", medoids=w))
-    assert not uses_sharpness(obj, SelectConfig("auto", medoids=w))          # auto runs FVS there
+    assert not uses_sharpness(obj, SelectConfig("auto", medoids=w))          # auto runs the energy there
     assert uses_sharpness(obj, SelectConfig("medoids", medoids=w))
     assert not uses_sharpness(walk, SelectConfig("medoids"))                  # weight 0
     assert not uses_sharpness(walk, SelectConfig("fvs", medoids=w))
