@@ -440,20 +440,23 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                     groups.setdefault(t, []).append(u)
         if "all" in methods and not args.proxy_only:
             groups.setdefault(0, []).append(Unit(f"all{suffix}", "all", None, list(pool)))
-        results: dict[str, dict] = {}
+        plan = []                                    # (seed config, units, their stage keys) per training seed
         for t, us in sorted(groups.items()):
             cfg_t = replace(ev, train_seed=t)
             train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
-            keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
-                                     [sfm_key] + ([occ_key] if u.key == "all" else [])) for u in us}
-            # the occupancy stage's field was trained on fold 0's pool: the 'all' ceiling of fold 0 only
-            fp = {"all": str(run / "occupancy" / "field.pt")}
-            stale = stale_units(run, keys)
-            if stale and not args.overwrite:
-                raise SystemExit(f"{run}: {len(stale)} unit(s) already hold another subset or other settings "
-                                 f"under the same name ({', '.join(stale[:4])}{', ...' if len(stale) > 4 else ''}): "
-                                 "did a method's default change? Use another --out or a variant name "
-                                 "(e.g. --extra medoids_plain), or pass --overwrite to retrain them in place.")
+            plan.append((cfg_t, us, {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
+                                                      [sfm_key] + ([occ_key] if u.key == "all" else []))
+                                     for u in us}))
+        stale = stale_units(run, {k: v for _, _, keys in plan for k, v in keys.items()})   # before any training
+        if stale and not args.overwrite:
+            raise SystemExit(f"{run}: {len(stale)} unit(s) already hold another subset or other settings "
+                             f"under the same name ({', '.join(stale[:4])}{', ...' if len(stale) > 4 else ''}): "
+                             "did a method's default change? Use another --out or a variant name "
+                             "(e.g. --extra medoids_plain), or pass --overwrite to retrain them in place.")
+        # the occupancy stage's field was trained on fold 0's pool: the 'all' ceiling of fold 0 only
+        fp = {"all": str(run / "occupancy" / "field.pt")}
+        results: dict[str, dict] = {}
+        for cfg_t, us, keys in plan:
             results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
         # per method: per-view PSNR averaged over its trainings (random: over its seeds)
         per_view, per_run = {}, {}
