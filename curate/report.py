@@ -23,12 +23,7 @@ from typing import Callable
 import numpy as np
 
 from . import plots
-from .html_parts import CSS, fmt_num
-from .html_parts import duration as _duration
-from .html_parts import esc as _e
-from .html_parts import note as _note
-from .html_parts import read_json as _read_json
-from .html_parts import safe_section as _safe
+from .html_parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
 from .plots import colorbar, floorplan, heatmap_svg, top_down_axes
 
 logger = logging.getLogger(__name__)
@@ -75,7 +70,7 @@ def _load_rgb(path: str | Path, max_side: int) -> np.ndarray | None:
 
 
 def _img(uri: str, alt: str = "", style: str = "", cls: str = "") -> str:
-    return (f'<img src="{uri}" alt="{_e(alt)}"' + (f' style="{style}"' if style else "")
+    return (f'<img src="{uri}" alt="{esc(alt)}"' + (f' style="{style}"' if style else "")
             + (f' class="{cls}"' if cls else "") + ">")
 
 
@@ -85,8 +80,8 @@ class _Run:
 
     def __init__(self, run_dir: Path):
         self.dir = run_dir
-        self.rep = _read_json(run_dir / "report.json") or {}
-        self.sel = _read_json(run_dir / "select" / "selection.json") or {}
+        self.rep = read_json(run_dir / "report.json") or {}
+        self.sel = read_json(run_dir / "select" / "selection.json") or {}
         if not self.sel and isinstance(self.rep.get("selection"), dict):
             self.sel = self.rep["selection"]
         self.methods: dict = self.rep.get("methods") or {}
@@ -105,7 +100,7 @@ class _Run:
     @property
     def records(self) -> dict:
         if self._records is None:
-            self._records = _read_json(self.dir / "sfm" / "images.json") or {}
+            self._records = read_json(self.dir / "sfm" / "images.json") or {}
         return self._records
 
     def image_path(self, name: str) -> Path | None:
@@ -130,35 +125,35 @@ def _header(run: _Run) -> str:
              ("pool (candidates)", r.get("n_pool", len(s.get("pool", [])) or "—")),
              ("held out", f"{r.get('n_holdout', len(s.get('holdout', [])) or '—')}"
                           + (f" (every {every}th registered image)" if every else "")),
-             ("selection nodes", s.get("n_nodes", "—")), ("wall time", _duration(r.get("wall_seconds")))]
-    exp = _read_json(run.dir / "export" / "export.json")
+             ("selection nodes", s.get("n_nodes", "—")), ("wall time", duration(r.get("wall_seconds")))]
+    exp = read_json(run.dir / "export" / "export.json")
     if exp:
         mode = (exp.get("config") or {}).get("mode", "")
         items.append(("export", f"{run.dir / 'export'}: {exp.get('n_images', '?')} photos ({mode}), COLMAP sparse/0, "
                                 "transforms.json, images.txt"))
     out = ["<h1>curate: photo selection report</h1>",
-           '<dl class="kv">' + "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items) + "</dl>"]
+           '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in items) + "</dl>"]
     p = run.paired.get("energy-random")
     if p and "energy" in run.methods and "random" in run.methods:
         gap = r.get("gap_closed")
         sig = "significant" if p.get("lo") is not None and p["lo"] > 0 else "not significant at 95%"
-        out.append(f'<div class="verdict">{_e(_selection_label(run)).capitalize()}: <b>{fmt_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
+        out.append(f'<div class="verdict">{esc(_selection_label(run)).capitalize()}: <b>{fmt_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
                    f'random subsets of the same size (95% CI {fmt_num(p["lo"], 2, True)} .. {fmt_num(p["hi"], 2, True)}, '
                    f'{p.get("n", "?")} views; {sig})'
                    + (f"; closes <b>{100 * gap:.0f}%</b> of the gap from random to all pool images" if gap is not None
                       else "") + ".</div>")
     elif not run.methods:
-        out.append(_note("Not evaluated: no trainings were run for this report (selection only)."))
-    note = (run.rep.get("selection") or {}).get("note")
-    if note:
-        out.append(_note(f"Selection method {note}."))
+        out.append(note("Not evaluated: no trainings were run for this report (selection only)."))
+    sel_note = (run.rep.get("selection") or {}).get("note")
+    if sel_note:
+        out.append(note(f"Selection method {sel_note}."))
     return "\n".join(out)
 
 
 def _method_table(run: _Run) -> str:
     m = run.methods
     if not m:
-        return _note("Not evaluated (the run had evaluation turned off, or it has not finished).")
+        return note("Not evaluated (the run had evaluation turned off, or it has not finished).")
     rows = []
     for k in [k for k in METHOD_ORDER if k in m] + sorted(set(m) - set(METHOD_ORDER)):
         v = m[k]
@@ -173,15 +168,15 @@ def _method_table(run: _Run) -> str:
             psnr, ssim, t, name = fmt_num(v.get("psnr")), fmt_num(v.get("ssim"), 3), fmt_num(v.get("train_seconds"), 0), \
                 _selection_label(run) if k == "energy" else METHOD_LABEL.get(k, k)
         cls = ' class="hl"' if k == "energy" else ""
-        rows.append(f'<tr{cls}><td class="l">{_e(name)}</td><td>{psnr}</td><td>{ssim}</td>'
-                    f'<td>{_e(v.get("n_train", "—"))}</td><td>{t}</td></tr>')
+        rows.append(f'<tr{cls}><td class="l">{esc(name)}</td><td>{psnr}</td><td>{ssim}</td>'
+                    f'<td>{esc(v.get("n_train", "—"))}</td><td>{t}</td></tr>')
     out = ['<table><tr><th class="l">method</th><th>PSNR (dB)</th><th>SSIM</th><th>train images</th>'
            '<th>train seconds</th></tr>' + "".join(rows) + "</table>"]
     if run.paired:
         pr = []
         for k, p in run.paired.items():
-            pr.append(f'<tr><td class="l">{_e(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
-                      f'<td>{fmt_num(p.get("lo"), 2, True)} .. {fmt_num(p.get("hi"), 2, True)}</td><td>{_e(p.get("n", "—"))}'
+            pr.append(f'<tr><td class="l">{esc(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
+                      f'<td>{fmt_num(p.get("lo"), 2, True)} .. {fmt_num(p.get("hi"), 2, True)}</td><td>{esc(p.get("n", "—"))}'
                       f'</td></tr>')
         out.append('<p class="small">Paired per-view PSNR differences on the held-out views (random: each view\'s '
                    'mean over seeds), with a 95% t confidence interval:</p>'
@@ -189,10 +184,10 @@ def _method_table(run: _Run) -> str:
                    + "".join(pr) + "</table>")
     gap = run.rep.get("gap_closed")
     if gap is not None:
-        out.append(f"<p>Fraction of the random → all-images gap closed by the {_e(_selection_label(run))}: "
+        out.append(f"<p>Fraction of the random → all-images gap closed by the {esc(_selection_label(run))}: "
                    f"<b>{100 * float(gap):.0f}%</b> ((selection − random) / (all − random)).</p>")
     elif all(k in m for k in ("energy", "random", "all")):
-        out.append(_note("Gap closed: not defined (all pool images do not beat random subsets)."))
+        out.append(note("Gap closed: not defined (all pool images do not beat random subsets)."))
     return "\n".join(out)
 
 
@@ -200,7 +195,7 @@ def _bars(run: _Run) -> str:
     m = run.methods
     keys = [k for k in METHOD_ORDER if k in m and m[k].get("psnr") is not None]
     if not keys:
-        return _note("Not evaluated.")
+        return note("Not evaluated.")
     vals = [m[k]["psnr"] for k in keys]
     errs = [m[k].get("psnr_std") or 0.0 for k in keys]
     names = ["selection" if k == "energy" else k for k in keys]
@@ -211,7 +206,7 @@ def _bars(run: _Run) -> str:
 def _floorplan(run: _Run) -> str:
     p = run.dir / "select" / "nodes.npz"
     if not p.is_file():
-        return _note("No per-node energy terms (select/nodes.npz missing).")
+        return note("No per-node energy terms (select/nodes.npz missing).")
     z = np.load(p)
     res = int(z["res"])
     cams = run.cams
@@ -254,7 +249,7 @@ def _floorplan(run: _Run) -> str:
 def _camera_layout(run: _Run) -> str:
     cams = run.cams
     if cams is None or not len(cams):
-        return _note("No registered cameras (sfm/cameras.json missing).")
+        return note("No registered cameras (sfm/cameras.json missing).")
     k, a, b, _ = top_down_axes(cams.c2w, run.sel.get("up_axis"))
     hold = [i for i in run.sel.get("holdout", []) if 0 <= i < len(cams)]
     chosen = [i for i in run.sel.get("chosen", []) if 0 <= i < len(cams)]
@@ -272,14 +267,14 @@ def _camera_layout(run: _Run) -> str:
 def _thumbnails(run: _Run) -> str:
     names = run.sel.get("chosen_names") or []
     if not names:
-        return _note("No chosen photos recorded.")
+        return note("No chosen photos recorded.")
     out = []
     for i, n in enumerate(names):
         p = run.image_path(n)
         rgb = _load_rgb(p, THUMB_SIDE) if p is not None else None
         im = _img(plots.jpeg_data_uri(rgb, THUMB_SIDE, 75), n) if rgb is not None else \
             '<div style="width:160px;height:100px;background:#eee;line-height:100px">no preview</div>'
-        out.append(f'<figure>{im}<figcaption title="{_e(n)}">{i + 1}. {_e(Path(n).name)}</figcaption></figure>')
+        out.append(f'<figure>{im}<figcaption title="{esc(n)}">{i + 1}. {esc(Path(n).name)}</figcaption></figure>')
     return f'<p class="small">In the order chosen ({len(names)} photos).</p><div class="thumbs">' + "".join(out) + "</div>"
 
 
@@ -287,7 +282,7 @@ def _renders(run: _Run) -> str:
     m = run.methods
     gt_dir = run.dir / "evaluate" / "gt"
     if not m or not gt_dir.is_dir():
-        return _note("Not evaluated: no held-out renders.")
+        return note("Not evaluated: no held-out renders.")
     cols = []  # (label, key, per_view list)
     for k, label in (("energy", "energy"), ("random", "random (seed 0)"), ("fvs", "FVS"), ("all", "all")):
         v = m.get(k)
@@ -304,16 +299,16 @@ def _renders(run: _Run) -> str:
     if not names:
         names = [str(p.stem) for p in sorted(gt_dir.glob("*.png"))]
     if not names:
-        return _note("No held-out views.")
+        return note("No held-out views.")
     pick = [names[i] for i in np.unique(np.linspace(0, len(names) - 1, min(N_RENDER_VIEWS, len(names))).round()
                                         .astype(int))]
-    head = "<tr><th>ground truth</th>" + "".join(f"<th>{_e(c[0])}</th>" for c in cols) + "</tr>"
+    head = "<tr><th>ground truth</th>" + "".join(f"<th>{esc(c[0])}</th>" for c in cols) + "</tr>"
     rows = []
     for n in pick:
         stem = Path(n).stem
         gt = _load_rgb(gt_dir / f"{stem}.png", 200)
         cells = [f"<td>{_img(plots.jpeg_data_uri(gt, 200, 85), 'gt') if gt is not None else 'missing'}"
-                 f"{_e(Path(n).name)}</td>"]
+                 f"{esc(Path(n).name)}</td>"]
         for label, key, pv in cols:
             r = _load_rgb(run.dir / "evaluate" / key / "renders" / f"{stem}.png", 200)
             score = pv.get(n, {})
@@ -329,7 +324,7 @@ def _energy_curve(run: _Run) -> str:
     s = run.sel
     e = s.get("energy") or []
     if not e:
-        return _note("No energy trace (the selection method records none).")
+        return note("No energy trace (the selection method records none).")
     x = np.arange(1, len(e) + 1)
     charts = [plots.line_chart({"E": (x, np.asarray(e, float))}, "energy E", "photos chosen", "E", 370, 260)]
     for k, title, lab in (("angular", "angular term Σ (1 − TV)", "Σ (1 − TV)"),
@@ -343,11 +338,11 @@ def _energy_curve(run: _Run) -> str:
 def _timings(run: _Run) -> str:
     st = run.rep.get("stages") or []
     if not st:
-        return _note("No stage timings recorded.")
+        return note("No stage timings recorded.")
     def status(t: dict) -> str:
         return {True: "skipped (unchanged)", False: "run"}.get(t.get("skipped"), "—")
 
-    rows = "".join(f'<tr><td class="l">{_e(t.get("name"))}</td><td>{fmt_num(t.get("seconds"), 1)}</td>'
+    rows = "".join(f'<tr><td class="l">{esc(t.get("name"))}</td><td>{fmt_num(t.get("seconds"), 1)}</td>'
                    f'<td>{fmt_num(t.get("compute_seconds"), 1)}</td><td class="l">{status(t)}</td></tr>' for t in st)
     return ('<table><tr><th class="l">stage</th><th>seconds (this run)</th><th>seconds (when computed)</th>'
             '<th class="l">status</th></tr>' + rows
@@ -362,7 +357,7 @@ def _skipped(run: _Run) -> str:
     for key, what in (("skipped", "Skipped (unreadable or not photos)"), ("dropped", "Dropped (quality)")):
         items = sfm.get(key) or []
         if items:
-            rows = "".join(f'<tr><td class="l">{_e(i.get("file"))}</td><td class="l">{_e(i.get("reason"))}</td></tr>'
+            rows = "".join(f'<tr><td class="l">{esc(i.get("file"))}</td><td class="l">{esc(i.get("reason"))}</td></tr>'
                            for i in items)
             out.append(f'<p>{what}: {len(items)}</p><table><tr><th class="l">file</th><th class="l">reason</th></tr>'
                        f'{rows}</table>')
@@ -371,7 +366,7 @@ def _skipped(run: _Run) -> str:
     unreg = sfm.get("unregistered") or []
     if unreg:
         out.append(f"<p>Not registered by SfM: {len(unreg)}</p><p class='small'>"
-                   + ", ".join(_e(Path(u).name) for u in unreg) + "</p>")
+                   + ", ".join(esc(Path(u).name) for u in unreg) + "</p>")
     return "\n".join(out)
 
 
@@ -394,9 +389,9 @@ def write_html(run_dir: str | Path) -> Path:
     run = _Run(run_dir)
     if not run.rep:
         logger.warning("report: %s missing or unreadable; the report will be mostly empty", run_dir / "report.json")
-    body = [_safe(_header, run)]
+    body = [safe_section(_header, run)]
     for title, fn in SECTIONS:
-        body.append(f"<h2>{_e(title)}</h2>\n{_safe(fn, run)}")
+        body.append(f"<h2>{esc(title)}</h2>\n{safe_section(fn, run)}")
     page = ('<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>curate report</title>'
             f'<style>{CSS}</style></head><body>\n' + "\n".join(body)
             + '\n<p class="small">Written by curate. Self-contained: every image is embedded.</p></body></html>\n')

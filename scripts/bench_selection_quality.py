@@ -5,7 +5,7 @@ trains the pool field once, which is also the 'all' ceiling), then for each budg
 method a subset of the pool, and one field trained per (subset, training seed) with the
 SAME :class:`curate.evaluate.EvalConfig` through :func:`curate.evaluate.run_units`
 (units ``RUN/evaluate/q_<method>_b<budget>_t<seed>``, the default's folder named
-``q_default-<hash of its SelectConfig>_...``, keyed with
+``q_default-<hash of its SelectConfig and of auto's rule by kind of capture>_...``, keyed with
 :func:`curate.stage.stage_key`, so a re-run skips finished trainings; a unit whose folder
 holds another subset or settings, e.g. after a method's default changed, stops the run
 unless ``--overwrite`` is given, so no earlier result is lost).
@@ -362,6 +362,18 @@ class Bench:
     series: dict
 
 
+def default_label(default) -> tuple[str, str]:
+    """(auto's rule, tag) of curate's default: the tag names its unit folders
+    (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
+    not in :class:`curate.select.SelectConfig`, so the rule goes into the tag too: when the
+    rule changes, the default trains into new folders instead of meeting the old ones."""
+    from curate import methods
+    from curate.stage import stage_key
+    rule = f"auto: walk={methods.WALK_METHOD}, object={methods.OBJECT_METHOD}" \
+        if default.method == "auto" else ""
+    return rule, stage_key(default, [rule] if rule else [])[:6]
+
+
 def stale_units(run: Path, keys: dict[str, str]) -> list[str]:
     """Unit keys of ``keys`` (unit key -> stage key) whose folder ``run/evaluate/<unit>`` holds a
     finished training with another stage key: a different subset or settings under the same
@@ -559,21 +571,20 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.WARNING)
     from curate.evaluate import EvalConfig
     from curate.select import SelectConfig
-    from curate.stage import stage_key
 
     VARIANTS = _variants()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.max_side, iters=args.iters, workers=args.workers)
     default = SelectConfig()
-    default_tag = stage_key(default)[:6]
+    auto_rule, default_tag = default_label(default)
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
     rows, paired, series = [], [], {}
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
                 "holdout_offsets": args.holdout_offsets,
                 "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
                 "random_seeds": args.random_seeds, "default_method": default.method,
-                "default_config": asdict(default)}
+                "auto_rule": auto_rule, "default_config": asdict(default)}
     t_all = time.perf_counter()
     h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)
     offsets = list(range(ev.holdout_every)) if args.holdout_offsets == "all" else \

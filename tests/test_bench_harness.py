@@ -145,3 +145,19 @@ def test_stale_units_are_those_holding_another_subset_under_the_same_name(harnes
             "q_random_s0_b59_t0": "k-r"}
     assert harness.stale_units(tmp_path, keys) == ["q_medoids_b59_t0"]
     assert harness.stale_units(tmp_path, {"q_stride_b59_t0": "k-same"}) == []
+
+
+def test_default_label_follows_autos_rule(harness, monkeypatch):
+    """The default's unit folders are named by its config and by auto's rule by kind of
+    capture: a changed rule (e.g. objects: FVS -> energy) must not reuse the old folders,
+    while a method other than auto does not depend on the rule."""
+    from curate import methods
+    from curate.select import SelectConfig
+    rule, tag = harness.default_label(SelectConfig())
+    assert f"object={methods.OBJECT_METHOD}" in rule and f"walk={methods.WALK_METHOD}" in rule
+    assert harness.default_label(SelectConfig()) == (rule, tag)        # stable across calls
+    fixed = harness.default_label(SelectConfig(method="fvs"))
+    monkeypatch.setattr(methods, "OBJECT_METHOD", "fvs")
+    rule2, tag2 = harness.default_label(SelectConfig())
+    assert "object=fvs" in rule2 and tag2 != tag
+    assert harness.default_label(SelectConfig(method="fvs")) == fixed == ("", fixed[1])
