@@ -121,15 +121,23 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
     return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
 
 
+def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
+    """(method that runs, note) for ``method`` on ``cams``: "auto" becomes ``OBJECT_METHOD``
+    on an object capture and ``WALK_METHOD`` on a walk (:func:`capture_kind`), with a note
+    saying why; any other method runs as given, with no note."""
+    if method != "auto":
+        return method, ""
+    kind, ang = capture_kind(cams)
+    method = OBJECT_METHOD if kind == "object" else WALK_METHOD
+    return method, (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to "
+                    f"the viewing axes' meeting point {ang:.1f} deg) -> {method}")
+
+
 def uses_sharpness(cams: Cameras, cfg: SelectConfig) -> bool:
     """True when :func:`select` with ``cfg`` on ``cams`` would use the photos' sharpness:
     view medoids (asked for, or what "auto" picks for a walk) with a sharpness weight > 0.
     Callers measure sharpness (reading every photo) only then."""
-    if cfg.medoids.sharpness_weight <= 0:
-        return False
-    if cfg.method == "auto":
-        return (WALK_METHOD if capture_kind(cams)[0] == "walk" else OBJECT_METHOD) == "medoids"
-    return cfg.method == "medoids"
+    return cfg.medoids.sharpness_weight > 0 and resolve_method(cams, cfg.method)[0] == "medoids"
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
@@ -149,12 +157,9 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
 
     t0 = time.perf_counter()
     initial = [int(k) for k in dict.fromkeys(initial)]
-    note = ""
-    if cfg.method == "auto":
-        kind, ang = capture_kind(cams)
-        cfg = replace(cfg, method=OBJECT_METHOD if kind == "object" else WALK_METHOD)
-        note = (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to the "
-                f"viewing axes' meeting point {ang:.1f} deg) -> {cfg.method}")
+    method, note = resolve_method(cams, cfg.method)
+    if note:
+        cfg = replace(cfg, method=method)
         log.info("select %s", note)
     if index is None:
         index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
