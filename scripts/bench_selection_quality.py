@@ -17,8 +17,8 @@ random in the room's free space, off the capture path (rows ``room-offpath``): t
 free-viewpoint navigation the paper is about, which no real capture here can test.
 
 Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
-(the paper), ``fvs`` (farthest-view sampling), ``random`` (seeds 0..n-1, one training
-each), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.methods.METHODS`,
+(the paper), ``fvs`` (farthest-view sampling), ``random`` (n draws, one training
+each; each hold-out fold draws its own, :func:`random_seed`), ``all`` (the pool field), plus any ``--extra`` method of :data:`curate.methods.METHODS`,
 the variants of :func:`_variants`, ``stride`` (every n-th frame in capture order) and
 ``oracle`` (not a method: it sees the held-out views; an upper bound on placement).
 
@@ -222,6 +222,8 @@ def _variants():
             "medoids_sharp": SelectConfig("medoids", medoids=MedoidsConfig(sharpness_weight=1.0)),
             "medoids_path": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=True)),
             "medoids_plain": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=False)),
+            "medoids_p025": SelectConfig("medoids", medoids=MedoidsConfig(power=0.25)),
+            "medoids_p025_plain": SelectConfig("medoids", medoids=MedoidsConfig(power=0.25, path_weights=False)),
             "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
             "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
             "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
@@ -362,6 +364,28 @@ class Bench:
     series: dict
 
 
+FOLD_SEED = 1000
+"""Random draw s of hold-out fold o > 0 uses seed ``FOLD_SEED * o + s`` (:func:`random_seed`)."""
+
+
+def random_seed(fold: int, draw: int, shared: bool = False) -> int:
+    """Seed of random subset ``draw`` in hold-out fold ``fold``. The folds' pools differ by a
+    shift of one image, so one seed in every fold draws nearly the same cameras each time
+    (``shared``: how the harness drew them before 2026-11-23); by default each fold > 0
+    draws its own (fold 0 keeps seeds 0, 1, ...), so the random mean over folds averages
+    independent subsets."""
+    return int(draw) if shared or fold == 0 else FOLD_SEED * int(fold) + int(draw)
+
+
+def unit_label(h: "Bench", method: str, fold: int) -> str:
+    """Name of ``method``'s unit folders in ``fold``: random subsets drawn per fold
+    (:func:`random_seed`) are ``randomf`` in folds > 0, so they never meet the units that
+    ``--shared-seeds`` draws."""
+    if method == "random" and fold > 0 and not h.args.shared_seeds:
+        return "randomf"
+    return h.label.get(method, method)
+
+
 def default_label(default) -> tuple[str, str]:
     """(auto's rule, tag) of curate's default: the tag names its unit folders
     (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
@@ -433,7 +457,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                 timing[m] = 0.0
                 continue
             if m == "random":
-                cfgs = [SelectConfig("random", seed=s) for s in range(args.random_seeds)]
+                cfgs = [SelectConfig("random", seed=random_seed(fold, s, args.shared_seeds))
+                        for s in range(args.random_seeds)]
             else:
                 cfgs = [h.default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
             subsets[m] = []
@@ -447,7 +472,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
             for si, ch in enumerate(subs):
                 seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
                 for t in seeds:
-                    key = f"q_{h.label.get(m, m)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}{suffix}"
+                    key = f"q_{unit_label(h, m, fold)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}{suffix}"
                     u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
                     groups.setdefault(t, []).append(u)
         if "all" in methods and not args.proxy_only:
@@ -531,12 +556,16 @@ def main(argv=None) -> int:
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)
+    ap.add_argument("--shared-seeds", action="store_true", help="random draw s uses seed s in every fold, "
+                    "as before 2026-11-23 (the figures measured then; folds then repeat nearly the same "
+                    "draw); default: each fold > 0 draws its own subsets (unit folders q_randomf_...)")
     ap.add_argument("--one-seed", default="", help="selection methods trained with training seed 0 only (comma list)")
     ap.add_argument("--methods", default="default,energy,fvs,random,all")
     ap.add_argument("--extra", default="", help="more selection methods: METHODS names, or variants "
                     "'fvs_rot1' (FVS with rot_weight 1), 'cells_T1' (coverage objective 'cells', T=1), "
                     "'cov_pose' / 'cov_cells' (coverage with the pose / cells similarity alone), "
-                    "'medoids_p2' / 'medoids_p05' (medoids minimising the mean of the view distance ** 2 / ** 0.5), "
+                    "'medoids_p2' / 'medoids_p05' / 'medoids_p025' (medoids minimising the mean of the view "
+                    "distance ** 2 / ** 0.5 / ** 0.25; 'medoids_p025_plain': without path weights), "
                     "'medoids_e25' (medoids for 75%% of the budget, the paper's greedy energy for the rest), "
                     "'medoids_sharp' (medoids avoiding frames blurrier than their neighbours, sharpness_weight 1), "
                     "'medoids_path' / 'medoids_plain' (medoids with / without path weights; with is the default), "
@@ -583,7 +612,9 @@ def main(argv=None) -> int:
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
                 "holdout_offsets": args.holdout_offsets,
                 "field": "curate.field.FieldConfig() defaults", "train_seeds": args.train_seeds,
-                "random_seeds": args.random_seeds, "default_method": default.method,
+                "random_seeds": args.random_seeds,
+                "random_draws": "shared by the folds" if args.shared_seeds else "per fold",
+                "default_method": default.method,
                 "auto_rule": auto_rule, "default_config": asdict(default)}
     t_all = time.perf_counter()
     h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)

@@ -161,3 +161,49 @@ def test_default_label_follows_autos_rule(harness, monkeypatch):
     rule2, tag2 = harness.default_label(SelectConfig())
     assert "object=fvs" in rule2 and tag2 != tag
     assert harness.default_label(SelectConfig(method="fvs")) == fixed == ("", fixed[1])
+
+
+def test_random_draws_differ_between_folds(harness):
+    """The folds' pools differ by a shift of one image, so one seed in every fold picks nearly
+    the same cameras; the random mean over folds must average independent draws: each fold
+    > 0 draws with its own seeds (fold 0 keeps seeds 0, 1, ...), in its own unit folders,
+    unless --shared-seeds asks for the old draws (the figures measured with them)."""
+    from curate.baselines import random_subset
+    from curate.stats import holdout_split
+    n, every, B = 373, 14, 59
+
+    def cams(fold, draw, shared):
+        pool, _ = holdout_split(n, every, fold)
+        return set(pool[random_subset(len(pool), B, harness.random_seed(fold, draw, shared))].tolist())
+
+    def near(x, y):          # share of x's cameras with y's camera at most one image away
+        return np.mean([any(abs(i - j) <= 1 for j in y) for i in x])
+
+    assert [harness.random_seed(0, d) for d in range(3)] == [0, 1, 2]
+    seeds = {harness.random_seed(f, d) for f in range(every) for d in range(3)}
+    assert len(seeds) == 3 * every                               # every (fold, draw) its own seed
+    assert near(cams(1, 0, True), cams(2, 0, True)) > 0.9        # the old draws repeat across folds
+    assert near(cams(1, 0, False), cams(2, 0, False)) < 0.6      # per-fold draws do not
+    h = argparse.Namespace(args=argparse.Namespace(shared_seeds=False), label={"default": "default-x"})
+    assert harness.unit_label(h, "random", 0) == "random"        # fold 0: the same units as before
+    assert harness.unit_label(h, "random", 3) == "randomf"
+    assert harness.unit_label(h, "default", 3) == "default-x"
+    h.args.shared_seeds = True
+    assert harness.unit_label(h, "random", 3) == "random"
+
+
+def test_centred_r2_ignores_what_makes_a_view_hard():
+    """scripts/view_distance_fit.py: r^2 is taken within each held-out view (PSNR and the
+    feature centred per view), so a view's own difficulty does not count as explained."""
+    spec = importlib.util.spec_from_file_location("view_distance_fit", REPO / "scripts" / "view_distance_fit.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rng = np.random.default_rng(0)
+    d = [rng.uniform(0, 1, 5) for _ in range(20)]                 # 20 views, 5 subsets each
+    hard = rng.normal(0, 10, 20)                                  # per-view offsets, far larger
+    exact = [(h - 2 * x, x) for h, x in zip(hard, d)]
+    assert mod.centred_r2(exact) == pytest.approx(1.0)
+    # a feature that only tracks the views' difficulty explains nothing within a view
+    assert mod.centred_r2([(h + rng.normal(0, 1, 5), np.full(5, h)) for h in hard]) == pytest.approx(0.0, abs=1e-9)
+    noisy = [(h - 2 * x + rng.normal(0, 0.3, 5), x) for h, x in zip(hard, d)]
+    assert 0.5 < mod.centred_r2(noisy) < 1.0
