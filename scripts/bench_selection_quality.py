@@ -498,7 +498,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
         # per method: per-view PSNR averaged over its trainings (random: over its seeds)
         per_view, per_run = {}, {}
         for m in methods:
-            pat = re.compile(rf"q_{re.escape(h.label.get(m, m))}(_s\d+)?_b{B}_t\d+{suffix}")  # not q_<m>_p2_...
+            pat = re.compile(rf"q_{re.escape(unit_label(h, m, fold))}(_s\d+)?_b{B}_t\d+{suffix}")  # not q_<m>_p2_...
             rs = [r for k, r in results.items() if (k == f"all{suffix}" if m == "all" else pat.fullmatch(k))]
             if not rs:
                 continue
