@@ -19,7 +19,8 @@ free-viewpoint navigation the paper is about, which no real capture here can tes
 Methods: ``default`` (curate's default, :class:`curate.select.SelectConfig`), ``energy``
 (the paper), ``fvs`` (farthest-view sampling), ``random`` (n draws, one training
 each; each hold-out fold draws its own, :func:`random_seed`), ``all`` (the pool field),
-plus any ``--extra`` method of :data:`curate.methods.METHODS`, the variants of :func:`_variants`, ``stride`` (every n-th frame in capture order) and
+plus any ``--extra`` method of :data:`curate.methods.METHODS`, the variants of
+:func:`_variants`, ``stride`` (every n-th frame in capture order) and
 ``oracle`` (not a method: it sees the held-out views; an upper bound on placement).
 
 Hold-out folds (``--holdout-offsets``): fold o holds out images o, o + every, ...; with

@@ -101,7 +101,8 @@ def main(argv=None) -> int:
           f"{sum(len(g) for g in views.values())} (view, subset) pairs")
     print(f"{'w':>5s} {'cost':>5s} {'r2':>7s}")
     for r in rows:
-        print(f"{r['w']:5.2f} {r['cost']:>5s} {r['r2']:7.3f}{'   <- view medoids' if r['w'] == 1 and r['cost'] == 'd' else ''}")
+        mark = "   <- view medoids" if r["w"] == 1 and r["cost"] == "d" else ""
+        print(f"{r['w']:5.2f} {r['cost']:>5s} {r['r2']:7.3f}{mark}")
     print(json.dumps({"run": str(run), "part": args.part, "views": len(views), "rows": rows}))
     return 0
 
