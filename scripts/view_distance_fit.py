@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--part", default="on", choices=("on", "off"), help="test views on the path or off it")
     args = ap.parse_args(argv)
 
-    from curate.medoids import view_depths
+    from curate.medoids import embed, view_depths
     from curate.pipeline import load_node_grid
     from curate.select import SelectConfig
     from curate.sfm_io import load_sfm
@@ -66,8 +66,7 @@ def main(argv=None) -> int:
     at = {Path(n).name: i for i, n in enumerate(cams.names)}
     grid = load_node_grid(run)
     depth = view_depths(cams, grid.nodes(), build_pair_index(cams, grid.nodes(), SelectConfig().energy.bins))
-    c, v = cams.centres, cams.view_dirs                        # [N, 3] each
-    a = c + depth[:, None] * v                                 # [N, 3] look-at points
+    c, a = embed(cams, depth)                                  # [N, 3] centres, [N, 3] look-at points
 
     views = defaultdict(list)                                  # (budget, fold, view) -> [(psnr, chosen)]
     for f in sorted((run / "evaluate").glob("q_*/metrics.json")):
@@ -83,17 +82,19 @@ def main(argv=None) -> int:
     views = {k: g for k, g in views.items() if len(g) >= 3}
     if not views:
         raise SystemExit(f"{run}: no held-out view with 3 or more trained subsets")
-    pool = np.arange(n_reg)
+    def parts(rows_c, rows_a, cols):                          # centre and look-at distances [r, len(cols)]
+        return (np.linalg.norm(rows_c[:, None] - c[cols][None], axis=2),
+                np.linalg.norm(rows_a[:, None] - a[cols][None], axis=2))
+
+    reg = np.arange(n_reg)
+    dc_pool, da_pool = parts(c[:n_reg], a[:n_reg], reg)        # [K, K] each, every w reuses them
+    np.fill_diagonal(dc_pool, np.inf)
+    to_chosen = {k: [parts(c[k[2]][None], a[k[2]][None], ch) for _, ch in g] for k, g in views.items()}
+    psnr = {k: np.array([p for p, _ in g]) for k, g in views.items()}
     rows = []
     for w in [float(x) for x in args.weights.split(",") if x]:
-        d_pool = np.linalg.norm(c[pool][:, None] - c[pool][None], axis=2) + w * np.linalg.norm(
-            a[pool][:, None] - a[pool][None], axis=2)          # [K, K]
-        np.fill_diagonal(d_pool, np.inf)
-        tau = float(np.median(d_pool.min(1)))
-        near = {k: np.array([(np.linalg.norm(c[ch] - c[k[2]], axis=1)
-                              + w * np.linalg.norm(a[ch] - a[k[2]], axis=1)).min() for _, ch in g])
-                for k, g in views.items()}                     # view -> [subsets] nearest chosen distance
-        psnr = {k: np.array([p for p, _ in g]) for k, g in views.items()}
+        tau = float(np.median((dc_pool + w * da_pool).min(1)))
+        near = {k: np.array([(dc + w * da).min() for dc, da in ds]) for k, ds in to_chosen.items()}
         for cost, fn in (("d", lambda d: d), ("sqrt", np.sqrt), ("log", lambda d: np.log1p(d / tau))):
             rows.append({"w": w, "cost": cost, "r2": round(centred_r2([(psnr[k], fn(near[k])) for k in views]), 4)})
     rows.sort(key=lambda r: -r["r2"])

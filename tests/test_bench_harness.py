@@ -13,14 +13,18 @@ import pytest
 from conftest import REPO
 
 
-@pytest.fixture(scope="module")
-def harness():
-    spec = importlib.util.spec_from_file_location("bench_selection_quality",
-                                                  REPO / "scripts" / "bench_selection_quality.py")
+def load_script(name: str):
+    """The module of ``scripts/<name>.py`` (registered in sys.modules, for its dataclasses)."""
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod
     spec.loader.exec_module(mod)
     return mod
+
+
+@pytest.fixture(scope="module")
+def harness():
+    return load_script("bench_selection_quality")
 
 
 def _fold(rng, n_views: int, shift: float, n_random: int = 2, off=None):
@@ -119,9 +123,7 @@ def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monk
 
 def test_beside_holes_marks_the_neighbours_of_held_out_frames():
     """scripts/holdout_holes.py: a pool frame is beside a hole when frame i - 1 or i + 1 is held out."""
-    spec = importlib.util.spec_from_file_location("holdout_holes", REPO / "scripts" / "holdout_holes.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("holdout_holes")
     from curate.stats import holdout_split
     pool, hold = holdout_split(30, 7, 2)                       # held out: 2, 9, 16, 23
     got = pool[mod.beside_holes(pool, hold)]
@@ -195,9 +197,7 @@ def test_random_draws_differ_between_folds(harness):
 def test_centred_r2_ignores_what_makes_a_view_hard():
     """scripts/view_distance_fit.py: r^2 is taken within each held-out view (PSNR and the
     feature centred per view), so a view's own difficulty does not count as explained."""
-    spec = importlib.util.spec_from_file_location("view_distance_fit", REPO / "scripts" / "view_distance_fit.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("view_distance_fit")
     rng = np.random.default_rng(0)
     d = [rng.uniform(0, 1, 5) for _ in range(20)]                 # 20 views, 5 subsets each
     hard = rng.normal(0, 10, 20)                                  # per-view offsets, far larger
