@@ -40,6 +40,9 @@ Per-view paired differences (95% t intervals over the held-out views) of ``--can
 default, coverage, medoids, stride, oracle and all where present; each method's per-view PSNR
 is first averaged over its training seeds.
 
+The pool's pair index is built once per fold and shared by every method, so ``sel s`` /
+``select_s`` is the selection alone, without the visibility it reads.
+
 Prints a table per scene and budget, and ONE JSON line last; writes
 ``<out>/quality_psnr_<scenes>.svg`` (PSNR against budget per method, one chart per scene).
 
@@ -387,6 +390,17 @@ def unit_label(h: "Bench", method: str, fold: int) -> str:
     return h.label.get(method, method)
 
 
+UNIT_KEY = re.compile(r"q_(?P<label>.+?)(?:_s(?P<draw>\d+))?_b(?P<budget>\d+)_t(?P<seed>\d+)(?:_o(?P<fold>\d+))?$")
+"""Parses :func:`unit_key` (scripts that read a harness run's units use it)."""
+
+
+def unit_key(label: str, budget: int, seed: int, fold: int, draw: int | None = None) -> str:
+    """Folder name (under ``RUN/evaluate``) of one training: method label, random ``draw``
+    (random subsets only), budget, training seed, hold-out fold (``_o<fold>`` for fold > 0,
+    so fold 0 keeps the names of a single hold-out)."""
+    return f"q_{label}{'' if draw is None else f'_s{draw}'}_b{budget}_t{seed}{f'_o{fold}' if fold else ''}"
+
+
 def default_label(default) -> tuple[str, str]:
     """(auto's rule, tag) of curate's default: the tag names its unit folders
     (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
@@ -427,6 +441,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     from curate.stage import read_stage, stage_key
     from curate.stats import holdout_split
     from curate.train import default_box
+    from curate.visibility import build_pair_index
     args, ev, methods = h.args, h.ev, h.methods
     pool, hold = holdout_split(len(sfm.cameras), ev.holdout_every, fold)
     pool, hold = pool.tolist(), hold.tolist()
@@ -445,11 +460,11 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     box = default_box(sfm.cameras)
     sfm_key = read_stage(run / "sfm")["key"]
     occ_key = (read_stage(run / "occupancy") or {}).get("key", "")
-    found = {}
+    found, index = {}, {}                                # index: bins -> the pool's pair index
     for b in [x for x in args.budgets.split(",") if x]:
         B = resolve_budget(parse_budget(b), len(pool))
         subsets: dict[str, list[list[int]]] = {}   # method -> subsets (pool-relative indices)
-        timing = {}
+        timing = {}                                 # method -> selection seconds, pair index excluded
         for m in methods:
             if m == "all":
                 continue
@@ -464,7 +479,9 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                 cfgs = [h.default if m == "default" else VARIANTS[m] if m in VARIANTS else SelectConfig(m)]
             subsets[m] = []
             for c in cfgs:
-                s = select(pc, grid, B, c, sharpness=measures.sharpness[pool])
+                if c.energy.bins not in index:       # one pair index per fold and bins, not per method
+                    index[c.energy.bins] = build_pair_index(pc, grid.nodes(), c.energy.bins, device=c.device)
+                s = select(pc, grid, B, c, index=index[c.energy.bins], sharpness=measures.sharpness[pool])
                 subsets[m].append(s.chosen)
                 timing[m] = round(s.seconds, 3)
         prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
@@ -473,7 +490,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
             for si, ch in enumerate(subs):
                 seeds = [0] if m in ("random", *args.one_seed.split(",")) else list(range(args.train_seeds))
                 for t in seeds:
-                    key = f"q_{unit_label(h, m, fold)}{f'_s{si}' if m == 'random' else ''}_b{B}_t{t}{suffix}"
+                    key = unit_key(unit_label(h, m, fold), B, t, fold, si if m == "random" else None)
                     u = Unit(key, m, si if m == "random" else t, [pool[k] for k in ch])
                     groups.setdefault(t, []).append(u)
         if "all" in methods and not args.proxy_only:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -30,9 +29,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
-UNIT = re.compile(r"q_(.+?)(?:_s(\d+))?_b(\d+)_t(\d+)(?:_o(\d+))?$")
-"""A harness unit folder: method, random draw, budget, training seed, hold-out fold."""
 
 
 def centred_r2(groups: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -51,6 +49,7 @@ def main(argv=None) -> int:
     ap.add_argument("--part", default="on", choices=("on", "off"), help="test views on the path or off it")
     args = ap.parse_args(argv)
 
+    from bench_selection_quality import UNIT_KEY                 # the harness's unit folder names
     from curate.medoids import embed, view_depths
     from curate.pipeline import load_node_grid
     from curate.select import SelectConfig
@@ -70,15 +69,15 @@ def main(argv=None) -> int:
 
     views = defaultdict(list)                                  # (budget, fold, view) -> [(psnr, chosen)]
     for f in sorted((run / "evaluate").glob("q_*/metrics.json")):
-        m = UNIT.match(f.parent.name)
-        if not m or m.group(1) == "oracle" or m.group(4) != "0":   # the oracle sees the test
+        m = UNIT_KEY.match(f.parent.name)
+        if not m or m["label"] == "oracle" or m["seed"] != "0":   # the oracle sees the test
             continue
         rec = json.loads(f.read_text())
         chosen = np.asarray(rec["subset"], np.int64)
         for pv in rec["per_view"]:
             h = at[Path(pv["name"]).name]
             if (h >= n_reg) == (args.part == "off"):
-                views[(int(m.group(3)), int(m.group(5) or 0), h)].append((float(pv["psnr"]), chosen))
+                views[(int(m["budget"]), int(m["fold"] or 0), h)].append((float(pv["psnr"]), chosen))
     views = {k: g for k, g in views.items() if len(g) >= 3}
     if not views:
         raise SystemExit(f"{run}: no held-out view with 3 or more trained subsets")

@@ -207,3 +207,43 @@ def test_centred_r2_ignores_what_makes_a_view_hard():
     assert mod.centred_r2([(h + rng.normal(0, 1, 5), np.full(5, h)) for h in hard]) == pytest.approx(0.0, abs=1e-9)
     noisy = [(h - 2 * x + rng.normal(0, 0.3, 5), x) for h, x in zip(hard, d)]
     assert 0.5 < mod.centred_r2(noisy) < 1.0
+
+
+def test_unit_keys_round_trip(harness):
+    """Scripts that read a harness run back (view_distance_fit) parse its unit folder names
+    with UNIT_KEY: every name unit_key writes must parse back to what it was made of, also
+    for labels holding underscores, digits and the default's hash."""
+    cases = [("medoids_path", 59, 0, 0, None), ("medoids_p025_plain", 104, 1, 13, None),
+             ("randomf", 59, 0, 7, 1), ("random", 6, 0, 0, 0), ("default-0f0613", 35, 2, 3, None),
+             ("fvs_rot1", 10, 0, 1, None)]
+    for label, b, t, fold, draw in cases:
+        key = harness.unit_key(label, b, t, fold, draw)
+        m = harness.UNIT_KEY.match(key)
+        assert m is not None, key
+        assert (m["label"], int(m["budget"]), int(m["seed"]), int(m["fold"] or 0)) == (label, b, t, fold)
+        assert (None if m["draw"] is None else int(m["draw"])) == draw
+    assert harness.unit_key("random", 59, 0, 0, 1) == "q_random_s1_b59_t0"     # fold 0: the old names
+    assert harness.UNIT_KEY.match("all_o3") is None                             # the pool field is no unit
+
+
+def test_error_weights_degenerate_and_monotone():
+    """scripts/field_weighted_medoids.py: beta 0 leaves the path weights; a perfectly rendered
+    view (MSE 0) or no reference view gives finite weights, never NaN; views near harder
+    reference views weigh more for beta > 0 and less for beta < 0."""
+    mod = load_script("field_weighted_medoids")
+    rng = np.random.default_rng(1)
+    base = rng.uniform(0.5, 1.5, 8)
+    D = rng.uniform(0, 1, (8, 5))
+    err = np.array([0.0, 1e-3, 1e-2, 2e-2, 5e-2])                   # one reference view rendered exactly
+    assert np.allclose(mod.error_weights(D, err, base, 0.0, 3), base)
+    for beta in (-1.0, 1.0, 2.0):
+        w = mod.error_weights(D, err, base, beta, 3)
+        assert np.all(np.isfinite(w)) and np.all(w > 0)
+    assert np.allclose(mod.error_weights(np.zeros((8, 0)), err[:0], base, 1.0, 3), base)
+    # two views, each next to one reference view (k = 1): the harder neighbour weighs more
+    D2 = np.array([[0.1, 5.0], [5.0, 0.1]])
+    up = mod.error_weights(D2, np.array([1e-3, 1e-2]), np.ones(2), 1.0, 1)
+    down = mod.error_weights(D2, np.array([1e-3, 1e-2]), np.ones(2), -1.0, 1)
+    assert up[1] > up[0] and down[1] < down[0]
+    assert np.allclose(mod.error_weights(D2, np.array([1e-3, 1e-2]), np.ones(2), 1.0, 99),
+                       np.ones(2))                                    # k capped: both see both -> equal
