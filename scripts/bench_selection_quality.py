@@ -401,6 +401,13 @@ def unit_key(label: str, budget: int, seed: int, fold: int, draw: int | None = N
     return f"q_{label}{'' if draw is None else f'_s{draw}'}_b{budget}_t{seed}{f'_o{fold}' if fold else ''}"
 
 
+def is_unit(key: str, label: str, budget: int, fold: int) -> bool:
+    """``key`` is a unit of ``label`` at ``budget`` in ``fold`` (any draw, any training seed;
+    ``medoids`` does not take ``medoids_p2``'s units)."""
+    m = UNIT_KEY.match(key)
+    return bool(m) and m["label"] == label and int(m["budget"]) == budget and int(m["fold"] or 0) == fold
+
+
 def default_label(default) -> tuple[str, str]:
     """(auto's rule, tag) of curate's default: the tag names its unit folders
     (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
@@ -516,8 +523,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
         # per method: per-view PSNR averaged over its trainings (random: over its seeds)
         per_view, per_run = {}, {}
         for m in methods:
-            pat = re.compile(rf"q_{re.escape(unit_label(h, m, fold))}(_s\d+)?_b{B}_t\d+{suffix}")  # not q_<m>_p2_...
-            rs = [r for k, r in results.items() if (k == f"all{suffix}" if m == "all" else pat.fullmatch(k))]
+            lab = unit_label(h, m, fold)
+            rs = [r for k, r in results.items() if (k == f"all{suffix}" if m == "all" else is_unit(k, lab, B, fold))]
             if not rs:
                 continue
             per_view[m] = np.mean([[v["psnr"] for v in r["per_view"]] for r in rs], axis=0)

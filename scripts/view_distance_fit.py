@@ -32,7 +32,6 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
 
-
 def centred_r2(groups: list[tuple[np.ndarray, np.ndarray]]) -> float:
     """r^2 between PSNR and a feature, both centred within each group [(psnr [n], feature [n])]."""
     y = np.concatenate([p - p.mean() for p, _ in groups])

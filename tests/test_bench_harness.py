@@ -224,6 +224,12 @@ def test_unit_keys_round_trip(harness):
         assert (None if m["draw"] is None else int(m["draw"])) == draw
     assert harness.unit_key("random", 59, 0, 0, 1) == "q_random_s1_b59_t0"     # fold 0: the old names
     assert harness.UNIT_KEY.match("all_o3") is None                             # the pool field is no unit
+    # reading back: a method takes its own units only (any draw and seed), not a variant's or another fold's
+    assert harness.is_unit("q_medoids_b59_t1_o2", "medoids", 59, 2)
+    assert harness.is_unit("q_randomf_s1_b59_t0_o2", "randomf", 59, 2)
+    assert not harness.is_unit("q_medoids_p2_b59_t0_o2", "medoids", 59, 2)
+    assert not harness.is_unit("q_medoids_b59_t0", "medoids", 59, 2)
+    assert not harness.is_unit("q_medoids_b35_t0_o2", "medoids", 59, 2)
 
 
 def test_error_weights_degenerate_and_monotone():
