@@ -8,7 +8,9 @@ DIR`` writes ``DIR/<scene>/evaluate/q_*``) and asks how well the nearest chosen 
 ``log(1 + d / tau)``, tau the pool's median nearest-view distance), predicts each held-out
 view's PSNR *across the subsets trained for the same fold and budget*: PSNR and g(d) are
 centred per held-out view (what makes a view hard drops out), and the table gives the
-share of the remaining variance that g(d) explains (r^2), best first.
+share of the remaining variance that g(d) explains (r^2), best first. One more row
+(w = 1, cost ``d, d2``) fits the nearest *and* the second-nearest chosen view's distance
+together: how much a second view close by adds to what the nearest one explains.
 
 Off-path test views (the synthetic room) are listed apart (``--part off``).
 
@@ -33,12 +35,29 @@ sys.path.insert(0, str(ROOT / "scripts"))
 
 
 def centred_r2(groups: list[tuple[np.ndarray, np.ndarray]]) -> float:
-    """r^2 between PSNR and a feature, both centred within each group [(psnr [n], feature [n])]."""
-    y = np.concatenate([p - p.mean() for p, _ in groups])
-    x = np.concatenate([f - f.mean() for _, f in groups])
-    if not (x @ x > 0 and y @ y > 0):
+    """r^2 of PSNR on one or more features, all centred within each group.
+
+    groups: [(psnr [n], features [n] or [n, f])]. Least squares without intercept on the
+    centred values; with one feature this is the squared correlation. 0 where PSNR or
+    every feature is constant within every group.
+    """
+    def centred(a):                                              # [n] or [n, f] -> [n, f], mean 0
+        a = np.asarray(a, float).reshape(len(a), -1)
+        return a - a.mean(0)
+    y = np.concatenate([centred(p)[:, 0] for p, _ in groups])  # [N]
+    x = np.concatenate([centred(f) for _, f in groups])        # [N, f]
+    if not (y @ y > 0 and np.any(x != 0)):
         return 0.0
-    return float((x @ y) ** 2 / ((x @ x) * (y @ y)))
+    beta, *_ = np.linalg.lstsq(x, y, rcond=None)
+    res = y - x @ beta
+    return float(np.clip(1.0 - (res @ res) / (y @ y), 0.0, 1.0))
+
+
+def nearest_two(d: np.ndarray) -> np.ndarray:
+    """[1, n] distances to the chosen views -> [2]: the nearest and the second nearest
+    (the nearest twice when only one view is chosen)."""
+    d = np.sort(np.ravel(d))
+    return np.array([d[0], d[min(1, len(d) - 1)]])
 
 
 def main(argv=None) -> int:
@@ -95,6 +114,9 @@ def main(argv=None) -> int:
         near = {k: np.array([(dc + w * da).min() for dc, da in ds]) for k, ds in to_chosen.items()}
         for cost, fn in (("d", lambda d: d), ("sqrt", np.sqrt), ("log", lambda d: np.log1p(d / tau))):
             rows.append({"w": w, "cost": cost, "r2": round(centred_r2([(psnr[k], fn(near[k])) for k in views]), 4)})
+        if w == 1:                                             # nearest and second-nearest chosen view
+            two = {k: np.array([nearest_two(dc + da) for dc, da in ds]) for k, ds in to_chosen.items()}
+            rows.append({"w": w, "cost": "d, d2", "r2": round(centred_r2([(psnr[k], two[k]) for k in views]), 4)})
     rows.sort(key=lambda r: -r["r2"])
     print(f"{run.name} ({args.part} the path): {len(views)} held-out views with >= 3 trained subsets, "
           f"{sum(len(g) for g in views.values())} (view, subset) pairs")

@@ -207,6 +207,28 @@ def test_centred_r2_ignores_what_makes_a_view_hard():
     assert mod.centred_r2([(h + rng.normal(0, 1, 5), np.full(5, h)) for h in hard]) == pytest.approx(0.0, abs=1e-9)
     noisy = [(h - 2 * x + rng.normal(0, 0.3, 5), x) for h, x in zip(hard, d)]
     assert 0.5 < mod.centred_r2(noisy) < 1.0
+    # one feature: the squared correlation of the centred values
+    y = np.concatenate([p - p.mean() for p, _ in noisy]); x = np.concatenate([f - f.mean() for _, f in noisy])
+    assert mod.centred_r2(noisy) == pytest.approx((x @ y) ** 2 / ((x @ x) * (y @ y)))
+
+
+def test_centred_r2_with_two_features_and_the_second_nearest_view():
+    """view_distance_fit's "d, d2" row: PSNR fitted on the nearest and second-nearest chosen
+    view together explains what the nearest alone cannot, and never less than it."""
+    mod = load_script("view_distance_fit")
+    rng = np.random.default_rng(1)
+    d1 = [rng.uniform(0, 1, 6) for _ in range(30)]
+    d2 = [a + rng.uniform(0, 1, 6) for a in d1]
+    hard = rng.normal(0, 10, 30)
+    both = [(h - 2 * a - 0.5 * b, np.stack([a, b], 1)) for h, a, b in zip(hard, d1, d2)]
+    assert mod.centred_r2(both) == pytest.approx(1.0)
+    one = mod.centred_r2([(p, f[:, 0]) for p, f in both])
+    assert 0.5 < one < 1.0 - 1e-6
+    junk = [(p, np.stack([f[:, 0], rng.normal(size=6)], 1)) for p, f in both]
+    assert one - 1e-12 <= mod.centred_r2(junk) <= 1.0
+    assert mod.centred_r2([(np.full(6, 3.0), f) for _, f in both]) == 0.0   # PSNR constant within views
+    np.testing.assert_array_equal(mod.nearest_two(np.array([[3.0, 1.0, 2.0]])), [1.0, 2.0])
+    np.testing.assert_array_equal(mod.nearest_two(np.array([[0.5]])), [0.5, 0.5])
 
 
 def test_unit_keys_round_trip(harness):
