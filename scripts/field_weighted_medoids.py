@@ -37,6 +37,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
 
 def error_weights(D: np.ndarray, err: np.ndarray, base: np.ndarray, beta: float, k: int) -> np.ndarray:
@@ -64,6 +65,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     import torch
+    from bench_selection_quality import unit_key                  # the harness's unit folder names
     from curate.evaluate import EvalConfig, Unit, eval_cameras, train_unit
     from curate.field import RadianceField
     from curate.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
@@ -85,7 +87,7 @@ def main(argv=None) -> int:
     for fold in [int(x) for x in args.folds.split(",") if x]:
         pool, hold = (x.tolist() for x in holdout_split(len(sfm.cameras), ev.holdout_every, fold))
         sfx = f"_o{fold}" if fold else ""
-        base = run / "evaluate" / f"q_medoids_path_b{B}_t0{sfx}"
+        base = run / "evaluate" / unit_key("medoids_path", B, 0, fold)
         auto = json.loads((base / "metrics.json").read_text())
         pc = sfm.cameras[pool]
         idx = build_pair_index(pc, grid.nodes(), SelectConfig().energy.bins)
@@ -114,7 +116,7 @@ def main(argv=None) -> int:
         sub = [pool[k] for k in s1]
         key = stage_key({"train": replace(ev, workers=0, methods=(), random_seeds=0), "subset": sub,
                          "holdout": hold}, [tag])
-        m = train_unit(str(run), Unit(f"q_{tag}_b{B}_t0{sfx}", tag, 0, sub), ev, cams, paths, hold,
+        m = train_unit(str(run), Unit(unit_key(tag, B, 0, fold), tag, 0, sub), ev, cams, paths, hold,
                        default_box(sfm.cameras), key)
         p0 = np.array([v["psnr"] for v in auto["per_view"]])
         p1 = np.array([v["psnr"] for v in m["per_view"]])
