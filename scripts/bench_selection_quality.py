@@ -408,6 +408,16 @@ def is_unit(key: str, label: str, budget: int, fold: int) -> bool:
     return bool(m) and m["label"] == label and int(m["budget"]) == budget and int(m["fold"] or 0) == fold
 
 
+def train_key(ev, subset: list[int], holdout: list[int], deps: list[str]) -> str:
+    """Stage key of one harness training: its settings (an ``EvalConfig`` without the fields
+    that do not change a training: workers, methods, random seeds), the subset and held-out
+    views (absolute indices) and the keys it depends on. A unit whose stage holds another
+    key is retrained (or reported stale)."""
+    from curate.stage import stage_key
+    return stage_key({"train": replace(ev, workers=0, methods=(), random_seeds=0), "subset": subset,
+                      "holdout": holdout}, deps)
+
+
 def default_label(default) -> tuple[str, str]:
     """(auto's rule, tag) of curate's default: the tag names its unit folders
     (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
@@ -445,7 +455,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     from curate.budget import parse_budget, resolve_budget
     from curate.evaluate import Unit, eval_cameras, run_units
     from curate.select import SelectConfig, select
-    from curate.stage import read_stage, stage_key
+    from curate.stage import read_stage
     from curate.stats import holdout_split
     from curate.train import default_box
     from curate.visibility import build_pair_index
@@ -505,8 +515,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
         plan = []                                    # (seed config, units, their stage keys) per training seed
         for t, us in sorted(groups.items()):
             cfg_t = replace(ev, train_seed=t)
-            train = replace(cfg_t, workers=0, methods=(), random_seeds=0)
-            plan.append((cfg_t, us, {u.key: stage_key({"train": train, "subset": u.subset, "holdout": tests},
+            plan.append((cfg_t, us, {u.key: train_key(cfg_t, u.subset, tests,
                                                       [sfm_key] + ([occ_key] if u.key == "all" else []))
                                      for u in us}))
         stale = stale_units(run, {k: v for _, _, keys in plan for k, v in keys.items()})   # before any training

@@ -30,7 +30,6 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -65,14 +64,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     import torch
-    from bench_selection_quality import unit_key                  # the harness's unit folder names
+    from bench_selection_quality import train_key, unit_key       # the harness's unit names and keys
     from curate.evaluate import EvalConfig, Unit, eval_cameras, train_unit
     from curate.field import RadianceField
     from curate.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
     from curate.metrics import render_image
     from curate.pipeline import load_node_grid, load_split
     from curate.select import SelectConfig
-    from curate.stage import stage_key
     from curate.stats import holdout_split, paired_difference
     from curate.train import default_box, load_image
     from curate.visibility import build_pair_index
@@ -114,8 +112,7 @@ def main(argv=None) -> int:
                           args.beta, args.neighbours)
         s1 = medoids_select(pc, B, MedoidsConfig(path_weights=True), (), grid.nodes(), idx, weights=w)[0]
         sub = [pool[k] for k in s1]
-        key = stage_key({"train": replace(ev, workers=0, methods=(), random_seeds=0), "subset": sub,
-                         "holdout": hold}, [tag])
+        key = train_key(ev, sub, hold, [tag])
         m = train_unit(str(run), Unit(unit_key(tag, B, 0, fold), tag, 0, sub), ev, cams, paths, hold,
                        default_box(sfm.cameras), key)
         p0 = np.array([v["psnr"] for v in auto["per_view"]])
