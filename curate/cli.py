@@ -9,11 +9,11 @@ import logging
 import sys
 from pathlib import Path
 
-from .budget import budget_text, parse_budget, resolve_budget
-from .methods import (DEFAULT_METHOD, METHOD_HELP, METHODS, PATH_HELP, PATH_WEIGHTS, SHARPNESS_HELP,
+from curate.core.budget import budget_text, parse_budget, resolve_budget
+from curate.select.methods import (DEFAULT_METHOD, METHOD_HELP, METHODS, PATH_HELP, PATH_WEIGHTS, SHARPNESS_HELP,
                       SHARPNESS_WEIGHT)
-from .sfm_config import CAMERA_MODES, MATCHERS
-from .sfm_config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy
+from curate.sfm.config import CAMERA_MODES, MATCHERS
+from curate.sfm.config import SfmConfig as _SfmDefaults  # a plain dataclass: nothing heavy
 
 
 class CliError(Exception):
@@ -45,7 +45,7 @@ def _bins(text: str):
 
 
 def _budget(text: str):
-    """argparse type of ``--budget``: :func:`curate.budget.parse_budget`."""
+    """argparse type of ``--budget``: :func:`curate.core.budget.parse_budget`."""
     try:
         return parse_budget(text)
     except ValueError:
@@ -80,7 +80,7 @@ def _add_method(s: argparse.ArgumentParser) -> None:
 def _select_cfg(args, base=None):
     """SelectConfig from the options of ``_add_method`` and ``_add_energy_args`` (over ``base``)."""
     from dataclasses import replace
-    from .select import SelectConfig
+    from curate.select.select import SelectConfig
     base = base if base is not None else SelectConfig(device=args.device)
     try:
         return replace(base, method=args.method, energy=_energy_cfg(args), seed=args.seed,
@@ -91,7 +91,7 @@ def _select_cfg(args, base=None):
 
 
 def _energy_cfg(args):
-    from .energy import EnergyConfig
+    from curate.select.energy import EnergyConfig
     try:
         return EnergyConfig(gamma=args.gamma, n_theta=args.bins[0], n_phi=args.bins[1],
                             binning="equal-area" if args.equal_area else "paper")
@@ -100,7 +100,7 @@ def _energy_cfg(args):
 
 
 def _grid(args, cams):
-    from .grid import NodeGrid, box_from_cameras
+    from curate.core.grid import NodeGrid, box_from_cameras
     if args.res < 1:
         raise CliError("--res must be >= 1")
     if args.box is not None:
@@ -115,13 +115,13 @@ def _grid(args, cams):
 def load_cameras(path: Path):
     """Cameras from a transforms.json, the project's cameras.json, a COLMAP model folder
     (binary or text, or a folder with sparse/0) or a run folder; (cameras, image paths)."""
-    from .cameras import Cameras
-    from .transforms_json import read_transforms
+    from curate.core.cameras import Cameras
+    from curate.core.transforms_json import read_transforms
     if not path.exists():
         raise CliError(f"{path}: no such file or folder")
     if path.is_dir():
         if any((path / f).is_file() for f in ("cameras.bin", "cameras.txt")) or (path / "sparse" / "0").is_dir():
-            from .sfm import read_cameras
+            from curate.sfm.colmap import read_cameras
             try:
                 return read_cameras(path)
             except (OSError, ValueError, RuntimeError) as e:
@@ -146,7 +146,7 @@ def load_cameras(path: Path):
 # ---------------------------------------------------------------------- commands
 def cmd_score(args) -> int:
     import numpy as np
-    from .select import score_cameras
+    from curate.select.select import score_cameras
 
     cams, _ = load_cameras(Path(args.input))
     cfg = _energy_cfg(args)
@@ -175,9 +175,9 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    from .select import select, uses_sharpness
-    from .transforms_json import write_transforms
-    from .stage import write_json_atomic, config_dict
+    from curate.select.select import select, uses_sharpness
+    from curate.core.transforms_json import write_transforms
+    from curate.core.stage import write_json_atomic, config_dict
 
     if (Path(args.input) / "occupancy" / "stage.json").is_file():
         return _select_stage(args)
@@ -191,7 +191,7 @@ def cmd_select(args) -> int:
     grid = _grid(args, cams)
     sharp = None
     if uses_sharpness(cams, cfg):
-        from .quality import files_sharpness
+        from curate.sfm.quality import files_sharpness
         if all(Path(f).is_file() for f in files):
             sharp = files_sharpness(files, progress=not args.json)      # [K]
         else:
@@ -216,7 +216,7 @@ def cmd_select(args) -> int:
 
 def cmd_sfm(args) -> int:
     import time
-    from .sfm_config import SfmConfig
+    from curate.sfm.config import SfmConfig
 
     try:
         cfg = SfmConfig(max_image_size=args.max_size, recursive=args.recursive, matcher=args.matcher,
@@ -228,7 +228,7 @@ def cmd_sfm(args) -> int:
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
     t0 = time.perf_counter()
-    from .sfm import import_poses, run_sfm
+    from curate.sfm.colmap import import_poses, run_sfm
     try:
         if args.poses:
             out = import_poses(cfg, args.poses, args.out, photos=args.photos, force=args.force)
@@ -247,9 +247,9 @@ def cmd_sfm(args) -> int:
 
 def cmd_simulate(args) -> int:
     from dataclasses import replace
-    from .progressive import ProgressiveConfig, CameraSpec
-    from .simulate import SimulateConfig, run_simulation
-    from .energy import EnergyConfig
+    from curate.simulate.progressive import ProgressiveConfig, CameraSpec
+    from curate.simulate.experiment import SimulateConfig, run_simulation
+    from curate.select.energy import EnergyConfig
 
     w, h = args.size
     cfg = SimulateConfig(scene=args.scene, scene_seed=args.scene_seed, budget=args.budget, n_test=args.n_test,
@@ -275,10 +275,10 @@ def cmd_simulate(args) -> int:
 
 def _run_cfg(args):
     """RunConfig from ``curate run`` options."""
-    from .evaluate import EvalConfig
-    from .occupancy import OccupancyConfig
-    from .pipeline import RunConfig
-    from .sfm_config import SfmConfig
+    from curate.evaluate.units import EvalConfig
+    from curate.occupancy.masks import OccupancyConfig
+    from curate.pipeline import RunConfig
+    from curate.sfm.config import SfmConfig
     try:
         ev = EvalConfig(holdout_every=args.holdout_every, max_side=args.eval_size, iters=args.iters,
                         random_seeds=args.random_seeds, workers=args.workers)
@@ -292,8 +292,8 @@ def _run_cfg(args):
 
 def _saved_cfg(run_dir: Path):
     """The RunConfig saved in RUN/run.json by ``curate run``."""
-    from .pipeline import RunConfig
-    from .stage import config_from_dict
+    from curate.pipeline import RunConfig
+    from curate.core.stage import config_from_dict
     p = run_dir / "run.json"
     if not p.is_file():
         raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
@@ -304,7 +304,7 @@ def _saved_cfg(run_dir: Path):
 
 
 def cmd_run(args) -> int:
-    from .pipeline import run
+    from curate.pipeline import run
     cfg = _run_cfg(args)
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
@@ -324,8 +324,8 @@ def cmd_run(args) -> int:
 
 
 def cmd_batch(args) -> int:
-    from .batch import read_list, run_batch
-    from .executors import RayMissing
+    from curate.batch.runner import read_list, run_batch
+    from curate.core.executors import RayMissing
     cfg = _run_cfg(args)
     folders = list(args.folders)
     if args.list:
@@ -352,7 +352,7 @@ def cmd_batch(args) -> int:
 
 def cmd_stage(args) -> int:
     """occupancy / evaluate / report / export on an existing run folder, with its saved config."""
-    from . import pipeline as pl
+    from curate import pipeline as pl
     run_dir = Path(args.run)
     cfg, rec = _saved_cfg(run_dir)
     try:
@@ -374,7 +374,7 @@ def cmd_stage(args) -> int:
 def _select_stage(args) -> int:
     """``curate select RUN``: the select stage of a run folder, with its saved config."""
     from dataclasses import replace
-    from . import pipeline as pl
+    from curate import pipeline as pl
     run_dir = Path(args.input)
     cfg, _ = _saved_cfg(run_dir)
     sel = _select_cfg(args, cfg.select)

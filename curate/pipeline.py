@@ -4,7 +4,7 @@ Each stage is a plain function ``stage_x(cfg, run_dir, ..., force) -> Path`` wri
 own folder of the run (``RUN/<stage>/``, a ``stage.json`` record last). A stage's key
 hashes its resolved config with the keys of the stages it reads, so a re-run skips a
 stage whose inputs and options did not change, and redoes everything downstream of a
-change. Run-folder contract (besides ``RUN/sfm/``, see :mod:`curate.sfm`):
+change. Run-folder contract (besides ``RUN/sfm/``, see :mod:`curate.sfm.colmap`):
 
 * ``RUN/occupancy/``: ``occupancy.npz`` (``box_min`` [3], ``box_max`` [3], ``res``,
   ``points_mask`` [R,R,R] bool (from the sparse points; all False without points),
@@ -19,9 +19,9 @@ change. Run-folder contract (besides ``RUN/sfm/``, see :mod:`curate.sfm`):
   it, else null) and ``nodes.npz`` (``nodes`` [M,3], per-node ``angular``
   and ``frequency`` of the chosen set, ``flat`` [M] grid indices, ``res``, ``box_min``,
   ``box_max``).
-* ``RUN/evaluate/``: see :mod:`curate.evaluate`.
+* ``RUN/evaluate/``: see :mod:`curate.evaluate.units`.
 * ``RUN/report.json``, ``RUN/report.html``: see :func:`stage_report`.
-* ``RUN/export/``: see :mod:`curate.export`.
+* ``RUN/export/``: see :mod:`curate.export.subset`.
 
 Camera indices are into ``RUN/sfm/cameras.json`` (registered cameras, sorted by name).
 """
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import EvalConfig
-from .occupancy import OccupancyConfig, RefineConfig
-from .select import SelectConfig
-from .sfm_config import SfmConfig
+from curate.evaluate.units import EvalConfig
+from curate.occupancy.masks import OccupancyConfig, RefineConfig
+from curate.select.select import SelectConfig
+from curate.sfm.config import SfmConfig
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class RunConfig:
 
 
 def _key_of(stage_dir: Path) -> str:
-    from .stage import read_stage
+    from curate.core.stage import read_stage
     rec = read_stage(stage_dir)
     if rec is None:
         raise FileNotFoundError(f"{stage_dir}: stage not finished")
@@ -104,7 +104,7 @@ def image_paths(run_dir: Path, names: list[str], records: dict) -> list[str]:
 def photo_sharpness(run_dir: Path, sfm, idx: list[int]) -> np.ndarray:
     """[len(idx)] image sharpness of the photos of cameras ``idx``: as the SfM stage recorded
     it (``sfm/images.json``), else measured now (imported poses); NaN when unreadable."""
-    from .quality import files_sharpness
+    from curate.sfm.quality import files_sharpness
     by: dict[str, float] = {}
     for r in sfm.records.get("photos", []):
         v = (r.get("extra") or {}).get("sharpness")
@@ -122,8 +122,8 @@ def photo_sharpness(run_dir: Path, sfm, idx: list[int]) -> np.ndarray:
 
 def load_split(run_dir: Path, every: int):
     """Registered cameras, their image paths, (pool, holdout) indices, sfm result."""
-    from .sfm_io import load_sfm
-    from .stats import holdout_split
+    from curate.sfm.io import load_sfm
+    from curate.core.stats import holdout_split
     sfm = load_sfm(run_dir)
     paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
     pool, hold = holdout_split(len(sfm.cameras), every)
@@ -140,7 +140,7 @@ def up_axis(cams) -> int:
 
 def surface_band(mask: np.ndarray, k: int) -> np.ndarray:
     """[R,R,R] bool: occupied nodes next to free space, widened by ``k`` voxels each side."""
-    from .occupancy import dilate
+    from curate.occupancy.masks import dilate
     if not mask.any():
         return mask
     interior = ~dilate(~mask, 1)
@@ -151,11 +151,11 @@ def surface_band(mask: np.ndarray, k: int) -> np.ndarray:
 # ------------------------------------------------------------------------ stages
 def stage_occupancy(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
     """Pool field + occupancy grid (points, refined, node band) -> ``RUN/occupancy``."""
-    from .evaluate import eval_cameras
-    from .grid import NodeGrid
-    from .occupancy import occupancy_from_points, refine_occupancy
-    from .stage import begin_stage, finish_stage, stage_key, write_json_atomic
-    from .train import default_box, train_field
+    from curate.evaluate.units import eval_cameras
+    from curate.core.grid import NodeGrid
+    from curate.occupancy.masks import occupancy_from_points, refine_occupancy
+    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.field.train import default_box, train_field
 
     t0 = time.perf_counter()
     d = run_dir / "occupancy"
@@ -204,17 +204,17 @@ def stage_occupancy(cfg: RunConfig, run_dir: Path, force: bool = False, timings:
 
 def load_node_grid(run_dir: Path):
     """The selection's NodeGrid (box, resolution, node band mask) from ``RUN/occupancy``."""
-    from .grid import NodeGrid
+    from curate.core.grid import NodeGrid
     z = np.load(run_dir / "occupancy" / "occupancy.npz")
     return NodeGrid(z["box_min"], z["box_max"], int(z["res"]), z["nodes_mask"])
 
 
 def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
     """Greedy selection over the pool -> ``RUN/select``."""
-    from .energy import energy_of_subset
-    from .select import select, uses_sharpness
-    from .stage import begin_stage, finish_stage, stage_key, write_json_atomic
-    from .visibility import build_pair_index
+    from curate.select.energy import energy_of_subset
+    from curate.select.select import select, uses_sharpness
+    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.select.visibility import build_pair_index
 
     t0 = time.perf_counter()
     d = run_dir / "select"
@@ -222,8 +222,8 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     if begin_stage(d, key, force):
         _summary("select", t0, True, "", timings)
         return d
-    from .budget import parse_budget, resolve_budget
-    from .sfm_io import load_sfm
+    from curate.core.budget import parse_budget, resolve_budget
+    from curate.sfm.io import load_sfm
     sfm = load_sfm(run_dir)
     split = json.loads((run_dir / "occupancy" / "split.json").read_text())
     pool = split["pool"]
@@ -259,10 +259,10 @@ def stage_select(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
 
 def eval_units(cfg: RunConfig, run_dir: Path):
     """The evaluation units of this run and their stage keys."""
-    from .baselines import farthest_view, random_subset
-    from .evaluate import Unit
-    from .sfm_io import load_sfm
-    from .stage import stage_key
+    from curate.select.baselines import farthest_view, random_subset
+    from curate.evaluate.units import Unit
+    from curate.sfm.io import load_sfm
+    from curate.core.stage import stage_key
     sel = json.loads((run_dir / "select" / "selection.json").read_text())
     pool, chosen = sel["pool"], sel["chosen"]
     cams = load_sfm(run_dir).cameras
@@ -297,9 +297,9 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
     ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
     import shutil
-    from .evaluate import eval_cameras, run_units, summarize
-    from .stage import is_fresh, write_json_atomic
-    from .train import default_box
+    from curate.evaluate.units import eval_cameras, run_units, summarize
+    from curate.core.stage import is_fresh, write_json_atomic
+    from curate.field.train import default_box
 
     t0 = time.perf_counter()
     d = run_dir / "evaluate"
@@ -326,7 +326,7 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
 
 def recorded_seconds(run_dir: Path) -> dict[str, float | None]:
     """Seconds each stage took when it actually ran (from the stage records; evaluate: all units summed)."""
-    from .stage import read_stage
+    from curate.core.stage import read_stage
     out: dict[str, float | None] = {}
     for s in ("sfm", "occupancy", "select", "evaluate", "export"):
         if s == "evaluate":
@@ -344,8 +344,8 @@ def stage_report(cfg: RunConfig, run_dir: Path, photos: str | None, timings: lis
     ``compute_seconds``, the time each took when it actually ran; ``wall_seconds``: this
     invocation (``curate report`` alone keeps the previous figure).
     """
-    from .sfm_io import load_sfm
-    from .stage import read_stage, write_json_atomic
+    from curate.sfm.io import load_sfm
+    from curate.core.stage import read_stage, write_json_atomic
     sfm = load_sfm(run_dir)
     sel = json.loads((run_dir / "select" / "selection.json").read_text())
     photos_rec = sfm.records.get("photos", [])
@@ -373,22 +373,22 @@ def stage_report(cfg: RunConfig, run_dir: Path, photos: str | None, timings: lis
         rep.update(json.loads(summ.read_text()))
     write_json_atomic(run_dir / "report.json", rep)
     try:
-        from .report import write_html
+        from curate.report.run_report import write_html
         write_html(run_dir)
     except ImportError:  # pragma: no cover - report module not present
-        log.warning("no HTML report (curate.report missing)")
+        log.warning("no HTML report (curate.report.run_report missing)")
     return run_dir / "report.json"
 
 
 def _config_dict(cfg: RunConfig) -> dict:
-    from .stage import config_dict
+    from curate.core.stage import config_dict
     return config_dict(cfg)
 
 
 def stage_export(cfg: RunConfig, run_dir: Path, force: bool = False, timings: list | None = None) -> Path:
     """The chosen subset in the formats NeRF tools read -> ``RUN/export``."""
-    from .export import export_subset
-    from .stage import begin_stage, finish_stage, stage_key
+    from curate.export.subset import export_subset
+    from curate.core.stage import begin_stage, finish_stage, stage_key
     t0 = time.perf_counter()
     d = run_dir / "export"
     key = stage_key({"mode": cfg.export_mode}, [_key_of(run_dir / "select")])
@@ -411,8 +411,8 @@ def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: s
     transforms.json) the folder the poses' image paths are relative to. ``executor``:
     a ``concurrent.futures.Executor`` for the evaluation's trainings (None: local processes).
     """
-    from .sfm import import_poses, run_sfm
-    from .stage import write_json_atomic, config_dict, versions
+    from curate.sfm.colmap import import_poses, run_sfm
+    from curate.core.stage import write_json_atomic, config_dict, versions
     t_start = time.perf_counter()
     run_dir = Path(run_dir)
     if photos is not None and run_dir.resolve().is_relative_to(Path(photos).resolve()):

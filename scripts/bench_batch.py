@@ -5,7 +5,7 @@
 Prepares a run folder of the sample pool up to the selection (SfM import, occupancy with
 the pool field, selection), then runs the evaluation's trainings (selection, random
 seeds, FVS; 'all' reuses the pool field) twice from scratch: serially (one worker) and
-through :class:`curate.executors.RayExecutor` on a local Ray instance (``--ray-cpus``,
+through :class:`curate.core.executors.RayExecutor` on a local Ray instance (``--ray-cpus``,
 default the machine's cores), optionally also with the local process pool. Last line:
 JSON with the seconds, the ratio and whether the PSNRs agree.
 """
@@ -26,9 +26,9 @@ sys.path.insert(0, str(ROOT))
 
 def main() -> None:
     from curate import pipeline as pl
-    from curate.evaluate import EvalConfig
-    from curate.executors import RayExecutor, cpu_count, ray_init
-    from curate.occupancy import OccupancyConfig
+    from curate.evaluate.units import EvalConfig
+    from curate.core.executors import RayExecutor, cpu_count, ray_init
+    from curate.occupancy.masks import OccupancyConfig
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--iters", type=int, default=200)

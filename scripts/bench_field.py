@@ -25,19 +25,19 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from curate.cameras import Cameras  # noqa: E402
-from curate.field import FieldConfig  # noqa: E402
-from curate.metrics import evaluate  # noqa: E402
-from curate.train import load_images, train_field  # noqa: E402
+from curate.core.cameras import Cameras  # noqa: E402
+from curate.field.model import FieldConfig  # noqa: E402
+from curate.field.metrics import evaluate  # noqa: E402
+from curate.field.train import load_images, train_field  # noqa: E402
 
 DEFAULT_SCALE = {"fox": 1 / 8, "office": 1 / 4, "templering": 1 / 2}
 
 
 def load_dataset(folder: Path) -> tuple[Cameras, list[str]]:
     """Cameras (full resolution) and image paths of fox / office / templering (or any transforms.json)."""
-    from curate import datasets
+    from research import datasets
     if (folder / "transforms.json").is_file():
-        from curate.transforms_json import read_transforms
+        from curate.core.transforms_json import read_transforms
         return read_transforms(folder / "transforms.json")
     cams = datasets.load_ground_truth(folder)
     if cams is None:

@@ -36,7 +36,7 @@ import numpy as np
 
 
 def pool(n: int, seed: int):
-    from curate.cameras import Cameras, look_at
+    from curate.core.cameras import Cameras, look_at
     rng = np.random.default_rng(seed)
     c = rng.uniform(-0.9, 0.9, (n, 3))
     d = rng.normal(size=(n, 3))
@@ -45,16 +45,16 @@ def pool(n: int, seed: int):
 
 
 def nodes(res: int):
-    from curate.grid import NodeGrid
+    from curate.core.grid import NodeGrid
     return NodeGrid([-1, -1, -1], [1, 1, 1], res).nodes()
 
 
 def warm_up() -> float:
     """Load (or compile) the numba kernel and torch once; returns the seconds it took."""
     import torch  # noqa: F401  (import time is not selection time)
-    from curate.energy import EnergyConfig
-    from curate.greedy import greedy_select
-    from curate.visibility import build_pair_index
+    from curate.select.energy import EnergyConfig
+    from curate.select.greedy import greedy_select
+    from curate.select.visibility import build_pair_index
     t0 = time.perf_counter()
     greedy_select(build_pair_index(pool(5, 9), nodes(3), EnergyConfig().bins), 2)
     return time.perf_counter() - t0
@@ -62,9 +62,9 @@ def warm_up() -> float:
 
 def case_main() -> dict:
     warm = warm_up()
-    from curate.energy import EnergyConfig, energy_of_subset
-    from curate.greedy import bruteforce_scores, greedy_select
-    from curate.visibility import build_pair_index
+    from curate.select.energy import EnergyConfig, energy_of_subset
+    from curate.select.greedy import bruteforce_scores, greedy_select
+    from curate.select.visibility import build_pair_index
     cfg = EnergyConfig()
     cams, nd = pool(1000, 0), nodes(32)
     t0 = time.perf_counter()
@@ -85,9 +85,9 @@ def case_main() -> dict:
 
 
 def case_exact() -> dict:
-    from curate.energy import EnergyConfig, energy_of_subset
-    from curate.greedy import greedy_select, greedy_select_bruteforce
-    from curate.visibility import build_pair_index
+    from curate.select.energy import EnergyConfig, energy_of_subset
+    from curate.select.greedy import greedy_select, greedy_select_bruteforce
+    from curate.select.visibility import build_pair_index
     out = {}
     same, rel = True, 0.0
     for cfg in (EnergyConfig(), EnergyConfig(gamma=0.5, binning="equal-area")):
@@ -105,9 +105,9 @@ def case_exact() -> dict:
 
 def case_select(n: int, res: int, budget: int, key: str) -> dict:
     warm = warm_up()
-    from curate.energy import EnergyConfig
-    from curate.greedy import greedy_select
-    from curate.visibility import build_pair_index
+    from curate.select.energy import EnergyConfig
+    from curate.select.greedy import greedy_select
+    from curate.select.visibility import build_pair_index
     cfg = EnergyConfig()
     cams, nd = pool(n, 2), nodes(res)
     t0 = time.perf_counter()
@@ -126,10 +126,10 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     and each method's time over the paper's greedy measured in the same run (ratios are
     steadier than absolute times on a shared machine)."""
     warm_up()
-    from curate.grid import NodeGrid
-    from curate.medoids import MedoidsConfig, embed, path_weights, view_depths
-    from curate.select import SelectConfig, select
-    from curate.visibility import build_pair_index
+    from curate.core.grid import NodeGrid
+    from curate.select.medoids import MedoidsConfig, embed, path_weights, view_depths
+    from curate.select.select import SelectConfig, select
+    from curate.select.visibility import build_pair_index
     cams = pool(n, 2)
     grid = NodeGrid(np.full(3, -1.0), np.full(3, 1.0), 32)
     cfg = SelectConfig()

@@ -3,9 +3,9 @@
 
     python scripts/bench_sfm.py --data ../shared/data/fox ../shared/data/office [--matcher sequential] ...
 
-Runs ``curate.sfm.run_sfm`` at the default config (overridable below) on each folder
+Runs ``curate.sfm.colmap.run_sfm`` at the default config (overridable below) on each folder
 (photos: ``FOLDER/images`` when it exists, else ``FOLDER``), compares the registered
-cameras with ``curate.datasets.load_ground_truth`` (fox: transforms.json, templering:
+cameras with ``research.datasets.load_ground_truth`` (fox: transforms.json, templering:
 templeR_par.txt, office: poses.txt + K.txt) after a similarity alignment, and prints
 one line per data set and, as the LAST line, one JSON object ``{name: result}``.
 """
@@ -22,10 +22,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from curate.align import pose_errors  # noqa: E402
-from curate.datasets import image_folder, load_ground_truth  # noqa: E402
-from curate.sfm import SfmConfig, run_sfm  # noqa: E402
-from curate.sfm_io import load_sfm  # noqa: E402
+from research.align import pose_errors  # noqa: E402
+from research.datasets import image_folder, load_ground_truth  # noqa: E402
+from curate.sfm.colmap import SfmConfig, run_sfm  # noqa: E402
+from curate.sfm.io import load_sfm  # noqa: E402
 
 
 def main(argv=None) -> int:

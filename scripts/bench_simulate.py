@@ -28,10 +28,10 @@ from dataclasses import asdict
 
 import numpy as np
 
-from curate.energy import EnergyConfig
-from curate.field import FieldConfig
-from curate.progressive import CameraSpec, FieldOccupancyConfig, ProgressiveConfig
-from curate.simulate import METHODS, TEST_SETS, SimulateConfig, run_simulation
+from curate.select.energy import EnergyConfig
+from curate.field.model import FieldConfig
+from curate.simulate.progressive import CameraSpec, FieldOccupancyConfig, ProgressiveConfig
+from curate.simulate.experiment import METHODS, TEST_SETS, SimulateConfig, run_simulation
 
 
 def main() -> None:

@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from curate.cameras import Cameras, look_at
-from curate.grid import NodeGrid
-from curate.select import SelectConfig, capture_kind, select
+from curate.core.cameras import Cameras, look_at
+from curate.core.grid import NodeGrid
+from curate.select.select import SelectConfig, capture_kind, select
 from conftest import random_pool, shared_data
 
 
@@ -60,14 +60,14 @@ def test_auto_runs_the_energy_on_an_object_and_medoids_on_a_walk():
 
 @pytest.mark.parametrize("scene,kind", [("office", "walk"), ("fox", "object"), ("templering", "object")])
 def test_capture_kind_on_real_sets(scene, kind):
-    from curate.datasets import load_ground_truth
+    from research.datasets import load_ground_truth
     d = shared_data(scene)
     assert capture_kind(load_ground_truth(d))[0] == kind
 
 
 def test_equal_units_train_once(tmp_path, monkeypatch):
     """The selection and FVS with the same subset: one training, the other unit a copy under its own name."""
-    import curate.evaluate as ev
+    import curate.evaluate.units as ev
     calls = []
 
     def fake_entry(args):

@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from curate.baselines import (farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset, random_subset,
+from curate.select.baselines import (farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset, random_subset,
                               stride_subset)
-from curate.cameras import Cameras, look_at
-from curate.grid import NodeGrid
-from curate.select import SelectConfig, select
+from curate.core.cameras import Cameras, look_at
+from curate.core.grid import NodeGrid
+from curate.select.select import SelectConfig, select
 from conftest import random_pool
 
 

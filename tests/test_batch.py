@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from curate.batch import find_poses, plan, read_list
+from curate.batch.runner import find_poses, plan, read_list
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"

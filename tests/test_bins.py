@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from curate.bins import DirectionBins
-from curate.energy import total_variation
+from curate.select.bins import DirectionBins
+from curate.select.energy import total_variation
 
 
 @pytest.mark.parametrize("binning", ["paper", "equal-area"])

@@ -2,7 +2,7 @@
 
 import pytest
 
-from curate.budget import budget_text, parse_budget, resolve_budget
+from curate.core.budget import budget_text, parse_budget, resolve_budget
 
 
 @pytest.mark.parametrize("text, value", [("60", 60), (" 7 ", 7), ("0", 0), ("15%", 0.15), ("100%", 1.0),

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from curate.cameras import (Cameras, c2w_from_colmap, c2w_from_w2c, colmap_from_c2w, look_at, opencv_from_opengl,
+from curate.core.cameras import (Cameras, c2w_from_colmap, c2w_from_w2c, colmap_from_c2w, look_at, opencv_from_opengl,
                             opengl_from_opencv, quat_from_rotmat, rotmat_from_quat, w2c_from_c2w)
-from curate.transforms_json import read_transforms, write_transforms
+from curate.core.transforms_json import read_transforms, write_transforms
 from conftest import random_pool, shared_data
 
 

@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from curate.energy import EnergyConfig, compute_energy
-from curate.grid import NodeGrid
-from curate.transforms_json import write_transforms
+from curate.select.energy import EnergyConfig, compute_energy
+from curate.core.grid import NodeGrid
+from curate.core.transforms_json import write_transforms
 from conftest import random_pool, shared_data
 
 
@@ -93,7 +93,7 @@ def test_simulate_rejects_bad_size():
 
 def test_score_accepts_a_colmap_model(tmp_path, pool_json):
     """The same cameras written as a COLMAP model (binary and text) score the same as the transforms.json."""
-    from curate.sfm import reconstruction_from_cameras
+    from curate.sfm.colmap import reconstruction_from_cameras
     path, cams = pool_json
     rec = reconstruction_from_cameras(cams)
     (tmp_path / "bin").mkdir()

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from curate.bins import DirectionBins
-from curate.cameras import Cameras, look_at
-from curate.energy import EnergyConfig, compute_energy, energy_reference, total_variation
-from curate.grid import NodeGrid, box_from_cameras
-from curate.visibility import FrustumVisibility, build_pair_index, frustum_visible_reference
+from curate.select.bins import DirectionBins
+from curate.core.cameras import Cameras, look_at
+from curate.select.energy import EnergyConfig, compute_energy, energy_reference, total_variation
+from curate.core.grid import NodeGrid, box_from_cameras
+from curate.select.visibility import FrustumVisibility, build_pair_index, frustum_visible_reference
 from conftest import random_pool
 
 

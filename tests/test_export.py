@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.cameras import Cameras, look_at
-from curate.transforms_json import read_transforms, write_transforms
+from curate.core.cameras import Cameras, look_at
+from curate.core.transforms_json import read_transforms, write_transforms
 
 from test_ingest import sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.export import ExportConfig, export_names, export_subset  # noqa: E402
-from curate.sfm import SfmConfig, import_poses, read_cameras  # noqa: E402
+from curate.export.subset import ExportConfig, export_names, export_subset  # noqa: E402
+from curate.sfm.colmap import SfmConfig, import_poses, read_cameras  # noqa: E402
 
 
 def ring(n: int, w: int = 64, h: int = 48) -> Cameras:
@@ -114,8 +114,8 @@ def test_export_names_unique():
 
 def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
     """An SfM-like run: working copies at half size, a model with points; the export describes the originals."""
-    from curate.sfm import reconstruction_from_cameras
-    from curate.sfm_prep import write_outputs
+    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.prep import write_outputs
 
     orig = ring(8, 128, 96)
     photos = tmp_path / "photos"

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from curate.cameras import Cameras, look_at
-from curate.field import SH_C0, FieldConfig, RadianceField, composite_weights, contract
-from curate.metrics import camera_rays, psnr, render_image, ssim
-from curate.train import train_field
+from curate.core.cameras import Cameras, look_at
+from curate.field.model import SH_C0, FieldConfig, RadianceField, composite_weights, contract
+from curate.field.metrics import camera_rays, psnr, render_image, ssim
+from curate.field.train import train_field
 
 torch.set_num_threads(1)  # see FieldConfig.threads
 
@@ -160,7 +160,7 @@ def test_errors_for_degenerate_inputs(sphere_scene):
         train_field(_tiny_cfg(), cams, imgs[:3], iters=5)
     with pytest.raises(ValueError, match="degenerate scene box"):
         RadianceField(FieldConfig(), [0, 0, 0], [1, 1, 0])
-    from curate.grid import NodeGrid
+    from curate.core.grid import NodeGrid
     empty = NodeGrid([-1] * 3, [1] * 3, 8, np.zeros((8, 8, 8), bool))
     with pytest.raises(ValueError, match="prior is empty"):
         train_field(_tiny_cfg(), cams, imgs, iters=5, box=([-1] * 3, [1] * 3), prior=empty)

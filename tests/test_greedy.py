@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from curate.cameras import Cameras
-from curate.energy import EnergyConfig, compute_energy, energy_of_subset
-from curate.grid import NodeGrid
-from curate.greedy import GreedyState, bruteforce_scores, greedy_select, greedy_select_bruteforce, trace_energy
-from curate.visibility import build_pair_index
+from curate.core.cameras import Cameras
+from curate.select.energy import EnergyConfig, compute_energy, energy_of_subset
+from curate.core.grid import NodeGrid
+from curate.select.greedy import GreedyState, bruteforce_scores, greedy_select, greedy_select_bruteforce, trace_energy
+from curate.select.visibility import build_pair_index
 from conftest import random_pool
 
 
@@ -126,7 +126,7 @@ def test_greedy_empty_pool_and_zero_budget():
 
 
 def test_chunked_step_updates_match(monkeypatch):
-    import curate.greedy as greedy
+    import curate.select.greedy as greedy
     cfg = EnergyConfig()
     _, _, idx = make_index(n=80, res=8, seed=1)
     whole = greedy_select(idx, 15, cfg, backend="numpy")
@@ -138,7 +138,7 @@ def test_chunked_step_updates_match(monkeypatch):
 
 def test_node_state_scores_fresh_candidates_exactly():
     """Progressive placement scores a fresh batch of candidates against a fixed set."""
-    from curate.greedy import NodeState
+    from curate.select.greedy import NodeState
     cfg = EnergyConfig()
     for backend in BACKENDS:
         check_fresh_candidates(NodeState, cfg, backend)

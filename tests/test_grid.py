@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from curate.energy import EnergyConfig, compute_energy
-from curate.grid import NodeGrid
-from curate.select import score_cameras
-from curate.visibility import build_pair_index
+from curate.select.energy import EnergyConfig, compute_energy
+from curate.core.grid import NodeGrid
+from curate.select.select import score_cameras
+from curate.select.visibility import build_pair_index
 from conftest import random_pool
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.ingest import find_images, ingest, read_image, working_name
-from curate.quality import assess, hamming, phash, sharpness
+from curate.sfm.ingest import find_images, ingest, read_image, working_name
+from curate.sfm.quality import assess, hamming, phash, sharpness
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -149,9 +149,9 @@ def test_quality_duplicates_and_blur():
 
 def test_images_json_records_skips(tmp_path):
     """The SfM stage's images.json lists skipped files with reasons (ingest + quality only, no COLMAP)."""
-    from curate.sfm_config import SfmConfig
-    from curate.sfm_prep import prepare_photos, write_outputs
-    from curate.cameras import Cameras
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.prep import prepare_photos, write_outputs
+    from curate.core.cameras import Cameras
     photos = make_mixed_folder(tmp_path / "photos", n_good=3)
     (photos / "copy_of_0001.jpg").write_bytes((photos / "0001.jpg").read_bytes())  # an exact duplicate
     out = tmp_path / "run" / "sfm"
@@ -168,11 +168,11 @@ def test_images_json_records_skips(tmp_path):
 
 
 def test_later_stages_do_not_import_pycolmap():
-    """Only curate.sfm may import pycolmap, and only inside its functions."""
+    """Only curate.sfm.colmap may import pycolmap, and only inside its functions."""
     import subprocess
     import sys
-    code = ("import sys, curate.sfm, curate.sfm_io, curate.sfm_prep, curate.ingest, curate.quality, "
-            "curate.align, curate.datasets; assert 'pycolmap' not in sys.modules, 'pycolmap imported'")
+    code = ("import sys, curate.sfm.colmap, curate.sfm.io, curate.sfm.prep, curate.sfm.ingest, curate.sfm.quality, "
+            "research.align, research.datasets; assert 'pycolmap' not in sys.modules, 'pycolmap imported'")
     r = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr

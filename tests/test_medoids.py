@@ -1,17 +1,17 @@
-"""View medoids (curate.medoids): a Voronoi local optimum of the mean view distance, checked by brute force."""
+"""View medoids (curate.select.medoids): a Voronoi local optimum of the mean view distance, checked by brute force."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from curate.cameras import Cameras, look_at
-from curate.energy import EnergyConfig
-from curate.grid import NodeGrid
-from curate.medoids import MedoidsConfig, medoids_select, view_depths
-from curate.select import SelectConfig, Selection, select
-from curate.stage import config_from_dict
-from curate.visibility import build_pair_index
+from curate.core.cameras import Cameras, look_at
+from curate.select.energy import EnergyConfig
+from curate.core.grid import NodeGrid
+from curate.select.medoids import MedoidsConfig, medoids_select, view_depths
+from curate.select.select import SelectConfig, Selection, select
+from curate.core.stage import config_from_dict
+from curate.select.visibility import build_pair_index
 from conftest import random_pool
 
 GRID = NodeGrid([-1, -1, -1], [1, 1, 1], 6)
@@ -207,7 +207,7 @@ def test_select_medoids_end_to_end_and_config_roundtrip():
 def test_energy_share_medoids_then_the_paper_greedy(share, budget, initial):
     """energy_share: round(share * budget) cameras by the paper's greedy on top of the medoids
     of the rest; share 0 is plain medoids, share 1 the paper's greedy alone."""
-    from curate.greedy import greedy_select
+    from curate.select.greedy import greedy_select
     cams = random_pool(30, seed=11)
     idx = build_pair_index(cams, GRID.nodes(), EnergyConfig().bins)
     s = select(cams, GRID, budget, SelectConfig("medoids", medoids=MedoidsConfig(energy_share=share)),
@@ -243,7 +243,7 @@ def ref_blur_penalty(D, sharp, k=6):
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("weight,power", [(0.5, 1.0), (3.0, 1.0), (1.0, 2.0)])
 def test_sharpness_local_optimum_against_reference(seed, weight, power):
-    from curate.medoids import blur_penalty, embed
+    from curate.select.medoids import blur_penalty, embed
     K, budget = 14, 3
     cams, nodes, idx = pool_index(K, seed)
     sharp = np.random.default_rng(seed).lognormal(0.0, 0.6, K)
@@ -286,7 +286,7 @@ def test_blurred_frame_gives_way_to_a_sharp_neighbour():
 
 
 def test_blur_penalty_degenerate_inputs_never_nan():
-    from curate.medoids import blur_penalty, embed
+    from curate.select.medoids import blur_penalty, embed
     cams = random_pool(8, seed=2)
     c, a = embed(cams, np.ones(8))
     pen, tau, nbrs = blur_penalty(c, a, np.ones(8))
@@ -315,8 +315,8 @@ def test_blur_penalty_degenerate_inputs_never_nan():
 
 def test_uses_sharpness_only_when_view_medoids_run_with_a_weight():
     """Callers read every photo for sharpness only when select() would use it."""
-    from curate.baselines import hemisphere_cameras
-    from curate.select import capture_kind, uses_sharpness
+    from curate.select.baselines import hemisphere_cameras
+    from curate.select.select import capture_kind, uses_sharpness
     x = np.linspace(0.0, 2.0, 9)
     c = np.c_[x, np.zeros(9), np.zeros(9)]
     walk = Cameras(look_at(c, c + [0.0, 1.0, 0.0]), 300.0, 300.0, 160, 120, 320, 240)

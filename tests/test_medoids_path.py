@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from curate.cameras import Cameras, look_at
-from curate.medoids import PATH_CAP, MedoidsConfig, embed, medoids_select, path_weights
+from curate.core.cameras import Cameras, look_at
+from curate.select.medoids import PATH_CAP, MedoidsConfig, embed, medoids_select, path_weights
 
 
 def walk(x, y=None, yaw=None):
@@ -75,12 +75,12 @@ def test_shuffled_photos_are_not_a_path():
     cams = walk(rng.permutation(np.linspace(0.0, 10.0, 60)))   # a walk in shuffled name order
     c, a = embed(cams, np.ones(len(cams)))
     assert path_weights(c, a) is None
-    from curate.medoids import PathOrderWarning
+    from curate.select.medoids import PathOrderWarning
     with pytest.warns(PathOrderWarning, match="capture order"):
         got, _ = medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=True))
     assert got == medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=False))[0]    # falls back to plain medoids
-    from curate.grid import NodeGrid
-    from curate.select import SelectConfig, select
+    from curate.core.grid import NodeGrid
+    from curate.select.select import SelectConfig, select
     sel = select(cams, NodeGrid([-1, 0, -1], [11, 2, 1], 6), 6,
                  SelectConfig("medoids", medoids=MedoidsConfig(depth=1.0, path_weights=True)))
     assert sel.chosen == got and "path weights ignored" in sel.to_dict()["note"]   # said in selection.json
@@ -141,7 +141,7 @@ def test_cli_path_weights_flag(tmp_path):
     import subprocess
     import sys
 
-    from curate.transforms_json import write_transforms
+    from curate.core.transforms_json import write_transforms
     x = np.r_[np.arange(0.0, 5.0, 0.1), np.arange(5.0, 10.0, 0.4)]
     files = [f"frame_{i:04d}.png" for i in range(len(x))]       # name order = capture order
     path = write_transforms(tmp_path / "transforms.json", walk(x), files)
@@ -155,8 +155,8 @@ def test_cli_path_weights_flag(tmp_path):
         got[flag] = json.loads(p.stdout)["chosen"]
         cfg = json.loads((out / "selection.json").read_text())["config"]["medoids"]
         assert cfg["path_weights"] is (flag == "--path-weights")
-    from curate.grid import NodeGrid
-    from curate.select import SelectConfig, select
+    from curate.core.grid import NodeGrid
+    from curate.select.select import SelectConfig, select
     grid = NodeGrid([-1, 0.5, -1], [11, 2, 1], 8)
     for flag, on in (("--path-weights", True), ("--no-path-weights", False)):
         ref = select(walk(x), grid, 5, SelectConfig("medoids", medoids=MedoidsConfig(path_weights=on))).chosen
@@ -185,7 +185,7 @@ def test_real_frame_sequences_are_paths_and_shuffled_ones_are_not(scene):
     """Path weights turn on for the real sets' frames in name order, and off once the
     same cameras are shuffled (photos from several sessions, renamed files)."""
     from conftest import shared_data
-    from curate.datasets import load_ground_truth
+    from research.datasets import load_ground_truth
     cams = load_ground_truth(shared_data(scene))
     spread = float(np.median(np.linalg.norm(cams.centres - cams.centres.mean(0), axis=1)))
     c, a = embed(cams, np.full(len(cams), spread))              # look-at depth: the centres' spread

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from curate.cameras import Cameras, look_at
-from curate.grid import NodeGrid
-from curate.occupancy import (OccupancyConfig, RefineConfig, occupancy_from_points, refine_occupancy,
+from curate.core.cameras import Cameras, look_at
+from curate.core.grid import NodeGrid
+from curate.occupancy.masks import (OccupancyConfig, RefineConfig, occupancy_from_points, refine_occupancy,
                               scene_box)
 
 BOX_LO, BOX_HI = np.array([0.0, -1.0, 0.0]), np.array([2.0, 1.0, 0.6])
@@ -97,8 +97,8 @@ def test_refine_occupancy_modes():
 
 
 def test_prior_mask_limits_field_cells():
-    from curate.field import FieldConfig, RadianceField
-    from curate.occupancy import prior_mask
+    from curate.field.model import FieldConfig, RadianceField
+    from curate.occupancy.masks import prior_mask
     f = RadianceField(FieldConfig(res_schedule=(33,)), [-1] * 3, [1] * 3)
     m = np.zeros((8, 8, 8), bool)
     m[:4] = True  # x < 0 half occupied

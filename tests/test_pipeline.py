@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.evaluate import summarize
+from curate.evaluate.units import summarize
 from curate.pipeline import RunConfig, surface_band
-from curate.stage import config_dict, config_from_dict
+from curate.core.stage import config_dict, config_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
@@ -146,9 +146,9 @@ def test_run_refuses_a_run_folder_inside_the_photos(tmp_path):
 
 
 def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
-    from curate.sfm import import_poses
-    from curate.sfm_config import SfmConfig
-    from curate.sfm_io import load_sfm, original_cameras
+    from curate.sfm.colmap import import_poses
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.io import load_sfm, original_cameras
     from curate.pipeline import image_paths
     import_poses(SfmConfig(progress=False), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
     res = load_sfm(tmp_path)
@@ -162,8 +162,8 @@ def test_sharpness_weight_reaches_view_medoids_and_reruns_only_the_selection(tmp
     """`--sharpness-weight` is measured from the photos of an import, recorded per pool image in
     selection.json, and a changed weight redoes the select stage only."""
     from curate.pipeline import image_paths, photo_sharpness
-    from curate.quality import files_sharpness
-    from curate.sfm_io import load_sfm
+    from curate.sfm.quality import files_sharpness
+    from curate.sfm.io import load_sfm
     out = tmp_path / "run"
     base = _cmd(out, "--no-evaluate", "--method", "medoids")
     subprocess.run(base, check=True, capture_output=True, env=_env(), timeout=600)

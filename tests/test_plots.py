@@ -7,7 +7,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 from PIL import Image
 
-from curate.plots import bar_chart, camera_map, colormap, jpeg_data_uri, line_chart, png_data_uri
+from curate.report.plots import bar_chart, camera_map, colormap, jpeg_data_uri, line_chart, png_data_uri
 
 
 def test_svgs_parse_and_hold_their_data():

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from curate.energy import compute_energy
-from curate.grid import NodeGrid
-from curate.progressive import CameraSpec, ProgressiveConfig, progressive_placement, random_cameras, scene_oracle
-from curate.synthetic import make_scene
+from curate.select.energy import compute_energy
+from curate.core.grid import NodeGrid
+from curate.simulate.progressive import CameraSpec, ProgressiveConfig, progressive_placement, random_cameras, scene_oracle
+from curate.simulate.synthetic import make_scene
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_each_step_takes_the_best_candidate(room):
     lo, hi = s.interior
     placed, _ = progressive_placement(g.nodes(), (lo, hi), s.free_box, cfg, occupied, min_depth)
     # Re-draw the same candidates and check none beats the placed one.
-    from curate.progressive import draw_acceptable
+    from curate.simulate.progressive import draw_acceptable
     cands = draw_acceptable(np.random.default_rng(3), *s.free_box, 40, cfg, occupied, min_depth)
     best = max(compute_energy(cands[k], g.nodes(), cfg.energy).energy for k in range(len(cands)))
     assert np.isclose(compute_energy(placed, g.nodes(), cfg.energy).energy, best, rtol=1e-12)
@@ -61,7 +61,7 @@ def test_random_cameras_spec():
 
 
 def test_grid_oracle_agrees_with_scene(room):
-    from curate.progressive import grid_oracle
+    from curate.simulate.progressive import grid_oracle
     s, _ = room
     lo, hi = s.interior
     g = NodeGrid(lo - 0.1, hi + 0.1, 48)
@@ -71,7 +71,7 @@ def test_grid_oracle_agrees_with_scene(room):
     agree = (occupied(pts) == s.occupied(pts)).mean()
     assert agree > 0.93  # voxel rounding near surfaces only
     # Cameras: an exact-depth test and the marched one agree on "closer than the margin".
-    from curate.progressive import random_cameras
+    from curate.simulate.progressive import random_cameras
     cams = random_cameras(np.random.default_rng(1), s.free_box[0], s.free_box[1], 60, CameraSpec())
     _, exact = scene_oracle(s)
     near_exact = exact(cams) < 0.5
@@ -91,7 +91,7 @@ class _ExactField:
 
 def test_field_oracle_free_box_then_field(room):
     from scipy import ndimage
-    from curate.progressive import FieldOccupancyConfig, FieldOracle
+    from curate.simulate.progressive import FieldOccupancyConfig, FieldOracle
     s, _ = room
     cfg = FieldOccupancyConfig(res=20, probe=(24, 18))
     o = FieldOracle(s.interior, s.free_box, 0.3, cfg)
@@ -115,7 +115,7 @@ def test_field_oracle_free_box_then_field(room):
 
 
 def test_first_hit_depth_on_a_slab():
-    from curate.progressive import first_hit_depth
+    from curate.simulate.progressive import first_hit_depth
     dens = lambda p: np.where(p[:, 0] > 2.0, 5.0, 0.0)  # noqa: E731  opaque slab beyond x = 2
     o = np.zeros((3, 3))
     d = np.array([[1.0, 0, 0], [0, 1.0, 0], [np.sqrt(0.5), np.sqrt(0.5), 0]])

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from curate.cameras import Cameras, look_at
-from curate.report import floorplan, top_down_axes, write_html
+from curate.core.cameras import Cameras, look_at
+from curate.report.run_report import floorplan, top_down_axes, write_html
 
 
 def make_run(root: Path, evaluated: bool = True) -> Path:
@@ -121,7 +121,7 @@ def test_floorplan_averages_vertical_columns():
 
 
 def test_simulate_report(tmp_path):
-    from curate.report_simulate import write_simulate_html
+    from curate.simulate.report import write_simulate_html
     cams = Cameras(look_at(np.array([[1.0, 0, 1], [0, 1, 1]]), np.zeros((2, 3))), 50, 50, 32, 24, 64, 48)
     tests = ("hemisphere", "random", "ours")
     rep = {"scene": "kitchen", "scene_seed": 0, "budget": 2, "n_nodes": 99, "wall_seconds": 3.5,

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.align import pose_errors, umeyama
-from curate.cameras import Cameras, look_at
-from curate.sfm_io import load_sfm, original_cameras
+from research.align import pose_errors, umeyama
+from curate.core.cameras import Cameras, look_at
+from curate.sfm.io import load_sfm, original_cameras
 
 from test_ingest import make_mixed_folder, need, sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.sfm import SfmConfig, import_poses, run_sfm  # noqa: E402
+from curate.sfm.colmap import SfmConfig, import_poses, run_sfm  # noqa: E402
 
 
 def small_cfg(**kw) -> SfmConfig:
@@ -57,7 +57,7 @@ def test_pose_errors_zero_for_similar_copy():
 @pytest.mark.parametrize("matcher", ["exhaustive", "sequential"])
 def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     """Verification RANSAC gets cfg.seed (COLMAP's -1 reseeds every run), the mapper the strict initial pair."""
-    from curate import sfm
+    from curate.sfm import colmap as sfm
     got: dict = {}
     monkeypatch.setattr(pycolmap, "match_" + matcher, lambda db, **kw: got.update(kw))
     sfm._match(small_cfg(seed=7, loop_detection=False), tmp_path / "database.db", matcher)
@@ -128,7 +128,7 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
 
 # ------------------------------------------------------------------ fox: accuracy, import
 def test_fox_sfm_matches_published_poses(fox_run):
-    from curate.transforms_json import read_transforms
+    from curate.core.transforms_json import read_transforms
     ref, _ = read_transforms(need("fox") / "transforms.json")
     res = load_sfm(fox_run)
     assert len(res.cameras) >= 0.95 * len(ref)
@@ -141,7 +141,7 @@ def test_fox_sfm_matches_published_poses(fox_run):
 
 
 def test_import_transforms_json(tmp_path):
-    from curate.transforms_json import read_transforms
+    from curate.core.transforms_json import read_transforms
     src = need("fox") / "transforms.json"
     ref, files = read_transforms(src)
     out = import_poses(small_cfg(), src, tmp_path / "run")
@@ -186,7 +186,7 @@ def test_import_colmap_model(fox_run, tmp_path, fmt):
 
 # ------------------------------------------------------------------ templering
 def test_templering_sfm_matches_ground_truth(tmp_path):
-    from curate.datasets import load_templering
+    from research.datasets import load_templering
     folder = need("templering")
     ref = load_templering(folder)
     photos = tmp_path / "photos"  # only the PNGs (the folder also holds the calibration text files)

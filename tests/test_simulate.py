@@ -5,8 +5,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from curate.progressive import ProgressiveConfig
-from curate.simulate import SimulateConfig, TEST_SETS, run_simulation
+from curate.simulate.progressive import ProgressiveConfig
+from curate.simulate.experiment import SimulateConfig, TEST_SETS, run_simulation
 
 
 def nearest_view_train(cams, images, tests, out, seed):
@@ -45,10 +45,10 @@ def test_simulation_table(tmp_path):
 def test_field_variant_end_to_end(tmp_path):
     """Algorithm 1 with occupancy from the field being trained: runs, keeps cameras out of solids,
     records the occupancy source and the loop's timings."""
-    from curate.cameras import Cameras
-    from curate.field import FieldConfig
-    from curate.progressive import FieldOccupancyConfig
-    from curate.synthetic import make_scene
+    from curate.core.cameras import Cameras
+    from curate.field.model import FieldConfig
+    from curate.simulate.progressive import FieldOccupancyConfig
+    from curate.simulate.synthetic import make_scene
     tiny = FieldConfig(res_schedule=(24, 32), upsample_at=(100,), n_inner=32, n_outer=8, batch_rays=1024,
                        val_every=0, occ_update_start=15, occ_update_every=15, tv_block=12)
     cfg = SimulateConfig(scene="kitchen", budget=6, n_test=3, node_res=10, methods=("ours", "random"),

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from curate.stats import holdout_split, mean_ci, paired_difference, seeds_summary, t_quantile
+from curate.core.stats import holdout_split, mean_ci, paired_difference, seeds_summary, t_quantile
 
 
 def test_holdout_every_14th():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from curate.cameras import Cameras, look_at
-from curate.synthetic import LAYOUTS, make_scene
+from curate.core.cameras import Cameras, look_at
+from curate.simulate.synthetic import LAYOUTS, make_scene
 
 
 def cam_at(c, target, size=(64, 48), f=50.0):

@@ -1,0 +1,159 @@
+"""Run-folder stages: each stage writes ``RUN/<stage>/stage.json`` when it finishes.
+
+``stage.json`` holds the stage's *key* (a hash of its resolved config and of the
+content of its inputs), the resolved config itself, versions, the seed when there is
+one, the stage's outputs and its wall time. A stage whose ``stage.json`` exists with
+the same key is skipped; a stage killed half-way leaves no ``stage.json`` and is
+redone. Writes go to a temporary file and are renamed, so a record is whole or absent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+STAGE_FILE = "stage.json"
+
+
+def config_dict(cfg: Any) -> dict:
+    """A dataclass config (possibly nested) as a JSON-ready dict."""
+    if dataclasses.is_dataclass(cfg):
+        return {f.name: config_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
+    if isinstance(cfg, (list, tuple)):
+        return [config_dict(v) for v in cfg]  # type: ignore[return-value]
+    if isinstance(cfg, Path):
+        return str(cfg)  # type: ignore[return-value]
+    return cfg
+
+
+def _record(cfg: Any) -> Any:
+    """:func:`config_dict`, also inside plain dicts (a stage's config may be ``{"select":
+    SelectConfig, ...}``). Not used for keys: :func:`stage_key` keeps its hashing unchanged."""
+    if isinstance(cfg, dict):
+        return {k: _record(v) for k, v in cfg.items()}
+    if isinstance(cfg, (list, tuple)) and not dataclasses.is_dataclass(cfg):
+        return [_record(v) for v in cfg]
+    return config_dict(cfg)
+
+
+def hash_files(paths: Iterable[str | Path], h: "hashlib._Hash | None" = None) -> str:
+    """SHA-256 over the names, sizes and content of ``paths`` (in the given order)."""
+    h = h or hashlib.sha256()
+    for p in paths:
+        p = Path(p)
+        h.update(p.name.encode())
+        if p.is_file():
+            h.update(str(p.stat().st_size).encode())
+            with open(p, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+        else:
+            h.update(b"<missing>")
+    return h.hexdigest()
+
+
+def stage_key(cfg: Any, input_hashes: Iterable[str] = ()) -> str:
+    """Key of a stage run: its resolved config plus the hashes of its inputs."""
+    h = hashlib.sha256(json.dumps(config_dict(cfg), sort_keys=True, default=str).encode())
+    for x in input_hashes:
+        h.update(x.encode())
+    return h.hexdigest()[:16]
+
+
+def versions() -> dict:
+    """Versions of Python, curate and the main dependencies that are already imported or importable cheaply."""
+    from curate import __version__
+    out = {"python": platform.python_version(), "curate": __version__}
+    from importlib import metadata
+    for name in ("numpy", "torch", "pycolmap", "open3d", "rawpy", "scikit-image"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def read_stage(stage_dir: str | Path) -> dict | None:
+    p = Path(stage_dir) / STAGE_FILE
+    if not p.is_file():
+        return None
+    try:
+        return json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def is_fresh(stage_dir: str | Path, key: str) -> bool:
+    """True when the stage finished earlier with the same key."""
+    rec = read_stage(stage_dir)
+    return rec is not None and rec.get("key") == key
+
+
+def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
+    """True when the stage finished earlier with the same ``key`` (and ``force`` is off): skip it.
+
+    Otherwise the stage's folder is emptied (a stale or half-written run is removed,
+    its record first, so a crash in between never leaves a stale record) and False is
+    returned: run the stage, then :func:`finish_stage`.
+    """
+    import shutil
+    stage_dir = Path(stage_dir)
+    if not force and is_fresh(stage_dir, key):
+        return True
+    (stage_dir / STAGE_FILE).unlink(missing_ok=True)
+    if stage_dir.exists():
+        shutil.rmtree(stage_dir)
+    stage_dir.mkdir(parents=True)
+    return False
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename: a reader
+    never sees half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + f".tmp{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def write_json_atomic(path: str | Path, obj: Any) -> Path:
+    return write_text_atomic(path, json.dumps(obj, indent=1, default=str))
+
+
+def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outputs: dict | None = None,
+                 seed: int | None = None, **extra: Any) -> dict:
+    """Write the stage record; call last, once every output file is in place."""
+    rec = {"key": key, "config": _record(cfg), "versions": versions(), "seed": seed,
+           "seconds": round(time.perf_counter() - started, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+           "outputs": outputs or {}, **extra}
+    write_json_atomic(Path(stage_dir) / STAGE_FILE, rec)
+    return rec
+
+
+def config_from_dict(cls: type, d: dict) -> Any:
+    """Inverse of :func:`config_dict` for a dataclass ``cls`` whose fields all have defaults.
+
+    Nested dataclasses are rebuilt, lists become tuples where the default is a tuple,
+    and unknown keys raise ``ValueError`` (a record from another version is not guessed at).
+    """
+    base = cls()
+    kw = {}
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    for k, v in d.items():
+        if k not in names:
+            raise ValueError(f"{cls.__name__} has no option {k!r}")
+        cur = getattr(base, k)
+        if dataclasses.is_dataclass(cur) and isinstance(v, dict):
+            v = config_from_dict(type(cur), v)
+        elif isinstance(cur, tuple) and isinstance(v, list):
+            v = tuple(v)
+        kw[k] = v
+    return cls(**kw)

@@ -1,0 +1,149 @@
+"""Read and write NeRF ``transforms.json`` files (instant-ngp, nerfstudio, Blender-synthetic).
+
+Poses in the file are OpenGL/NeRF camera-to-world (x right, y up, z backward);
+they are converted to the project's OpenCV camera-to-world on reading and back on
+writing (``curate.core.cameras.opencv_from_opengl``).
+
+Intrinsics may be global (top level) or per frame (a frame's keys win):
+``fl_x fl_y cx cy w h``, or ``camera_angle_x`` (and optionally ``camera_angle_y``)
+for a field of view; ``k1 k2 p1 p2`` distortion. Missing ``w``/``h`` are read from
+the image header; a missing principal point is the image centre.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from curate.core.cameras import Cameras, opencv_from_opengl, opengl_from_opencv
+
+_IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG", ".tif", ".tiff")
+
+
+def _resolve_image(root: Path, file_path: str) -> Path | None:
+    p = (root / file_path)
+    if p.suffix and p.exists():
+        return p
+    for ext in _IMAGE_EXTS:
+        q = p.with_name(p.name + ext)
+        if q.exists():
+            return q
+    return p if p.exists() else None
+
+
+def _image_size(path: Path | None) -> tuple[int, int] | None:
+    if path is None:
+        return None
+    from PIL import Image
+    with Image.open(path) as im:
+        return im.size
+
+
+def read_transforms(path: str | Path) -> tuple[Cameras, list[str]]:
+    """Read a transforms.json.
+
+    Returns:
+        cameras: OpenCV c2w cameras, ``names`` = each frame's ``file_path`` as written.
+        file_paths: absolute paths of the frames' images (resolved against the json's folder;
+            an extension is added when the file path has none, as Blender-synthetic files do).
+    """
+    path = Path(path)
+    meta = json.loads(path.read_text())
+    frames = meta.get("frames")
+    if not isinstance(frames, list) or not frames:
+        raise ValueError(f"{path}: no 'frames' list")
+    root = path.parent
+    c2w, fx, fy, cx, cy, ws, hs, dist, names, files = [], [], [], [], [], [], [], [], [], []
+    for i, fr in enumerate(frames):
+        if "transform_matrix" not in fr:
+            raise ValueError(f"{path}: frame {i} has no transform_matrix")
+        get = lambda k, fr=fr: fr.get(k, meta.get(k))  # noqa: E731
+        fp = str(fr.get("file_path", ""))
+        img = _resolve_image(root, fp) if fp else None
+        w, h = get("w"), get("h")
+        if w is None or h is None:
+            size = _image_size(img)
+            if size is None:
+                raise ValueError(f"{path}: frame {i} ({fp!r}) has no w/h and its image was not found")
+            w, h = size
+        w, h = float(w), float(h)
+        if get("fl_x") is not None:
+            f_x = float(get("fl_x"))
+            f_y = float(get("fl_y")) if get("fl_y") is not None else f_x
+        elif get("camera_angle_x") is not None:
+            f_x = 0.5 * w / math.tan(0.5 * float(get("camera_angle_x")))
+            f_y = 0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None else f_x
+        else:
+            raise ValueError(f"{path}: frame {i} has neither fl_x nor camera_angle_x")
+        m = np.asarray(fr["transform_matrix"], np.float64)
+        if m.shape == (3, 4):
+            m = np.vstack([m, [0, 0, 0, 1]])
+        if m.shape != (4, 4):
+            raise ValueError(f"{path}: frame {i} transform_matrix has shape {m.shape}")
+        c2w.append(m)
+        fx.append(f_x)
+        fy.append(f_y)
+        cx.append(float(get("cx")) if get("cx") is not None else 0.5 * w)
+        cy.append(float(get("cy")) if get("cy") is not None else 0.5 * h)
+        ws.append(int(round(w)))
+        hs.append(int(round(h)))
+        dist.append([float(get(k) or 0.0) for k in ("k1", "k2", "p1", "p2")])
+        names.append(fp)
+        files.append(str(img) if img is not None else str(root / fp))
+    cams = Cameras(opencv_from_opengl(np.stack(c2w)), np.array(fx), np.array(fy), np.array(cx), np.array(cy),
+                   np.array(ws), np.array(hs), np.array(dist), tuple(names))
+    return cams, files
+
+
+def transforms_dict(cams: Cameras, file_paths: list[str] | None = None, extra: dict | None = None) -> dict:
+    """nerfstudio / instant-ngp transforms.json content for ``cams``.
+
+    Intrinsics go to the top level when all cameras share them (instant-ngp reads
+    only those), else per frame (nerfstudio reads both). ``camera_model`` is
+    ``OPENCV`` when any distortion is non-zero, else ``PINHOLE``.
+    """
+    file_paths = list(cams.names) if file_paths is None else list(file_paths)
+    if len(file_paths) != len(cams):
+        raise ValueError("one file path per camera is needed")
+    intr = np.stack([cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height], axis=1)
+    intr = np.concatenate([intr, cams.dist], axis=1)
+    keys = ("fl_x", "fl_y", "cx", "cy", "w", "h", "k1", "k2", "p1", "p2")
+    shared = len(cams) > 0 and bool(np.all(intr == intr[0]))
+    has_dist = bool(np.any(cams.dist != 0))
+
+    def intr_of(row) -> dict:
+        d = {k: float(v) for k, v in zip(keys, row)}
+        d["w"], d["h"] = int(d["w"]), int(d["h"])
+        if not has_dist:
+            for k in keys[6:]:
+                d.pop(k)
+        return d
+
+    out: dict = {"camera_model": "OPENCV" if has_dist else "PINHOLE"}
+    if shared:
+        out.update(intr_of(intr[0]))
+        out["camera_angle_x"] = float(2 * math.atan(0.5 * cams.width[0] / cams.fx[0]))
+        out["camera_angle_y"] = float(2 * math.atan(0.5 * cams.height[0] / cams.fy[0]))
+    gl = opengl_from_opencv(cams.c2w)
+    frames = []
+    for i in range(len(cams)):
+        fr = {"file_path": file_paths[i], "transform_matrix": gl[i].tolist()}
+        if not shared:
+            fr.update(intr_of(intr[i]))
+        frames.append(fr)
+    out["frames"] = frames
+    if extra:
+        out.update(extra)
+    return out
+
+
+def write_transforms(path: str | Path, cams: Cameras, file_paths: list[str] | None = None,
+                     extra: dict | None = None) -> Path:
+    """Write ``cams`` as a transforms.json; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(transforms_dict(cams, file_paths, extra), indent=2))
+    return path

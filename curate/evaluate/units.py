@@ -1,0 +1,281 @@
+"""Evaluation stage: train the same radiance field on each subset and score the held-out views.
+
+The protocol (the paper's real-scene test): every ``holdout_every``-th registered image
+is held out; each *unit* trains the same field (same :class:`curate.field.model.FieldConfig`,
+same iterations, same scene box, same training seed) on one subset of the pool and
+renders the held-out views. Units: ``energy`` (the selection), ``random_s<k>`` (random
+subsets of the same size, one per seed), ``fvs`` (farthest-view sampling), ``all`` (the
+whole pool: the ceiling).
+
+Training length is a number of iterations, not seconds, so results do not depend on
+how loaded the machine is (``EvalConfig.time_budget_s`` adds an optional cap).
+
+Each unit is a stage of its own, ``RUN/evaluate/<key>/``:
+
+* ``stage.json``: the stage record (written last: a unit killed half-way is redone);
+* ``metrics.json``: ``{"method", "seed", "subset": [camera indices], "n_train", "psnr",
+  "ssim", "per_view": [{"name", "psnr", "ssim"}], "train_seconds", "iters"}``;
+* ``renders/<stem>.png``: the rendered held-out views (``stem`` of the camera name);
+* ``field.pt``: the trained field.
+
+``RUN/evaluate/gt/<stem>.png`` holds the held-out ground truth at evaluation size.
+Units run in a process pool (one single-threaded training per CPU core on a CPU
+machine, one at a time on CUDA).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from curate.core.cameras import Cameras
+from curate.core.executors import available_memory, cpu_count
+from curate.field.model import FieldConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class EvalConfig:
+    """How subsets are compared."""
+
+    holdout_every: int = 14
+    """Every n-th registered image (0, n, 2n, ... in name order) is a held-out test view."""
+    max_side: int = 240
+    """Training and test images are resized so that their longer side is at most this (pixels)."""
+    iters: int = 800
+    """Training iterations per subset (the same for every subset); ~3 minutes of one CPU core."""
+    time_budget_s: float | None = None
+    """Optional cap on each training's seconds (None: iterations only, independent of machine load)."""
+    random_seeds: int = 3
+    """Random subsets of the selection's size, one per seed 0..n-1."""
+    train_seed: int = 0
+    """Seed of every field training (weights, ray batches)."""
+    methods: tuple[str, ...] = ("energy", "random", "fvs", "all")
+    """Which subsets to train: the selection ('energy'), 'random', 'fvs', 'all'."""
+    workers: int = 0
+    """Trainings in parallel (0: one per CPU core, capped by memory; 1 on CUDA)."""
+    field: FieldConfig = field(default_factory=FieldConfig)
+    """The radiance field and its training settings."""
+
+
+@dataclass
+class Unit:
+    """One training: a subset of the registered cameras, scored on the held-out ones."""
+
+    key: str
+    """Folder name under RUN/evaluate ('energy', 'random_s0', 'fvs', 'all')."""
+    method: str
+    seed: int | None
+    subset: list[int]
+    """Indices into the registered cameras."""
+
+
+def eval_cameras(cams: Cameras, max_side: int) -> Cameras:
+    """The cameras at evaluation size (longer side <= ``max_side``; never upscaled)."""
+    f = np.minimum(1.0, max_side / np.maximum(cams.width, cams.height))  # [N]
+    return cams.scaled_images(f)
+
+
+def _stem(name: str) -> str:
+    return Path(name).stem
+
+
+def auto_workers(cfg: EvalConfig, n_units: int, pixels: int) -> int:
+    """Parallel trainings: one per core on CPU (each single-threaded), limited by memory
+    (about 40 bytes of cached rays per training pixel) and by the number of units."""
+    if cfg.workers > 0:
+        return min(cfg.workers, max(n_units, 1))
+    if cfg.field.resolve_device().type == "cuda":
+        return 1
+    per = 40 * pixels + (1 << 30)
+    return int(max(1, min(cpu_count(), n_units, available_memory() // per)))
+
+
+def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: Sequence[str],
+               holdout: Sequence[int], box: tuple, key: str, field_path: str | None = None) -> dict:
+    """Train (or load ``field_path``) on ``unit.subset``, render and score ``holdout``; write the unit's folder.
+
+    ``cams`` are the registered cameras at evaluation size, ``paths`` their image files.
+    Returns the metrics dict (also written as ``metrics.json``).
+    """
+    import torch
+    from curate.field.metrics import psnr, render_image, save_png, ssim
+    from curate.core.stage import begin_stage, finish_stage, write_json_atomic
+    from curate.field.train import TrainStats, load_image, train_field
+
+    d = Path(run_dir) / "evaluate" / unit.key
+    if begin_stage(d, key):
+        return json.loads((d / "metrics.json").read_text())
+    t0 = time.perf_counter()
+    if cfg.field.threads > 0:
+        torch.set_num_threads(cfg.field.threads)
+    sub = list(unit.subset)
+    if field_path is not None:
+        from curate.field.model import RadianceField
+        fld = RadianceField.load(field_path, device=cfg.field.resolve_device())
+        meta = json.loads((Path(field_path).parent / "train.json").read_text())
+        st = TrainStats(iters=meta["iters"], train_seconds=meta["train_seconds"], stop_reason=meta.get("stop_reason", ""))
+        import shutil
+        shutil.copy2(field_path, d / "field.pt")
+    else:
+        fld, st = train_field(cfg.field, cams[sub], [paths[i] for i in sub], d, time_budget_s=cfg.time_budget_s,
+                              iters=cfg.iters, seed=cfg.train_seed, box=box)
+    per = []
+    test = cams[list(holdout)]
+    with torch.no_grad():
+        for k, i in enumerate(holdout):
+            gt = load_image(paths[i], int(test.width[k]), int(test.height[k]))
+            pred = render_image(fld, test, k)
+            save_png(pred, d / "renders" / f"{_stem(cams.names[i])}.png")
+            per.append({"name": cams.names[i], "psnr": psnr(pred, gt), "ssim": ssim(pred, gt)})
+    m = {"method": unit.method, "seed": unit.seed, "subset": sub, "n_train": len(sub),
+         "psnr": float(np.mean([r["psnr"] for r in per])), "ssim": float(np.mean([r["ssim"] for r in per])),
+         "per_view": per, "train_seconds": round(st.train_seconds, 2), "iters": st.iters}
+    write_json_atomic(d / "metrics.json", m)
+    finish_stage(d, key, cfg, t0, outputs={"metrics": "metrics.json", "renders": "renders/"}, seed=cfg.train_seed,
+                 method=unit.method, psnr=m["psnr"])
+    log.info("evaluate %s: %d images, PSNR %.2f, SSIM %.3f (%.0fs)", unit.key, len(sub), m["psnr"], m["ssim"],
+             time.perf_counter() - t0)
+    return m
+
+
+def _unit_entry(args: tuple) -> dict:
+    """Process-pool entry point (spawned workers re-import curate)."""
+    logging.basicConfig(level=args[-1], format="%(levelname)s %(name)s: %(message)s")
+    return train_unit(*args[:-1])
+
+
+def save_ground_truth(run_dir: str | Path, cams: Cameras, paths: Sequence[str], holdout: Sequence[int]) -> None:
+    """``RUN/evaluate/gt/<stem>.png``: the held-out images at evaluation size."""
+    from curate.field.metrics import save_png
+    from curate.field.train import load_image
+    d = Path(run_dir) / "evaluate" / "gt"
+    for i in holdout:
+        p = d / f"{_stem(cams.names[i])}.png"
+        if not p.is_file():
+            save_png(load_image(paths[i], int(cams.width[i]), int(cams.height[i])), p)
+
+
+def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg: EvalConfig, cams: Cameras,
+              paths: Sequence[str], holdout: Sequence[int], box: tuple,
+              field_paths: dict[str, str] | None = None, progress: bool = True,
+              executor=None) -> dict[str, dict]:
+    """Run every unit (finished ones are skipped); {unit key: metrics}.
+
+    ``keys[unit.key]`` is the unit's stage key; ``field_paths`` maps a unit key to an
+    already trained field (the occupancy stage's pool field serves 'all').
+    ``executor``: any ``concurrent.futures.Executor`` (e.g. a Ray-backed one for a
+    cluster) to submit the trainings to; None: a local process pool (see
+    :func:`auto_workers`), or this process for one worker.
+    """
+    from curate.core.stage import is_fresh
+    from tqdm import tqdm
+    field_paths = field_paths or {}
+    save_ground_truth(run_dir, cams, paths, holdout)
+    todo = [u for u in units if not is_fresh(Path(run_dir) / "evaluate" / u.key, keys[u.key])]
+    fresh = [u for u in units if u not in todo]
+    # units with equal keys (e.g. method "auto" chose exactly the FVS subset) train once; the others copy it
+    first: dict[str, Unit] = {keys[u.key]: u for u in reversed(fresh)}
+    dups = []
+    for u in todo:
+        src = first.setdefault(keys[u.key], u) if u.key not in field_paths else u
+        if src is not u:
+            dups.append((u, src))
+    todo = [u for u in todo if all(u is not d for d, _ in dups)]
+    results: dict[str, dict] = {}
+    for u in fresh:
+        results[u.key] = json.loads((Path(run_dir) / "evaluate" / u.key / "metrics.json").read_text())
+    pix = int(np.max([np.sum(cams.width[u.subset] * cams.height[u.subset]) for u in todo])) if todo else 0
+    n_train = [u for u in todo if u.key not in field_paths]
+    workers = auto_workers(cfg, len(n_train), pix)
+    level = logging.getLogger("curate").getEffectiveLevel()
+    args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), level)
+            for u in todo]
+    bar = tqdm(total=len(units), initial=len(fresh), desc="evaluate (trainings)", disable=not progress)
+    from concurrent.futures import as_completed
+    if executor is not None and todo:
+        futs = {executor.submit(_unit_entry, a): a[1].key for a in args}
+        for f in as_completed(futs):
+            results[futs[f]] = f.result()
+            bar.update(1)
+    elif workers <= 1 or len(todo) <= 1:
+        for a in args:
+            results[a[1].key] = _unit_entry(a)
+            bar.update(1)
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+            futs = {ex.submit(_unit_entry, a): a[1].key for a in args}
+            for f in as_completed(futs):
+                results[futs[f]] = f.result()
+                bar.update(1)
+    for u, src in dups:
+        results[u.key] = _copy_unit(Path(run_dir) / "evaluate", src.key, u, results[src.key])
+        bar.update(1)
+    bar.close()
+    return {u.key: results[u.key] for u in units}
+
+
+def _copy_unit(ev_dir: Path, src_key: str, unit: Unit, metrics: dict) -> dict:
+    """Copy the finished unit ``src_key`` as ``unit`` (same key: same subset and settings);
+    its record last, so a crash leaves no stale record."""
+    import shutil
+    from curate.core.stage import STAGE_FILE, write_json_atomic, write_text_atomic
+    src, dst = ev_dir / src_key, ev_dir / unit.key
+    if dst.exists():
+        shutil.rmtree(dst)
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns(STAGE_FILE))
+    m = {**metrics, "method": unit.method, "seed": unit.seed, "copied_from": src_key}
+    write_json_atomic(dst / "metrics.json", m)
+    write_text_atomic(dst / STAGE_FILE, (src / STAGE_FILE).read_text())
+    return m
+
+
+def summarize(results: dict[str, dict]) -> tuple[dict, dict, float | None]:
+    """(methods, paired, gap_closed) for report.json from the units' metrics.
+
+    ``methods[m]``: ``psnr``, ``ssim``, ``per_view`` (random: means over seeds, plus
+    ``psnr_std``/``ssim_std`` over the seeds' means and ``runs`` per seed). ``paired``:
+    per-view differences energy - random (random averaged over seeds per view) and
+    energy - fvs with 95% confidence intervals. ``gap_closed``: (energy - random) /
+    (all - random), None when not defined.
+    """
+    from curate.core.stats import paired_difference, seeds_summary
+    methods: dict[str, dict] = {}
+    rand = {k: v for k, v in results.items() if v["method"] == "random"}
+    for k, v in results.items():
+        if v["method"] != "random":
+            methods[v["method"]] = {**_brief(v), "key": k}
+    if rand:
+        runs = {str(v["seed"]): {**_brief(v), "key": k} for k, v in rand.items()}
+        ps, ss = seeds_summary([v["psnr"] for v in rand.values()]), seeds_summary([v["ssim"] for v in rand.values()])
+        names = [r["name"] for r in next(iter(rand.values()))["per_view"]]
+        pv = [{"name": n, "psnr": float(np.mean([v["per_view"][i]["psnr"] for v in rand.values()])),
+               "ssim": float(np.mean([v["per_view"][i]["ssim"] for v in rand.values()]))} for i, n in enumerate(names)]
+        methods["random"] = {"psnr": ps["mean"], "psnr_std": ps["std"], "ssim": ss["mean"], "ssim_std": ss["std"],
+                             "seeds": [int(s) for s in runs], "runs": runs, "per_view": pv,
+                             "n_train": next(iter(rand.values()))["n_train"]}
+    paired = {}
+    if "energy" in methods:
+        e = [r["psnr"] for r in methods["energy"]["per_view"]]
+        for other in ("random", "fvs"):
+            if other in methods:
+                paired[f"energy-{other}"] = paired_difference(e, [r["psnr"] for r in methods[other]["per_view"]])
+    gap = None
+    if all(m in methods for m in ("energy", "random", "all")):
+        room = methods["all"]["psnr"] - methods["random"]["psnr"]
+        if room > 1e-6:
+            gap = (methods["energy"]["psnr"] - methods["random"]["psnr"]) / room
+    return methods, paired, gap
+
+
+def _brief(v: dict) -> dict:
+    return {k: v[k] for k in ("psnr", "ssim", "per_view", "n_train", "train_seconds", "iters", "seed") if k in v}

@@ -1,0 +1,180 @@
+"""Export the chosen subset of a run as a ready-to-train dataset.
+
+``export_subset(run_dir, chosen_names, out_dir)`` writes, into ``out_dir`` (normally
+``RUN/export``):
+
+* ``images/``: the chosen ORIGINAL photos (never the working copies), as symbolic links
+  to the originals (``mode="link"``, absolute targets) or copies (``mode="copy"``). A file
+  is named after the original (its base name; the path relative to the photo folder with
+  ``/`` turned into ``__`` when two originals share a base name). RAW originals are linked
+  or copied as they are (``.dng``, ``.cr2``...): most NeRF tools cannot read them; convert
+  them first. Originals carrying a non-trivial EXIF orientation are linked as they are too:
+  the cameras describe the UPRIGHT image (as curate decoded it), so a tool must apply the
+  EXIF orientation (nerfstudio and PIL's ``exif_transpose`` do); a warning is logged.
+* ``sparse/0/``: a COLMAP binary model of only the chosen images, in COLMAP's world frame
+  (that of ``RUN/sfm/sparse/0``), image names = the names in ``images/`` and cameras
+  rescaled to the originals' resolution, so ``out_dir`` is a complete COLMAP dataset
+  (Gaussian splatting's ``-s out_dir``, ``ns-process-data``). 3D points are kept when at
+  least ``min_track`` (default 2) chosen images observe them, with only those observations.
+* ``transforms.json``: the same cameras (nerfstudio / instant-ngp, OpenGL convention, same
+  world frame, full-resolution intrinsics), ``file_path`` = ``images/<name>``.
+* ``images.txt``: the chosen photos, one per line, in the order chosen, as paths relative
+  to the photo folder (for an import: the image names of the imported model/transforms).
+* ``export.json``: what was written (mode, per image: camera name, export name, original).
+
+The photo folder is never written: an ``out_dir`` inside it is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from curate.sfm.io import load_sfm, original_cameras, sfm_dir
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["ExportConfig", "export_subset", "export_names"]
+
+MODES = ("link", "copy")
+
+
+@dataclass(frozen=True)
+class ExportConfig:
+    """How the chosen subset is written."""
+
+    mode: str = "link"
+    """``link``: symbolic links to the original photos; ``copy``: copies of them."""
+    min_track: int = 2
+    """A sparse point is kept in ``sparse/0`` when at least this many chosen images observe it."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"export mode must be one of {MODES}, got {self.mode!r}")
+        if self.min_track < 1:
+            raise ValueError("min_track must be >= 1")
+
+
+def export_names(originals: list[str], rels: list[str]) -> list[str]:
+    """File names in ``images/`` for the originals: base names, unique.
+
+    A base name shared by several originals becomes the relative path with ``/`` -> ``__``
+    (then, if still not unique, prefixed by its position ``0007_``).
+    """
+    base = [Path(o).name for o in originals]
+    count: dict[str, int] = {}
+    for b in base:
+        count[b] = count.get(b, 0) + 1
+    out = [b if count[b] == 1 else r.replace("/", "__").replace("\\", "__") for b, r in zip(base, rels)]
+    if len(set(out)) != len(out):
+        out = [f"{i:04d}_{n}" for i, n in enumerate(out)]
+    return out
+
+
+def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
+    """Folders the export must not be written into: the photo folder of the SfM stage, the originals' folders."""
+    roots = {Path(o).resolve().parent for o in originals}
+    st = sfm_dir(run_dir) / "stage.json"
+    if st.is_file():
+        rec = json.loads(st.read_text())
+        for k in ("photos",):
+            if rec.get(k):
+                roots.add(Path(rec[k]).resolve())
+    return sorted(roots)
+
+
+def _clear(out: Path) -> None:
+    """Remove what an earlier export wrote (links are removed, never their targets)."""
+    for name in ("images", "sparse"):
+        p = out / name
+        if p.is_symlink() or p.is_file():
+            p.unlink()
+        elif p.is_dir():
+            shutil.rmtree(p)  # does not follow the symbolic links inside
+    for name in ("transforms.json", "images.txt", "export.json"):
+        (out / name).unlink(missing_ok=True)
+
+
+def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | Path | None = None,
+                  mode: str = "link", config: ExportConfig | None = None) -> Path:
+    """Write the chosen cameras of the run's SfM stage as a dataset in ``out_dir``; returns ``out_dir``.
+
+    Args:
+        run_dir: run folder with a finished SfM / import stage (``RUN/sfm``).
+        chosen_names: [K] camera names of ``RUN/sfm/cameras.json`` (= ``chosen_names`` of
+            ``selection.json``), in the order chosen. Unknown or repeated names: ``ValueError``.
+        out_dir: destination (default ``RUN/export``); what an earlier export wrote there is replaced.
+        mode: ``link`` (symbolic links to the originals, default) or ``copy``.
+        config: overrides ``mode`` when given (``min_track`` lives there).
+
+    Layout of ``out_dir``: see the module docstring.
+    """
+    cfg = config or ExportConfig(mode=mode)
+    run_dir = Path(run_dir).resolve()
+    out = Path(out_dir).resolve() if out_dir is not None else run_dir / "export"
+    res = load_sfm(run_dir)
+    cams = res.cameras
+    index = {n: i for i, n in enumerate(cams.names)}
+    chosen = list(chosen_names)
+    unknown = [n for n in chosen if n not in index]
+    if unknown:
+        raise ValueError(f"{len(unknown)} chosen name(s) are not registered cameras of {sfm_dir(run_dir)}: "
+                         f"{unknown[:5]}")
+    if len(set(chosen)) != len(chosen):
+        dup = sorted({n for n in chosen if chosen.count(n) > 1})
+        raise ValueError(f"chosen names repeated: {dup[:5]}")
+    if not chosen:
+        raise ValueError("nothing to export: no chosen names")
+
+    full, paths = original_cameras(cams, res.records)
+    idx = [index[n] for n in chosen]
+    sub = full[idx]
+    recs = {r.get("working") or r.get("rel"): r for r in res.records.get("photos", [])}
+    # (original_cameras gives the name, not the path, for an import stage: take it from the record)
+    originals = [str(Path(recs.get(n, {}).get("original") or paths[i]).resolve()) for n, i in zip(chosen, idx)]
+    rels = [recs.get(n, {}).get("rel") or n for n in chosen]
+    names = export_names(originals, rels)
+    for root in _photo_roots(run_dir, originals):
+        if out == root or root in out.parents:
+            raise ValueError(f"export folder {out} is inside the photo folder {root}: the photo folder is never written")
+    missing = [o for o in originals if not Path(o).is_file()]
+    if missing:
+        raise FileNotFoundError(f"{len(missing)} original photo(s) not found: {missing[:3]}")
+
+    out.mkdir(parents=True, exist_ok=True)
+    _clear(out)
+    img_dir = out / "images"
+    img_dir.mkdir()
+    for src, name in zip(originals, names):
+        dst = img_dir / name
+        if cfg.mode == "link":
+            os.symlink(src, dst)
+        else:
+            shutil.copy2(src, dst)
+    rotated = [n for n in chosen if int(recs.get(n, {}).get("orientation", 1) or 1) != 1]
+    if rotated:
+        logger.warning("export: %d original(s) carry an EXIF rotation (%s...): the cameras describe the upright "
+                       "image, read them with the EXIF orientation applied", len(rotated), rotated[0])
+    raw = [n for n, r in zip(names, chosen) if recs.get(r, {}).get("format") == "raw"]
+    if raw:
+        logger.warning("export: %d RAW original(s) (%s...) linked as they are: convert them for NeRF tools",
+                       len(raw), raw[0])
+
+    from curate.sfm.colmap import write_subset_model  # pycolmap lives there
+    sizes = {n: (int(sub.width[k]), int(sub.height[k])) for k, n in enumerate(chosen)}
+    model = write_subset_model(sfm_dir(run_dir) / "sparse" / "0", chosen, out / "sparse" / "0",
+                               rename=dict(zip(chosen, names)), sizes=sizes, min_track=cfg.min_track)
+
+    from curate.core.transforms_json import write_transforms
+    write_transforms(out / "transforms.json", sub, [f"images/{n}" for n in names])
+    (out / "images.txt").write_text("".join(r + "\n" for r in rels))
+    manifest = {"config": asdict(cfg), "run_dir": str(run_dir), "n_images": len(chosen), "model": model,
+                "images": [{"camera": c, "name": n, "original": o, "rel": r}
+                           for c, n, o, r in zip(chosen, names, originals, rels)]}
+    (out / "export.json").write_text(json.dumps(manifest, indent=1))
+    logger.info("export: %d images (%s), %d sparse points -> %s", len(chosen), cfg.mode, model["n_points3D"], out)
+    return out

@@ -1,0 +1,419 @@
+"""A grid radiance field that trains on a CPU in minutes (DirectVoxGO / Plenoxels style).
+
+Scene parametrisation
+---------------------
+World points ``x`` are first normalised per axis into the scene box,
+``n = (x - centre) / half_size`` (the box becomes ``[-1, 1]^3``), then contracted
+(mip-NeRF 360 style, L-infinity norm) so that unbounded captures (a room, a fox on a
+wall) fit in a finite grid::
+
+    c(n) = n                                   if ||n||_inf <= 1
+    c(n) = (2 - 1 / ||n||_inf) * n / ||n||_inf  otherwise          (c in [-2, 2]^3)
+
+Two dense grids over the contracted cube ``[-2, 2]^3`` (``res^3`` nodes, trilinear
+``grid_sample``, ``align_corners=True``; per axis the box ``[-1, 1]`` takes a fraction
+``inner_frac`` = 0.75 of the nodes, the contracted outside the rest) hold the raw density (1 channel) and
+spherical-harmonic colour coefficients (``3 * (deg + 1)^2`` channels). Density is
+``softplus(raw + bias)`` (shifted softplus, clamped), colour ``sigmoid(SH(dir))``.
+Rays leaving the grid see a learned constant background colour.
+
+Sample spacing ``delta`` is measured in *contracted* space, so the density is "per
+contracted unit": inside the box that is per ``half_size`` of world length.
+
+Speed
+-----
+* an occupancy mask ``occ`` ([res, res, res] bool, same nodes as the grids) skips
+  samples in empty cells before any grid lookup (they get zero density);
+* colour is only evaluated for samples whose rendering weight exceeds
+  ``color_thresh`` (DVGO's "fast colour threshold");
+* transmittance uses ``exp(-cumsum(sigma * delta))`` with ``sigma * delta`` clamped,
+  which is stable for any density.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+log = logging.getLogger(__name__)
+
+SH_C0 = 0.28209479177387814
+SH_C1 = 0.4886025119029199
+SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
+MAX_TAU = 30.0  # clamp on sigma * delta: exp(-30) ~ 1e-13, opaque for every purpose
+MAX_RAW = 30.0  # clamp on the raw density before the softplus
+
+
+@dataclass
+class FieldConfig:
+    """Configuration of :class:`RadianceField` and of its training (``curate.field.train``)."""
+
+    res_schedule: tuple[int, ...] = (64, 96, 128)
+    """Grid resolutions (nodes per axis over the contracted cube [-2, 2]^3), coarse to fine."""
+    upsample_at: tuple[int, ...] = (400, 1200)
+    """Iterations at which the grids grow to the next resolution of ``res_schedule``."""
+    sh_degree: int = 0
+    """Spherical-harmonic degree of the view-dependent colour (0: diffuse, 1 or 2). Each degree
+    multiplies the colour lookups' cost (3 * (deg + 1)^2 channels)."""
+    inner_frac: float = 0.75
+    """Fraction of the grid (per axis) given to the scene box; the rest holds the contracted outside."""
+    n_inner: int = 64
+    """Samples per ray inside the scene box (uniform in depth) at the finest resolution; the
+    coarser grids use proportionally fewer."""
+    n_outer: int = 32
+    """Samples per ray outside the box (uniform in disparity, i.e. in contracted space), at the
+    finest resolution (fewer, by the square root of the resolution ratio, on coarser grids)."""
+    trans_thresh: float = 1e-3
+    """Training: samples whose transmittance is below this (hidden) get no gradient pass."""
+    near: float = 0.02
+    """Near plane as a fraction of the mean box half size."""
+    far: float = 50.0
+    """Far plane in box half sizes (contracts to 2 - 1/far)."""
+    alpha_init: float = 1e-3
+    """Initial opacity of one inner sample step (sets the density bias)."""
+    color_thresh: float = 1e-4
+    """Samples with a rendering weight below this skip the colour lookup."""
+    prune_thresh: float = 2e-3
+    """A cell whose opacity across one cell is below this is marked empty at occupancy updates."""
+    prune_dilation: int = 2
+    """Cells within this many cells of an occupied one stay active (Chebyshev distance)."""
+    occ_update_every: int = 100
+    """Iterations between occupancy-mask updates (0: never)."""
+    occ_update_start: int = 100
+    """First iteration with an occupancy update."""
+    batch_rays: int = 4096
+    """Rays per training iteration."""
+    lr_density: float = 0.1
+    """Adam learning rate of the density grid."""
+    lr_color: float = 0.05
+    """Adam learning rate of the SH colour grid."""
+    lr_bg: float = 0.01
+    """Adam learning rate of the background colour."""
+    lr_decay_iters: int = 5000
+    """Learning rates decay by 10x over this many iterations (exponentially)."""
+    tv_density: float = 1e-4
+    """Weight of the total-variation loss on the density grid (the whole grid, every iteration)."""
+    tv_color: float = 1e-5
+    """Weight of the total-variation loss on the colour grid (random blocks)."""
+    sparsity: float = 0.0
+    """Weight of the Cauchy sparsity loss on sample optical depths (Plenoxels-style; pushes faint
+    density in free space to zero, sharpening the occupancy). 0 disables."""
+    tv_block: int = 24
+    """Side in cells of the random block the TV losses are computed on each iteration."""
+    val_every: int = 200
+    """Iterations between validation renders (early stopping); 0 disables."""
+    patience: int = 3
+    """Stop after this many validations without a PSNR gain of ``min_delta``."""
+    min_delta: float = 0.05
+    """Validation PSNR gain (dB) that counts as progress."""
+    device: str = "auto"
+    """'auto' (CUDA when available, else CPU), 'cpu' or 'cuda'."""
+    threads: int = 1
+    """torch CPU threads (0: leave torch's default). 1 by default: on a shared 2-core machine,
+    OpenMP threads competing with other processes made each iteration ~20x slower (measured)."""
+
+    def resolve_device(self) -> torch.device:
+        if self.device == "auto":
+            return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        return torch.device(self.device)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+    @staticmethod
+    def from_dict(d: dict) -> "FieldConfig":
+        known = {f for f in FieldConfig.__dataclass_fields__}
+        kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in known}
+        return FieldConfig(**kw)
+
+
+def contract(n: torch.Tensor) -> torch.Tensor:
+    """L-inf scene contraction: [..., 3] normalised points -> [..., 3] in [-2, 2]^3."""
+    m = n.abs().amax(-1, keepdim=True).clamp_min(1e-9)
+    return torch.where(m <= 1, n, (2 - 1 / m) * n / m)
+
+
+def sh_basis(d: torch.Tensor, degree: int) -> torch.Tensor:
+    """Real SH basis: unit directions [K, 3] -> [K, (degree + 1)^2]."""
+    x, y, z = d.unbind(-1)
+    out = [torch.full_like(x, SH_C0)]
+    if degree >= 1:
+        out += [-SH_C1 * y, SH_C1 * z, -SH_C1 * x]
+    if degree >= 2:
+        out += [SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2 * z * z - x * x - y * y),
+                SH_C2[3] * x * z, SH_C2[4] * (x * x - y * y)]
+    return torch.stack(out, -1)
+
+
+def composite_weights(sigma: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
+    """Volume-rendering weights ``w_i = T_i * (1 - exp(-sigma_i * delta_i))`` with
+    ``T_i = exp(-sum_{j<i} sigma_j * delta_j)``; ``sigma * delta`` clamped to ``MAX_TAU``.
+
+    sigma, delta: [B, S] (non-negative) -> w: [B, S]; ``1 - w.sum(1)`` is the transmittance
+    left for the background.
+    """
+    tau = (sigma * delta).clamp(min=0, max=MAX_TAU)
+    T = torch.exp(-(torch.cumsum(tau, 1) - tau))
+    return T * (1 - torch.exp(-tau))
+
+
+def ray_box(o: torch.Tensor, d: torch.Tensor, lo: float = -1.0, hi: float = 1.0):
+    """Slab test. o, d: [B, 3] -> (t_enter [B], t_exit [B]); t_exit < t_enter for a miss."""
+    inv = 1.0 / torch.where(d.abs() < 1e-12, torch.full_like(d, 1e-12), d)
+    t0, t1 = (lo - o) * inv, (hi - o) * inv
+    return torch.minimum(t0, t1).amax(-1), torch.maximum(t0, t1).amin(-1)
+
+
+class RadianceField(torch.nn.Module):
+    """Density + SH colour grids over a contracted scene box; see the module docstring.
+
+    Args:
+        cfg: the configuration.
+        box_min, box_max: [3] world corners of the scene box (the uncontracted region).
+    """
+
+    def __init__(self, cfg: FieldConfig, box_min, box_max):
+        super().__init__()
+        lo = np.asarray(box_min, np.float64).reshape(3)
+        hi = np.asarray(box_max, np.float64).reshape(3)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(hi - lo <= 0):
+            raise ValueError(f"degenerate scene box {lo} .. {hi}")
+        if not 0 < cfg.inner_frac < 1:
+            raise ValueError("inner_frac must be in (0, 1)")
+        if cfg.sh_degree not in (0, 1, 2):
+            raise ValueError("sh_degree must be 0, 1 or 2")
+        if not cfg.res_schedule or min(cfg.res_schedule) < 2:
+            raise ValueError("res_schedule needs resolutions >= 2")
+        self.cfg = cfg
+        self.register_buffer("centre", torch.tensor(0.5 * (lo + hi), dtype=torch.float32))  # [3]
+        self.register_buffer("half_size", torch.tensor(0.5 * (hi - lo), dtype=torch.float32))  # [3]
+        r = int(cfg.res_schedule[0])
+        inner_step = 2.0 / max(cfg.n_inner, 1)  # at the finest resolution
+        # softplus(bias) * inner_step = -log(1 - alpha_init)
+        target = -math.log(1 - cfg.alpha_init) / inner_step
+        self.bias = float(math.log(math.expm1(target)))
+        self.n_sh = (cfg.sh_degree + 1) ** 2
+        self.density = torch.nn.Parameter(torch.zeros(1, 1, r, r, r))  # [1, 1, R, R, R] raw density
+        self.color = torch.nn.Parameter(torch.zeros(1, 3 * self.n_sh, r, r, r))  # [1, 3*n_sh, R, R, R]
+        self.bg = torch.nn.Parameter(torch.zeros(3))  # [3] raw background colour (sigmoid)
+        self.register_buffer("occ", torch.ones(r, r, r, dtype=torch.bool))  # [R, R, R] active cells
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def res(self) -> int:
+        return int(self.density.shape[-1])
+
+    def normalise(self, x: torch.Tensor) -> torch.Tensor:
+        """World points [..., 3] -> box-normalised points [..., 3] (box = [-1, 1]^3)."""
+        return (x - self.centre) / self.half_size
+
+    def to_unit(self, c: torch.Tensor) -> torch.Tensor:
+        """Contracted points [..., 3] -> grid coordinates in [-1, 1] (per axis piecewise linear:
+        the box [-1, 1] takes ``inner_frac`` of the grid, the contracted outside the rest)."""
+        f = self.cfg.inner_frac
+        a = c.abs()
+        return torch.where(a <= 1, f * c, torch.sign(c) * (f + (1 - f) * (a - 1)))
+
+    def from_unit(self, g: torch.Tensor) -> torch.Tensor:
+        """Inverse of :meth:`to_unit`: grid coordinates [..., 3] -> contracted points."""
+        f = self.cfg.inner_frac
+        a = g.abs()
+        return torch.where(a <= f, g / f, torch.sign(g) * (1 + (a - f) / (1 - f)))
+
+    def node_contracted(self) -> torch.Tensor:
+        """[R, R, R, 3] contracted (x, y, z) coordinates of every grid node, in the grids' layout:
+        node ``[k, j, i]`` is at x index i, y index j, z index k (grids are stored ``[1, C, Z, Y, X]``
+        so that ``grid_sample`` takes (x, y, z) coordinates as they are)."""
+        ax = torch.linspace(-1, 1, self.res, device=self.density.device)
+        gz, gy, gx = torch.meshgrid(ax, ax, ax, indexing="ij")
+        return self.from_unit(torch.stack([gx, gy, gz], -1))
+
+    def _occ_lookup_unit(self, g: torch.Tensor) -> torch.Tensor:
+        """Grid coordinates [..., 3] in [-1, 1] -> [...] bool, True where the nearest cell is active."""
+        r = self.res
+        idx = ((g + 1) * (0.5 * (r - 1))).round().long().clamp_(0, r - 1)
+        flat = (idx[..., 2] * r + idx[..., 1]) * r + idx[..., 0]
+        return self.occ.reshape(-1)[flat]
+
+    def _occ_lookup(self, c: torch.Tensor) -> torch.Tensor:
+        """Contracted points [..., 3] -> [...] bool, True where the nearest cell is active."""
+        return self._occ_lookup_unit(self.to_unit(c))
+
+    def sigma_at(self, c: torch.Tensor, unit: bool = False) -> torch.Tensor:
+        """Density per contracted unit at contracted points [K, 3] (grid coordinates when ``unit``) -> [K]."""
+        g = (c if unit else self.to_unit(c)).reshape(1, 1, 1, -1, 3)
+        raw = F.grid_sample(self.density, g, mode="bilinear", align_corners=True)
+        raw = raw.reshape(-1)
+        return F.softplus(raw.clamp(max=MAX_RAW) + self.bias)
+
+    def rgb_at(self, c: torch.Tensor, d: torch.Tensor, unit: bool = False) -> torch.Tensor:
+        """Colour at contracted points [K, 3] (grid coordinates when ``unit``) seen along unit world
+        directions [K, 3] -> [K, 3]."""
+        g = (c if unit else self.to_unit(c)).reshape(1, 1, 1, -1, 3)
+        coef = F.grid_sample(self.color, g, mode="bilinear", align_corners=True)
+        coef = coef.reshape(3, self.n_sh, -1)  # [3, n_sh, K]
+        basis = sh_basis(d, self.cfg.sh_degree).T  # [n_sh, K]
+        return torch.sigmoid((coef * basis[None]).sum(1).T)
+
+    def density_world(self, x: np.ndarray | torch.Tensor, chunk: int = 1 << 18) -> np.ndarray:
+        """Density per *world* unit at world points [M, 3] -> [M] float (inside the box exact up to
+        the per-axis scale, which is approximated by the geometric mean of the half sizes)."""
+        x = torch.as_tensor(np.asarray(x), dtype=torch.float32, device=self.centre.device)
+        out = []
+        with torch.no_grad():
+            for s in range(0, x.shape[0], chunk):
+                c = contract(self.normalise(x[s:s + chunk]))
+                sig = self.sigma_at(c) * self._occ_lookup(c)
+                out.append(sig)
+        g = float(torch.prod(self.half_size).item()) ** (1 / 3)
+        return (torch.cat(out) / g).cpu().numpy() if out else np.zeros(0)
+
+    # ------------------------------------------------------------------ rendering
+    def sample(self, o: torch.Tensor, d: torch.Tensor, jitter: torch.Generator | None = None):
+        """Sample points along rays.
+
+        Args:
+            o, d: [B, 3] world origins and unit directions.
+            jitter: a generator for stratified jitter (training), None for midpoints.
+        Returns:
+            t: [B, S] depths (world units along d), c: [B, S, 3] contracted points,
+            delta: [B, S] spacing in contracted space.
+        """
+        cfg = self.cfg
+        on, dn = self.normalise(o), d / self.half_size  # normalised ray: x_n = on + t * dn
+        mean_half = float(self.half_size.mean())
+        near = cfg.near * mean_half
+        t_in, t_out = ray_box(on, dn)
+        hit = t_out > torch.clamp(t_in, min=near)
+        t0 = torch.where(hit, torch.clamp(t_in, min=near), torch.full_like(t_in, near))
+        t1 = torch.where(hit, t_out, t0)
+        B = o.shape[0]
+        scale = self.res / max(cfg.res_schedule)  # fewer samples on the coarse grids
+        S1 = max(8, int(round(cfg.n_inner * scale)))
+        S2 = max(4, int(round(cfg.n_outer * math.sqrt(scale))))
+        if jitter is None:
+            u1 = torch.full((B, S1), 0.5, device=o.device)
+            u2 = torch.full((B, S2), 0.5, device=o.device)
+        else:
+            # drawn on the generator's device (CPU) then moved: same numbers on CPU and CUDA
+            u1 = torch.rand((B, S1), generator=jitter, device=jitter.device).to(o.device)
+            u2 = torch.rand((B, S2), generator=jitter, device=jitter.device).to(o.device)
+        s1 = (torch.arange(S1, device=o.device) + u1) / S1  # [B, S1] in (0, 1)
+        t_inner = t0[:, None] + (t1 - t0)[:, None] * s1
+        tf = torch.maximum(t1 * 1.01, t1 + cfg.far * mean_half)
+        s2 = (torch.arange(S2, device=o.device) + u2) / S2
+        inv = 1 / t1.clamp_min(1e-6)
+        t_outer = 1 / (inv[:, None] + (1 / tf - inv)[:, None] * s2)  # uniform in disparity
+        t = torch.cat([t_inner, t_outer], 1)  # [B, S]
+        c = contract(on[:, None, :] + t[..., None] * dn[:, None, :])  # [B, S, 3]
+        gap = (c[:, 1:] - c[:, :-1]).norm(dim=-1)
+        delta = torch.cat([gap, gap[:, -1:]], 1)
+        return t, c, delta
+
+    def render_rays(self, o: torch.Tensor, d: torch.Tensor, jitter: torch.Generator | None = None,
+                    bg_override: torch.Tensor | None = None) -> dict:
+        """Volume-render rays. o, d: [B, 3] world origins and unit directions.
+
+        Returns a dict: ``rgb`` [B, 3], ``depth`` [B] (expected depth, world units),
+        ``acc`` [B] (opacity), ``sparsity`` (scalar: mean over rays of the summed Cauchy penalty
+        ``log(1 + (tau / 0.05)^2)`` of the samples' optical depths; zero unless ``cfg.sparsity``),
+        ``n_density`` / ``n_color`` (samples evaluated).
+        """
+        B = o.shape[0]
+        t, c, delta = self.sample(o, d, jitter)
+        g = self.to_unit(c).reshape(-1, 3)  # [B*S, 3] grid coordinates
+        keep = self._occ_lookup_unit(g)  # [B*S]
+        S = t.shape[1]
+        if torch.is_grad_enabled() and self.cfg.trans_thresh > 0:
+            # pass 1 without gradients: drop samples hidden behind opaque ones (T < trans_thresh);
+            # they form a suffix of each ray, so the prefix's transmittance stays exact in pass 2
+            with torch.no_grad():
+                fl = keep.nonzero().squeeze(1)
+                sg = torch.zeros(B * S, device=o.device).index_put((fl,), self.sigma_at(g[fl], unit=True))
+                tau0 = (sg.reshape(B, S) * delta).clamp(max=MAX_TAU)
+                T0 = torch.exp(-(torch.cumsum(tau0, 1) - tau0))
+                keep = keep & (T0.reshape(-1) > self.cfg.trans_thresh)
+        flat = keep.nonzero().squeeze(1)  # [K]
+        sig_k = self.sigma_at(g[flat], unit=True)
+        sigma = torch.zeros(B * S, device=o.device, dtype=sig_k.dtype).index_put((flat,), sig_k).reshape(B, S)
+        w = composite_weights(sigma, delta)  # [B, S]
+        acc = w.sum(1)
+        tau = (sigma * delta).clamp(max=MAX_TAU)
+        sparsity = torch.log1p((tau / 0.05) ** 2).sum(1).mean() if self.cfg.sparsity > 0 else tau.new_zeros(())
+        wf = w.reshape(-1)
+        sel = (wf > self.cfg.color_thresh).nonzero().squeeze(1)  # [Kc]
+        ray_idx = torch.div(sel, S, rounding_mode="floor")
+        rgb_k = self.rgb_at(g[sel], d[ray_idx], unit=True)
+        rgb = torch.zeros(B, 3, device=o.device, dtype=rgb_k.dtype).index_add(0, ray_idx, wf[sel, None] * rgb_k)
+        bg = torch.sigmoid(self.bg) if bg_override is None else bg_override
+        rgb = rgb + (1 - acc)[:, None].clamp(0, 1) * bg
+        depth = (w * t).sum(1) + (1 - acc).clamp(0, 1) * t[:, -1]
+        return {"rgb": rgb, "depth": depth, "acc": acc, "sparsity": sparsity, "n_density": int(flat.numel()), "n_color": int(sel.numel())}
+
+    # ------------------------------------------------------------------ training helpers
+    @torch.no_grad()
+    def upsample(self, res: int) -> None:
+        """Grow both grids (and the occupancy mask) to ``res`` nodes per axis (trilinear)."""
+        size = (res, res, res)
+        self.density = torch.nn.Parameter(F.interpolate(self.density.data, size=size, mode="trilinear",
+                                                        align_corners=True))
+        self.color = torch.nn.Parameter(F.interpolate(self.color.data, size=size, mode="trilinear",
+                                                      align_corners=True))
+        occ = F.interpolate(self.occ.float()[None, None], size=size, mode="trilinear", align_corners=True)
+        self.occ = F.max_pool3d(occ, 3, 1, 1)[0, 0] > 0
+        log.info("grids upsampled to %d^3, %.1f%% cells active", res, 100 * self.occ.float().mean().item())
+
+    @torch.no_grad()
+    def update_occupancy(self, prior: torch.Tensor | None = None) -> float:
+        """Mark empty the cells whose opacity across one cell is below ``prune_thresh`` (dilated by
+        ``prune_dilation``); cells already empty stay empty. Returns the active fraction."""
+        f, step = self.cfg.inner_frac, 2.0 / (self.res - 1)  # node spacing in grid units
+        inner = self.node_contracted().abs().amax(-1) <= 1
+        cell = torch.where(inner, step / f, step / (1 - f))  # [R, R, R] cell side in contracted units
+        sig = F.softplus(self.density.clamp(max=MAX_RAW) + self.bias)[0, 0]
+        alive = (1 - torch.exp(-sig * cell)) > self.cfg.prune_thresh
+        k = self.cfg.prune_dilation
+        if k > 0:
+            alive = F.max_pool3d(alive.float()[None, None], 2 * k + 1, 1, k)[0, 0] > 0
+        self.occ &= alive
+        if prior is not None:
+            self.occ &= prior
+        return float(self.occ.float().mean())
+
+    def tv_loss(self, gen: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Total variation (mean squared neighbour difference): density over the whole grid, colour
+        on one random block (``tv_block`` cells a side)."""
+        r, b = self.res, min(self.cfg.tv_block, self.res)
+        i = torch.randint(0, r - b + 1, (3,), generator=gen).tolist()
+        out = []
+        for g in (self.density, self.color[:, :, i[0]:i[0] + b, i[1]:i[1] + b, i[2]:i[2] + b]):
+            blk = g
+            tv = ((blk[:, :, 1:] - blk[:, :, :-1]) ** 2).mean() + ((blk[:, :, :, 1:] - blk[:, :, :, :-1]) ** 2).mean() \
+                + ((blk[..., 1:] - blk[..., :-1]) ** 2).mean()
+            out.append(tv)
+        return out[0], out[1]
+
+    # ------------------------------------------------------------------ checkpoints
+    def save(self, path) -> None:
+        """Checkpoint: state_dict + config + box (``torch.load`` -> :meth:`load`)."""
+        lo = (self.centre - self.half_size).tolist()
+        hi = (self.centre + self.half_size).tolist()
+        torch.save({"config": self.cfg.to_dict(), "box_min": lo, "box_max": hi,
+                    "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()}}, path)
+
+    @staticmethod
+    def load(path, device: str | torch.device = "cpu") -> "RadianceField":
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+        cfg = FieldConfig.from_dict(ck["config"])
+        f = RadianceField(cfg, ck["box_min"], ck["box_max"])
+        r = ck["state_dict"]["density"].shape[-1]
+        if r != f.res:
+            f.upsample(r)
+        f.load_state_dict(ck["state_dict"])
+        return f.to(device)

@@ -1,0 +1,503 @@
+"""SfM stage: photos -> registered cameras + sparse points (COLMAP through pycolmap).
+
+The only module of curate that imports pycolmap (lazily, inside functions). Later
+stages read the results with ``curate.sfm.io.load_sfm`` without pycolmap.
+
+Pipeline (``run_sfm``): ingest (``curate.sfm.ingest``: decode, orient, downscale into
+working copies) -> quality (``curate.sfm.quality``: sharpness, near-duplicates; drop per
+config) -> SIFT extraction (one shared camera when every photo comes from the same
+camera model at the same size, else one camera per photo) -> matching (exhaustive for
+small pools, sequential for ordered frames, spatial with GPS; loop detection with a
+vocabulary tree trained on the capture itself, never a download, so it works offline) ->
+incremental mapping (largest model kept; initial pair with >= ``init_min_num_inliers``
+verified inliers) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
+mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
+and config give the same matches and, up to multi-threaded bundle adjustment, the same
+model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
+transforms.json.
+
+Run-folder contract, ``RUN/sfm/``:
+
+* ``stage.json``: stage record (key, config, versions, timings, statistics); written
+  last, a run killed half-way has none and is redone.
+* ``images/``: working copies (SfM only), longer side <= ``max_image_size``.
+* ``sparse/0/``: COLMAP binary model of the registered images, COLMAP's world frame
+  (for an import: the imported cameras, points when the source had them).
+* ``cameras.json``: the same cameras as ``curate.core.cameras.Cameras`` (OpenCV c2w, same
+  world frame), sorted by name; names are the working-copy names (SfM) or the image
+  names of the imported model / the ``file_path`` of the imported transforms.json.
+  Intrinsics are those of the working copies (SfM) or of the source (import).
+* ``transforms.json``: the same cameras in the nerfstudio convention. SfM: file paths
+  relative to ``RUN/sfm`` (``images/<working name>``), so ``RUN/sfm`` is a complete
+  nerfstudio dataset; import: absolute paths of the original photos.
+  ``curate.sfm.io.original_cameras`` maps cameras to the full-resolution originals.
+* ``points.npy`` [P, 3] float32 sparse points, ``points_rgb.npy`` [P, 3] uint8,
+  ``points_error.npy`` [P] float32 reprojection errors (absent for a transforms.json).
+* ``normalization.json``: ``x_canonical = scale * (x - centre)`` maps the scene into
+  [-1, 1]^3 (``curate.sfm.io.normalization``).
+* ``images.json``: per input file: original path, working name, status (``kept``,
+  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``.
+* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database.
+* ``dense/fused.ply``: dense point cloud, only with CUDA (``dense='auto'``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from curate.core.cameras import Cameras
+from curate.sfm.config import SfmConfig
+from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
+from curate.sfm.prep import choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, write_outputs
+from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["SfmConfig", "run_sfm", "import_poses", "cameras_from_reconstruction"]
+
+
+# ------------------------------------------------------------------ COLMAP's log
+@contextlib.contextmanager
+def colmap_log(path: Path):
+    """Send COLMAP's (glog) messages to ``path`` instead of the terminal while inside.
+
+    glog appends a timestamp and pid to the destination name, so it writes to
+    ``path.part.*`` files that are appended to ``path`` on exit. Errors still reach stderr.
+    """
+    import pycolmap
+    L = pycolmap.logging
+    saved = (L.logtostderr, L.alsologtostderr, L.stderrthreshold)
+    prefix = str(path) + ".part."
+    L.logtostderr, L.alsologtostderr, L.stderrthreshold = False, False, 2
+    for lvl in (L.WARNING, L.ERROR, L.FATAL):
+        L.set_log_destination(lvl, "")
+    L.set_log_destination(L.INFO, prefix)
+    try:
+        yield
+    finally:
+        L.set_log_destination(L.INFO, "")  # closes (and flushes) the file
+        L.logtostderr, L.alsologtostderr, L.stderrthreshold = saved
+        with open(path, "ab") as dst:
+            for part in sorted(path.parent.glob(path.name + ".part.*")):
+                dst.write(part.read_bytes())
+                part.unlink()
+
+
+@contextlib.contextmanager
+def _stdout_to(path: Path):
+    """Redirect the process's stdout file descriptor (C/C++ printf included) to ``path``, appending."""
+    import os
+    import sys
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with open(path, "ab") as f:
+        os.dup2(f.fileno(), 1)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
+# ------------------------------------------------------------------ conversions
+def cameras_from_reconstruction(rec) -> tuple[Cameras, np.ndarray, np.ndarray, np.ndarray]:
+    """Registered images of a ``pycolmap.Reconstruction`` as project cameras, sorted by name.
+
+    pycolmap 4 exposes ``image.cam_from_world()`` (a ``Rigid3d``, world-to-camera); its
+    rotation is read as a matrix (``rotation.matrix()``), avoiding the quaternion order
+    question (pycolmap stores Eigen ``x y z w``, COLMAP's text files ``w x y z``).
+
+    Returns:
+        cameras, points [P, 3] float32, colours [P, 3] uint8, errors [P] float32.
+    """
+    from curate.core.cameras import c2w_from_w2c
+
+    ids = sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name)
+    R, t, fx, fy, cx, cy, w, h, dist, names = [], [], [], [], [], [], [], [], [], []
+    for i in ids:
+        im = rec.image(i)
+        T = im.cam_from_world()
+        R.append(np.asarray(T.rotation.matrix(), np.float64))
+        t.append(np.asarray(T.translation, np.float64))
+        cam = rec.camera(im.camera_id)
+        try:
+            f_x, f_y, c_x, c_y, d = intrinsics_from_colmap(cam.model_name, cam.params)
+        except ValueError as e:
+            logger.warning("%s: %s; using its pinhole part only", im.name, e)
+            f_x, f_y, c_x, c_y, d = cam.focal_length_x, cam.focal_length_y, cam.principal_point_x, \
+                cam.principal_point_y, np.zeros(4)
+        fx.append(f_x), fy.append(f_y), cx.append(c_x), cy.append(c_y), dist.append(d)
+        w.append(cam.width), h.append(cam.height), names.append(im.name)
+    if not ids:
+        cams = Cameras.empty()
+    else:
+        cams = Cameras(c2w_from_w2c(np.stack(R), np.stack(t)), np.array(fx), np.array(fy), np.array(cx),
+                       np.array(cy), np.array(w), np.array(h), np.array(dist), tuple(names))
+    pts3 = list(rec.points3D.values())
+    if pts3:
+        xyz = np.array([p.xyz for p in pts3], np.float32)
+        rgb = np.array([p.color for p in pts3], np.uint8)
+        err = np.array([p.error for p in pts3], np.float32)
+    else:
+        xyz, rgb, err = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), np.zeros(0, np.float32)
+    return cams, xyz, rgb, err
+
+
+def reconstruction_from_cameras(cams: Cameras):
+    """A ``pycolmap.Reconstruction`` holding ``cams`` (no points); cameras with equal intrinsics share one."""
+    import pycolmap
+
+    from curate.core.cameras import w2c_from_c2w
+
+    rec = pycolmap.Reconstruction()
+    Rw, tw = w2c_from_c2w(cams.c2w)
+    cam_ids: dict = {}
+    for i in range(len(cams)):
+        model, params = colmap_from_intrinsics(cams.fx[i], cams.fy[i], cams.cx[i], cams.cy[i], cams.dist[i])
+        key = (model, tuple(params), int(cams.width[i]), int(cams.height[i]))
+        if key not in cam_ids:
+            cam_ids[key] = len(cam_ids) + 1
+            rec.add_camera_with_trivial_rig(pycolmap.Camera(
+                camera_id=cam_ids[key], model=model, width=key[2], height=key[3], params=params))
+        im = pycolmap.Image(name=cams.names[i] or f"{i:06d}", camera_id=cam_ids[key], image_id=i + 1)
+        rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(Rw[i]), tw[i]))
+    return rec
+
+
+# ------------------------------------------------------------------ SfM
+def _extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: bool) -> None:
+    import pycolmap
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = cfg.camera_model
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.max_image_size = cfg.max_image_size
+    ext.num_threads = cfg.num_threads
+    ext.sift.max_num_features = cfg.max_num_features
+    ext.sift.peak_threshold = cfg.sift_peak_threshold
+    mode = pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_IMAGE
+    pycolmap.extract_features(db, images, image_names=names, camera_mode=mode, reader_options=reader,
+                              extraction_options=ext, device=pycolmap.Device.cpu if not pycolmap.has_cuda
+                              else pycolmap.Device.auto)
+
+
+def _build_vocab_tree(db: Path, path: Path, seed: int, per_image: int = 1000) -> Path:
+    """A vocabulary tree (COLMAP ``VisualIndex``) trained on this capture's own SIFT descriptors.
+
+    COLMAP's published trees are downloads; for loop detection within one capture a small
+    tree trained on up to ``per_image`` descriptors of every image does as well and keeps
+    the stage offline. Visual words: one per ~40 descriptors, between 256 and 65536.
+    """
+    import pycolmap
+    rng = np.random.default_rng(seed)
+    dbh = pycolmap.Database.open(db)
+    parts = []
+    for im in dbh.read_all_images():
+        d = dbh.read_descriptors(im.image_id).to_float()
+        d = np.asarray(getattr(d, "data", d), np.float32)
+        if len(d) > per_image:
+            d = d[rng.choice(len(d), per_image, replace=False)]
+        parts.append(d)
+    dbh.close()
+    desc = np.concatenate(parts)
+    words = int(np.clip(2 ** np.floor(np.log2(max(len(desc) // 40, 1))), 256, 65536))
+    index = pycolmap.VisualIndex.create(128, 64)
+    bo = pycolmap.VisualIndex.BuildOptions()
+    bo.num_visual_words, bo.num_iterations, bo.num_rounds = words, 25, 1
+    t = time.perf_counter()
+    with _stdout_to(db.parent / "colmap.log"):  # faiss prints clustering warnings on stdout
+        index.build(bo, pycolmap.FeatureDescriptorsFloat(pycolmap.FeatureExtractorType.SIFT, desc))
+    index.write(path)
+    logger.info("sfm: vocabulary tree of %d words from %d descriptors in %.1f s", words, len(desc),
+                time.perf_counter() - t)
+    return path
+
+
+def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
+    """Match and verify the image pairs of ``matcher``; verification RANSAC is seeded by ``cfg.seed``.
+
+    COLMAP's default verification seed (-1) draws a new one per run: the office walk then got
+    a different set of verified pairs, and a different model, on every run.
+    """
+    import pycolmap
+    mo = pycolmap.FeatureMatchingOptions()
+    mo.num_threads = cfg.num_threads
+    mo.guided_matching = cfg.guided_matching
+    vo = pycolmap.TwoViewGeometryOptions()
+    vo.ransac.random_seed = cfg.seed
+    vo.min_num_inliers = cfg.min_num_matches
+    dev = pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
+    if matcher == "exhaustive":
+        pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
+    elif matcher == "sequential":
+        po = pycolmap.SequentialPairingOptions()
+        po.overlap = cfg.sequential_overlap
+        po.quadratic_overlap = cfg.sequential_quadratic
+        po.loop_detection = False
+        if cfg.loop_detection:  # with a vocabulary tree built from this capture's own features: offline
+            po.loop_detection = True
+            po.vocab_tree_path = str(_build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed))
+            po.loop_detection_period = cfg.loop_detection_period
+            po.loop_detection_num_images = cfg.loop_detection_num_images
+        pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                                  device=dev)
+    elif matcher == "spatial":
+        po = pycolmap.SpatialPairingOptions()
+        po.max_num_neighbors = cfg.spatial_neighbors
+        po.ignore_z = True
+        pycolmap.match_spatial(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                               device=dev)
+    else:
+        raise ValueError(f"unknown matcher {matcher!r}")
+
+
+def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
+    import pycolmap
+    from tqdm import tqdm
+
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.seed
+    opts.mapper.random_seed = cfg.seed
+    opts.triangulation.random_seed = cfg.seed
+    opts.min_num_matches = cfg.min_num_matches
+    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    opts.ba_refine_principal_point = False
+    bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
+    count = [0]
+
+    def on_image(k: int = 1):  # registrations over all models: the bar stops at the pool size
+        k = min(k, n_images - count[0])
+        count[0] += k
+        bar.update(k)
+
+    try:
+        models = pycolmap.incremental_mapping(db, images, out, options=opts, initial_image_pair_callback=
+                                              lambda: on_image(2), next_image_callback=on_image)
+    finally:
+        bar.close()
+    return models
+
+
+def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
+    import pycolmap
+    if not pycolmap.has_cuda:
+        return {"status": "skipped", "reason": "pycolmap has no CUDA (patch-match stereo needs it)"}
+    dense = sfm / "dense"
+    t0 = time.perf_counter()
+    pycolmap.undistort_images(dense, sparse, images)
+    pycolmap.patch_match_stereo(dense)
+    pycolmap.stereo_fusion(dense / "fused.ply", dense)
+    return {"status": "done", "path": "dense/fused.ply", "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
+    """Run the SfM stage on the photos of ``photos``; returns ``RUN/sfm`` (see the module docstring).
+
+    Skipped (returns at once) when ``RUN/sfm/stage.json`` has the same key: same config
+    (``num_threads`` and ``progress`` excluded) and same photo files (names and content).
+    """
+    import pycolmap
+
+    photos, run_dir = Path(photos).resolve(), Path(run_dir).resolve()
+    out = _sfm_dir(run_dir)
+    refuse_inside(out, photos)
+    key = input_key(cfg, photos)
+    if begin_stage(out, key, force):
+        logger.info("sfm: up to date (%s), skipped", out)
+        return out
+    started = time.perf_counter()
+    timings: dict[str, float] = {}
+    records, kept, t_ingest = prepare_photos(cfg, photos, out)
+    timings.update(t_ingest)
+    names = [r.working for r in kept]
+    if len(names) < 2:
+        write_outputs(out, Cameras.empty(), None, None, None, records, [], cfg.normalize_percentile)
+        raise RuntimeError(f"sfm: only {len(names)} usable photos in {photos}; see {out / 'images.json'}")
+    single = choose_camera_mode(cfg, kept)
+    matcher = choose_matcher(cfg, kept)
+    db, images = out / "database.db", out / "images"
+    stats: dict = {"n_input_files": len(records), "n_kept": len(names), "camera_mode": "single" if single else
+                   "per_image", "matcher": matcher}
+    pycolmap.set_random_seed(cfg.seed)
+    with colmap_log(out / "colmap.log"):
+        logger.info("sfm: extracting SIFT features (%s camera, %s) ...", stats["camera_mode"], cfg.camera_model)
+        t = time.perf_counter()
+        _extract(cfg, db, images, names, single)
+        timings["extract"] = round(time.perf_counter() - t, 2)
+        logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
+        logger.info("sfm: %s matching ...", matcher)
+        t = time.perf_counter()
+        _match(cfg, db, matcher)
+        timings["match"] = round(time.perf_counter() - t, 2)
+        dbh = pycolmap.Database.open(db)
+        _, inliers = dbh.read_two_view_geometry_num_inliers()
+        dbh.close()
+        stats["n_pairs_matched"] = len(inliers)
+        stats["n_pairs_verified"] = int(sum(n >= cfg.min_num_matches for n in inliers))
+        logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],
+                    len(inliers), timings["match"])
+        t = time.perf_counter()
+        models = _map(cfg, db, images, out / "mapper", len(names), cfg.progress)
+        timings["map"] = round(time.perf_counter() - t, 2)
+    if not models:
+        raise RuntimeError(f"sfm: COLMAP registered no images (see {out / 'colmap.log'})")
+    best = max(models.values(), key=lambda r: r.num_reg_images())
+    stats["model_sizes"] = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+    sparse = out / "sparse" / "0"
+    sparse.mkdir(parents=True)
+    best.write(sparse)
+    shutil.rmtree(out / "mapper", ignore_errors=True)
+    stats["mean_reprojection_error_px"] = float(best.compute_mean_reprojection_error())
+    stats["mean_track_length"] = float(best.compute_mean_track_length())
+    logger.info("sfm: %d / %d images registered, %d points, reprojection error %.2f px, mapping %.1f s",
+                best.num_reg_images(), len(names), best.num_points3D(), stats["mean_reprojection_error_px"],
+                timings["map"])
+    cams, xyz, rgb, err = cameras_from_reconstruction(best)
+    t = time.perf_counter()
+    if cfg.dense == "auto":
+        with colmap_log(out / "colmap.log"):
+            dense = _dense(out, sparse, images)
+    else:
+        dense = {"status": "off"}
+    timings["dense"] = round(time.perf_counter() - t, 2)
+    paths = [f"images/{n}" for n in cams.names]
+    stats.update(write_outputs(out, cams, xyz, rgb, err, records, paths, cfg.normalize_percentile))
+    stats["dense"] = dense
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+                 seed=cfg.seed, mode="sfm", photos=str(photos), timings=timings, stats=stats)
+    return out
+
+
+# ------------------------------------------------------------------ import
+def _read_source(source: Path, photos: Path | None):
+    """-> (cameras, xyz, rgb, err, reconstruction or None, original paths)."""
+    import pycolmap
+    if source.suffix.lower() == ".json":
+        from curate.core.transforms_json import read_transforms
+        cams, files = read_transforms(source)
+        return cams, None, None, None, None, files
+    model = source
+    if not any((model / f).is_file() for f in ("cameras.bin", "cameras.txt")) and (model / "sparse" / "0").is_dir():
+        model = model / "sparse" / "0"
+    if not any((model / f).is_file() for f in ("cameras.bin", "cameras.txt")):
+        raise FileNotFoundError(f"{source}: neither a transforms.json nor a COLMAP model folder")
+    rec = pycolmap.Reconstruction(model)
+    cams, xyz, rgb, err = cameras_from_reconstruction(rec)
+    files = [str((photos / n).resolve()) if photos is not None else n for n in cams.names]
+    return cams, xyz, rgb, err, rec, files
+
+
+def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
+    """Cameras of a COLMAP model folder (binary or text, or a folder with ``sparse/0``) or a
+    transforms.json, without writing anything: (cameras, image paths)."""
+    cams, _, _, _, _, files = _read_source(Path(source), Path(photos) if photos is not None else None)
+    return cams, files
+
+
+def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
+                 force: bool = False) -> Path:
+    """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.
+
+    Args:
+        source: a COLMAP model folder (binary or text; or a folder with ``sparse/0``), or a transforms.json.
+        photos: folder of the photos the model's image names refer to (COLMAP model only;
+            a transforms.json's file paths are resolved against its own folder).
+    """
+    source = Path(source).resolve()
+    photos = Path(photos).resolve() if photos is not None else None
+    run_dir = Path(run_dir).resolve()
+    out = _sfm_dir(run_dir)
+    files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.is_file())
+    key = stage_key({"mode": "import", "source": str(source), "photos": str(photos),
+                     "normalize_percentile": cfg.normalize_percentile}, [hash_files(files)])
+    if begin_stage(out, key, force):
+        logger.info("sfm import: up to date (%s), skipped", out)
+        return out
+    started = time.perf_counter()
+    cams, xyz, rgb, err, rec, originals = _read_source(source, photos)
+    if rec is None:
+        rec = reconstruction_from_cameras(cams)
+    sparse = out / "sparse" / "0"
+    sparse.mkdir(parents=True)
+    rec.write(sparse)
+    records = [{"original": o, "rel": n, "status": "kept", "reason": "", "working": "", "registered": True}
+               for n, o in zip(cams.names, originals)]
+    stats = write_outputs(out, cams, xyz, rgb, err, records, originals, cfg.normalize_percentile)
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+                 mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)
+    logger.info("sfm import: %d cameras, %d points from %s", len(cams), len(xyz) if xyz is not None else 0, source)
+    return out
+
+
+# ------------------------------------------------------------------ subset export
+def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: str | Path,
+                       rename: dict[str, str] | None = None, sizes: dict[str, tuple[int, int]] | None = None,
+                       min_track: int = 2) -> dict:
+    """Write a COLMAP binary model holding only the images ``keep_names`` of the model in ``sparse_dir``.
+
+    Same world frame and poses as the source. Each kept image keeps all its keypoints;
+    a 3D point is kept when at least ``min_track`` kept images observe it (default 2: a
+    point seen by one image only is not triangulated by that subset), with only those
+    observations in its track; reprojection errors are recomputed.
+
+    Args:
+        sparse_dir: source model folder (binary or text), e.g. ``RUN/sfm/sparse/0``.
+        keep_names: image names of the source model to keep (unknown names: ``ValueError``).
+        out_dir: folder written (created): ``cameras.bin images.bin points3D.bin`` (+ rigs/frames).
+        rename: optional source name -> name written in the new model (e.g. the original photo's).
+        sizes: optional source name -> (width, height) of the images the new model describes
+            (the originals): the camera is rescaled per axis (focal length and principal point;
+            a single-focal model takes the mean scale) and the keypoints with it.
+        min_track: fewest kept observations for a 3D point to be kept.
+
+    Returns:
+        {"n_images", "n_cameras", "n_points3D", "n_points3D_source"}.
+    """
+    import pycolmap
+
+    src = pycolmap.Reconstruction(str(sparse_dir))
+    rename, sizes = rename or {}, sizes or {}
+    by_name = {src.image(i).name: i for i in src.reg_image_ids()}
+    missing = [n for n in keep_names if n not in by_name]
+    if missing:
+        raise ValueError(f"{len(missing)} image(s) not in the model {sparse_dir}: {missing[:5]}")
+    rec = pycolmap.Reconstruction()
+    cam_ids: dict = {}
+    keep_ids = set()
+    for n in dict.fromkeys(keep_names):
+        iid = by_name[n]
+        im = src.image(iid)
+        cam = src.camera(im.camera_id)
+        w, h = sizes.get(n, (cam.width, cam.height))
+        sx, sy = w / cam.width, h / cam.height
+        key = (im.camera_id, int(w), int(h))
+        if key not in cam_ids:
+            new = pycolmap.Camera(camera_id=len(cam_ids) + 1, model=cam.model_name, width=cam.width,
+                                  height=cam.height, params=list(cam.params))
+            if (w, h) != (cam.width, cam.height):
+                new.rescale(int(w), int(h))
+            cam_ids[key] = new.camera_id
+            rec.add_camera_with_trivial_rig(new)
+        xy = np.array([p.xy for p in im.points2D], np.float64).reshape(-1, 2) * [sx, sy]
+        out_im = pycolmap.Image(name=rename.get(n, n), keypoints=xy, camera_id=cam_ids[key], image_id=iid)
+        rec.add_image_with_trivial_frame(out_im, im.cam_from_world())
+        keep_ids.add(iid)
+    for p in src.points3D.values():
+        els = [e for e in p.track.elements if e.image_id in keep_ids]
+        if len({e.image_id for e in els}) >= min_track:
+            rec.add_point3D(p.xyz, pycolmap.Track(els), p.color)
+    rec.update_point_3d_errors()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rec.write_binary(str(out_dir))
+    logger.info("subset model: %d images, %d of %d points -> %s", rec.num_reg_images(), rec.num_points3D(),
+                src.num_points3D(), out_dir)
+    return {"n_images": rec.num_reg_images(), "n_cameras": rec.num_cameras(), "n_points3D": rec.num_points3D(),
+            "n_points3D_source": src.num_points3D()}

@@ -1,0 +1,64 @@
+"""Configuration of the SfM stage (``curate.sfm.colmap.run_sfm``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
+"""``SfmConfig.matcher`` choices. No vocabulary-tree matcher: a pre-trained tree is a download;
+``sequential`` finds loops with a tree trained on the capture itself (``loop_detection``)."""
+CAMERA_MODES = ("auto", "single", "per_image")
+"""``SfmConfig.camera_mode`` choices."""
+
+
+@dataclass
+class SfmConfig:
+    """Options of the SfM stage. Every field but ``num_threads`` and ``progress`` is part of the stage key."""
+
+    # --- ingest
+    max_image_size: int = 1600        # longer side of the working copies (and of SIFT's input), pixels
+    recursive: bool = False           # also take photos from sub-folders
+    # --- quality (curate.sfm.quality)
+    drop_duplicates: bool = True      # drop near-identical photos (perceptual hash distance <= dup_max_distance)
+    dup_max_distance: int = 4         # of 256 hash bits; consecutive video frames differ by >= ~12
+    drop_blurry: bool = False         # drop photos with sharpness < blur_fraction * median (default: flag only)
+    blur_fraction: float = 0.3        # blurry threshold, relative to the pool's median sharpness
+    # --- features
+    camera_mode: str = "auto"         # 'auto' (single when one camera model and size), 'single', 'per_image'
+    camera_model: str = "SIMPLE_RADIAL"  # COLMAP model (f, cx, cy, k). RADIAL / OPENCV over-fit small object
+    #                                   rings: templering at 480 px registers 4 of 47 with RADIAL, 46 with SIMPLE_RADIAL
+    max_num_features: int = 8192      # SIFT features per image
+    sift_peak_threshold: float = 0.02 / 3  # SIFT detector threshold (COLMAP's default 0.02 / 3); lower: more features
+    # --- matching
+    matcher: str = "auto"             # 'auto', 'exhaustive', 'sequential', 'spatial' (never a vocab tree: offline)
+    exhaustive_max_images: int = 150  # 'auto': exhaustive up to this many photos
+    sequential_overlap: int = 15      # sequential: match each frame with the next N frames
+    sequential_quadratic: bool = True  # sequential: also frames i + 2^k (helps closing loops without a vocab tree)
+    loop_detection: bool = True       # sequential: find loops with a vocabulary tree trained on the capture itself
+    #                                   (office: without it the walk splits into 6 models at fast turns)
+    loop_detection_period: int = 10   # sequential loop detection: query every N-th frame
+    loop_detection_num_images: int = 30  # ... against its N most similar frames
+    spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
+    guided_matching: bool = False     # COLMAP guided matching (more matches, slower)
+    # --- mapping
+    min_num_matches: int = 15         # minimum verified matches for an image pair to count
+    init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
+    #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar
+    #                                   initial pair got a wrong relative pose, a kink that bent the walk by 17 deg
+    seed: int = 0                     # random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary
+    #                                   tree's training sample: same photos and config, same matches and model
+    # --- outputs
+    dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
+    normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
+    # --- execution (not in the stage key)
+    num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
+    progress: bool = True             # tqdm bars on the terminal
+
+    def __post_init__(self) -> None:
+        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off")}
+        for k, ok in choices.items():
+            if getattr(self, k) not in ok:
+                raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")
+        if self.max_image_size < 64:
+            raise ValueError("SfmConfig.max_image_size must be >= 64")

@@ -1,0 +1,145 @@
+"""The SfM stage's steps that need no pycolmap: stage key, ingest + quality, choices, outputs."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import logging
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from curate.core.cameras import Cameras
+from curate.sfm.ingest import PhotoRecord, find_images, ingest
+from curate.sfm.quality import assess, phash, sharpness
+from curate.sfm.config import SfmConfig
+from curate.sfm.io import normalization
+from curate.core.stage import hash_files, stage_key, write_json_atomic
+
+logger = logging.getLogger(__name__)
+
+_NOT_IN_KEY = ("num_threads", "progress")
+
+
+def refuse_inside(out: Path, photos: Path) -> None:
+    """Refuse a run folder inside the photo folder (the input folder is never written)."""
+    if out == photos or photos in out.parents:
+        raise ValueError(f"run folder {out} is inside the photo folder {photos}: the photo folder is never written")
+
+
+def input_key(cfg: SfmConfig, photos: Path) -> str:
+    """Stage key: config (execution-only fields excluded) + names and content of every file of ``photos``."""
+    imgs, other = find_images(photos, cfg.recursive)
+    files = sorted(imgs + other, key=lambda p: p.relative_to(photos).as_posix())
+    h = hashlib.sha256("\n".join(p.relative_to(photos).as_posix() for p in files).encode())
+    conf = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in _NOT_IN_KEY}
+    return stage_key({"mode": "sfm", **conf}, [hash_files(files, h), str(photos)])
+
+
+def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoRecord], list[PhotoRecord], dict]:
+    """Ingest into ``out/images`` and assess quality. Returns (all records, kept records, timings)."""
+    t = time.perf_counter()
+    metrics: dict[str, tuple[float, np.ndarray]] = {}
+
+    def on_image(rec: PhotoRecord, rgb: np.ndarray) -> None:
+        metrics[rec.rel] = (sharpness(rgb), phash(rgb))
+
+    threads = cfg.num_threads if cfg.num_threads > 0 else 2
+    records = ingest(photos, out / "images", cfg.max_image_size, cfg.recursive, threads, on_image, cfg.progress)
+    t_ingest = round(time.perf_counter() - t, 2)
+    t = time.perf_counter()
+    good = [r for r in records if r.status == "kept"]
+    if good:
+        sharp = np.array([metrics[r.rel][0] for r in good])
+        blurry, dup_of, dup_dist = assess(sharp, np.stack([metrics[r.rel][1] for r in good]), cfg.blur_fraction,
+                                          cfg.dup_max_distance)
+        med = float(np.median(sharp))
+        for i, r in enumerate(good):
+            r.extra.update(sharpness=float(sharp[i]), sharpness_rel=float(sharp[i] / med) if med > 0 else 0.0,
+                           blurry=bool(blurry[i]),
+                           duplicate_of=good[dup_of[i]].rel if dup_of[i] >= 0 else None,
+                           hash_distance=int(dup_dist[i]) if dup_of[i] >= 0 else None)
+            if cfg.drop_duplicates and dup_of[i] >= 0:
+                r.status = "dropped"
+                r.reason = f"near-duplicate of {good[dup_of[i]].rel} (hash distance {dup_dist[i]}, kept the sharper)"
+            elif cfg.drop_blurry and blurry[i]:
+                r.status = "dropped"
+                r.reason = f"blurry: sharpness {sharp[i] / med:.2f} x median < {cfg.blur_fraction}"
+        for r in good:
+            if r.status == "dropped":
+                (out / "images" / r.working).unlink(missing_ok=True)
+                logger.info("dropped %s: %s", r.rel, r.reason)
+    kept = [r for r in records if r.status == "kept"]
+    n_blur = sum(bool(r.extra.get("blurry")) for r in records)
+    logger.info("quality: %d kept, %d dropped, %d flagged blurry", len(kept), len(good) - len(kept), n_blur)
+    return records, kept, {"ingest": t_ingest, "quality": round(time.perf_counter() - t, 2)}
+
+
+def _trailing_number(name: str) -> tuple[str, int] | None:
+    m = re.match(r"^(.*?)(\d+)$", Path(name).stem)
+    return (m.group(1), int(m.group(2))) if m else None
+
+
+def looks_sequential(names: list[str]) -> bool:
+    """True when the (sorted) names are numbered frames: a common prefix and increasing numbers."""
+    nums = [_trailing_number(n) for n in names]
+    if len(names) < 3 or any(x is None for x in nums):
+        return False
+    prefixes = {x[0] for x in nums}  # type: ignore[index]
+    vals = [x[1] for x in nums]  # type: ignore[index]
+    return len(prefixes) == 1 and all(b > a for a, b in zip(vals, vals[1:]))
+
+
+def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
+    """'auto': exhaustive up to ``exhaustive_max_images``; beyond: spatial with GPS on most photos,
+    sequential for numbered frames, else exhaustive (slow but complete)."""
+    if cfg.matcher != "auto":
+        return cfg.matcher
+    n = len(kept)
+    if n <= cfg.exhaustive_max_images:
+        return "exhaustive"
+    if sum(r.has_gps for r in kept) >= 0.9 * n:
+        return "spatial"
+    if looks_sequential([r.rel for r in kept]):
+        return "sequential"
+    logger.warning("sfm: %d unordered photos without GPS: exhaustive matching (quadratic time)", n)
+    return "exhaustive"
+
+
+def choose_camera_mode(cfg: SfmConfig, kept: list[PhotoRecord]) -> bool:
+    """True for one shared camera: 'single', or 'auto' with one make/model/focal length and one working size."""
+    if cfg.camera_mode != "auto":
+        return cfg.camera_mode == "single"
+    keys = {(r.make, r.model, r.focal_mm, r.focal_35mm, r.width, r.height) for r in kept}
+    return len(keys) == 1
+
+
+def write_outputs(out: Path, cams: Cameras, xyz, rgb, err, records: list, file_paths: list[str],
+                  pct: float) -> dict:
+    """Write cameras.json, transforms.json, points*.npy, normalization.json and images.json; returns stats."""
+    from curate.core.transforms_json import write_transforms
+
+    cams.save(out / "cameras.json")
+    write_transforms(out / "transforms.json", cams, file_paths)
+    if xyz is not None:
+        np.save(out / "points.npy", np.asarray(xyz, np.float32).reshape(-1, 3))
+        np.save(out / "points_rgb.npy", np.asarray(rgb, np.uint8).reshape(-1, 3))
+        np.save(out / "points_error.npy", np.asarray(err, np.float32).reshape(-1))
+    else:
+        np.save(out / "points.npy", np.zeros((0, 3), np.float32))
+    norm = normalization(cams, xyz, pct)
+    write_json_atomic(out / "normalization.json", norm)
+    reg = set(cams.names)
+    recs = [dataclasses.asdict(r) if isinstance(r, PhotoRecord) else dict(r) for r in records]
+    for r in recs:
+        key = r["working"] or r["rel"]
+        r["registered"] = r["status"] == "kept" and key in reg
+    summary = {s: sum(r["status"] == s for r in recs) for s in ("kept", "dropped", "skipped")}
+    summary["registered"] = sum(r["registered"] for r in recs)
+    write_json_atomic(out / "images.json", {"summary": summary, "photos": recs})
+    n_kept = max(summary["kept"], 1)
+    return {"n_registered": summary["registered"], "registered_fraction": summary["registered"] / n_kept,
+            "n_points": int(0 if xyz is None else len(xyz)),
+            "unregistered": [r["rel"] for r in recs if r["status"] == "kept" and not r["registered"]]}

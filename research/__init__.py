@@ -1,0 +1,1 @@
+"""Experiments, harnesses and measured-but-not-adopted variants (imports curate; never the reverse)."""
