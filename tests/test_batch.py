@@ -133,6 +133,7 @@ def test_plan_names_poses_and_list(tmp_path):
     for sub in ("x/scene", "y/scene", "colmap_cap/sparse/0", "colmap_cap/images", "plain"):
         (tmp_path / sub).mkdir(parents=True)
     (tmp_path / "x" / "scene" / "transforms.json").write_text("{}")
+    (tmp_path / "colmap_cap" / "sparse" / "0" / "cameras.txt").write_text("# a COLMAP model\n")
     lst = tmp_path / "list.txt"
     lst.write_text("# captures\nx/scene\ny/scene\n\ncolmap_cap\nplain\nplain  # twice\n")
     folders = read_list(lst)

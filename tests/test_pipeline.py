@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from curate.evaluate.units import summarize
-from curate.pipeline import RunConfig, surface_band
+from curate.occupancy.stage import surface_band
+from curate.pipeline import RunConfig
 from curate.core.stage import config_dict, config_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,7 +150,7 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     from curate.sfm.colmap import import_poses
     from curate.sfm.config import SfmConfig
     from curate.sfm.io import load_sfm, original_cameras
-    from curate.pipeline import image_paths
+    from curate.sfm.io import image_paths
     import_poses(SfmConfig(progress=False), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
     res = load_sfm(tmp_path)
     oc, paths = original_cameras(res.cameras, res.records)
@@ -158,31 +159,38 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     assert image_paths(tmp_path, list(res.cameras.names), res.records) == paths
 
 
-def test_sharpness_weight_reaches_view_medoids_and_reruns_only_the_selection(tmp_path):
-    """`--sharpness-weight` is measured from the photos of an import, recorded per pool image in
-    selection.json, and a changed weight redoes the select stage only."""
-    from curate.pipeline import image_paths, photo_sharpness
-    from curate.sfm.quality import files_sharpness
-    from curate.sfm.io import load_sfm
+def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp_path):
+    """A changed selection option redoes the select stage only; `curate select RUN --budget N` keeps the
+    run's saved options (here --gamma and --method) and saves the new budget; `--box` reaches the
+    occupancy grid; `curate select RUN --res` is refused (the grid belongs to the occupancy stage)."""
     out = tmp_path / "run"
-    base = _cmd(out, "--no-evaluate", "--method", "medoids")
+    base = _cmd(out, "--no-evaluate", "--method", "energy", "--gamma", "0.2")
     subprocess.run(base, check=True, capture_output=True, env=_env(), timeout=600)
-    sel0 = json.loads((out / "select" / "selection.json").read_text())
-    assert sel0["sharpness"] is None                          # weight 0: not measured
     before = _mtimes(out)
-    subprocess.run(base + ["--sharpness-weight", "2"], check=True, capture_output=True, env=_env(), timeout=600)
+    subprocess.run(base + ["--method", "fvs"], check=True, capture_output=True, env=_env(), timeout=600)
     after = _mtimes(out)
     assert after["sfm/stage.json"] == before["sfm/stage.json"]
     assert after["occupancy/stage.json"] == before["occupancy/stage.json"]
     assert after["select/stage.json"] != before["select/stage.json"]
+    assert json.loads((out / "select" / "selection.json").read_text())["method"] == "fvs"
+
+    res = subprocess.run([sys.executable, "-m", "curate", "select", str(out), "--budget", "20"], env=_env(),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
     sel = json.loads((out / "select" / "selection.json").read_text())
-    assert json.loads((out / "select" / "stage.json").read_text())["config"]["select"]["medoids"][
-        "sharpness_weight"] == 2.0
-    res = load_sfm(out)
-    ref = files_sharpness([image_paths(out, list(res.cameras.names), res.records)[i] for i in sel["pool"]])
-    assert len(sel["sharpness"]) == len(sel["pool"]) and np.allclose(sel["sharpness"], ref)
-    assert np.all(ref > 0) and len(sel["chosen"]) == len(sel0["chosen"])
-    # a sharpness the SfM stage recorded is used as is (no file is read for it)
-    res.records["photos"][0].setdefault("extra", {})["sharpness"] = 123.0
-    k = list(res.cameras.names).index(res.records["photos"][0]["rel"])
-    assert photo_sharpness(out, res, [k])[0] == 123.0
+    rec = json.loads((out / "select" / "stage.json").read_text())["config"]
+    assert len(sel["chosen"]) == 20 and sel["method"] == "fvs"
+    assert rec["select"]["energy"]["gamma"] == 0.2 and rec["budget"] == "20"
+    assert json.loads((out / "run.json").read_text())["config"]["budget"] == "20"
+
+    res = subprocess.run([sys.executable, "-m", "curate", "select", str(out), "--res", "8"], env=_env(),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 2 and "curate occupancy" in res.stderr
+
+    res = subprocess.run([sys.executable, "-m", "curate", "occupancy", str(out), "--box=1,1,0.2,5,4,2.5"], env=_env(),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    z = np.load(out / "occupancy" / "occupancy.npz")
+    assert np.allclose(z["box_min"], [1, 1, 0.2]) and np.allclose(z["box_max"], [5, 4, 2.5])
+    split = json.loads((out / "occupancy" / "split.json").read_text())
+    assert split["holdout_every"] == 14 and split["holdout"] == list(range(0, 160, 14))

@@ -89,14 +89,19 @@ def read_list(path: str | Path) -> list[str]:
 
 
 def find_poses(folder: Path) -> tuple[str, str | None, str]:
-    """(photos, poses, source) of a folder: its transforms.json, else sparse/0, else SfM."""
-    tj = folder / "transforms.json"
-    if tj.is_file():
-        return str(folder), str(tj), "transforms.json"
-    sp = folder / "sparse" / "0"
-    if sp.is_dir():
-        return str(folder / "images" if (folder / "images").is_dir() else folder), str(sp), "colmap"
-    return str(folder), None, "sfm"
+    """(photos, poses, source) of a folder: its pose source (:func:`curate.sfm.poses.find_pose_source`:
+    its transforms.json, else its COLMAP model), else SfM on its photos."""
+    from curate.sfm.poses import find_pose_source
+    src = find_pose_source(folder)
+    if src is None:
+        return str(folder), None, "sfm"
+    if src.name == "transforms.json":
+        return str(folder), str(src), "transforms.json"
+    if src.is_dir():
+        photos = folder / "images" if (folder / "images").is_dir() else folder
+        model = src / "sparse" / "0" if (src / "sparse" / "0").is_dir() else src
+        return str(photos), str(model), "colmap"
+    return str(folder), None, "sfm"   # a cameras.json alone names no photos: SfM
 
 
 def _safe_name(s: str) -> str:
@@ -158,16 +163,8 @@ def _reason(e: BaseException) -> str:
 def _prep(cfg, item: Folder, run_dir: Path, force: bool) -> None:
     """SfM (or pose import), occupancy and selection: the part of ``pipeline.run`` before the evaluation."""
     import shutil
-    from curate import pipeline as pl
-    from curate.sfm.colmap import import_poses, run_sfm
-    t0 = time.perf_counter()
-    if item.poses:
-        import_poses(cfg.sfm, item.poses, run_dir, photos=item.photos, force=force)
-    else:
-        run_sfm(cfg.sfm, item.photos, run_dir, force=force)
-    print(f"{'sfm':10s} {item.source}  [{time.perf_counter() - t0:.1f}s]", flush=True)
-    pl.stage_occupancy(cfg, run_dir, force)
-    pl.stage_select(cfg, run_dir, force)
+    from curate.pipeline import run
+    run(cfg, item.photos, run_dir, poses=item.poses, force=force, until="select")
     if force:
         shutil.rmtree(run_dir / "evaluate", ignore_errors=True)
 

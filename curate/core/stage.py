@@ -20,6 +20,31 @@ from typing import Any, Iterable
 
 STAGE_FILE = "stage.json"
 
+STAGES = ("sfm", "occupancy", "select", "evaluate", "export", "report")
+"""The stages of ``curate run``, in order; each but ``report`` writes ``RUN/<stage>/``."""
+
+
+@dataclasses.dataclass
+class StageResult:
+    """What one stage call did: every stage function returns one."""
+
+    name: str
+    """The stage's name (one of :data:`STAGES`)."""
+    path: Path
+    """The folder (or, for ``report``, the file) the stage writes."""
+    ran: bool
+    """True when the stage ran now; False when it was skipped because its key was unchanged."""
+    seconds: float
+    """Seconds of this call (a skip takes milliseconds)."""
+    summary: str = ""
+    """One line for the terminal: what the stage produced."""
+
+    def line(self) -> str:
+        return f"{self.name:10s} {self.summary if self.ran else 'skipped (unchanged)'}  [{self.seconds:.1f}s]"
+
+    def timing(self) -> dict:
+        return {"name": self.name, "seconds": round(self.seconds, 2), "skipped": not self.ran}
+
 
 def config_dict(cfg: Any) -> dict:
     """A dataclass config (possibly nested) as a JSON-ready dict."""

@@ -376,29 +376,35 @@ def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool
 
 
 # ------------------------------------------------------------------ import
-def _read_source(source: Path, photos: Path | None):
-    """-> (cameras, xyz, rgb, err, reconstruction or None, original paths)."""
+def read_colmap_model(model: Path, photos: Path | None):
+    """A COLMAP model folder as :class:`curate.sfm.poses.Poses` (image paths under ``photos`` when given)."""
     import pycolmap
-    if source.suffix.lower() == ".json":
-        from curate.core.transforms_json import read_transforms
-        cams, files = read_transforms(source)
-        return cams, None, None, None, None, files
-    model = source
-    if not any((model / f).is_file() for f in ("cameras.bin", "cameras.txt")) and (model / "sparse" / "0").is_dir():
-        model = model / "sparse" / "0"
-    if not any((model / f).is_file() for f in ("cameras.bin", "cameras.txt")):
-        raise FileNotFoundError(f"{source}: neither a transforms.json nor a COLMAP model folder")
-    rec = pycolmap.Reconstruction(model)
+    from curate.sfm.poses import Poses
+    try:
+        rec = pycolmap.Reconstruction(model)
+    except Exception as e:  # noqa: BLE001 - pycolmap raises its own error types
+        raise ValueError(f"{model}: cannot read the COLMAP model ({e})") from None
     cams, xyz, rgb, err = cameras_from_reconstruction(rec)
     files = [str((photos / n).resolve()) if photos is not None else n for n in cams.names]
-    return cams, xyz, rgb, err, rec, files
+    return Poses(cams, files, xyz, rgb, err, rec)
+
+
+def _read_source(source: Path, photos: Path | None):
+    """-> (cameras, xyz, rgb, err, reconstruction or None, original paths)."""
+    from curate.sfm.poses import read_poses
+    if source.is_dir() and not any((source / f).is_file() for f in ("cameras.bin", "cameras.txt")) \
+            and not (source / "sparse" / "0").is_dir():
+        raise FileNotFoundError(f"{source}: neither a transforms.json nor a COLMAP model folder")
+    p = read_poses(source, photos)
+    return p.cameras, p.points, p.colors, p.errors, p.reconstruction, p.files
 
 
 def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
-    """Cameras of a COLMAP model folder (binary or text, or a folder with ``sparse/0``) or a
-    transforms.json, without writing anything: (cameras, image paths)."""
-    cams, _, _, _, _, files = _read_source(Path(source), Path(photos) if photos is not None else None)
-    return cams, files
+    """Cameras of a pose source (:func:`curate.sfm.poses.read_poses`), without writing anything:
+    (cameras, image paths)."""
+    from curate.sfm.poses import read_poses
+    p = read_poses(source, photos)
+    return p.cameras, p.files
 
 
 def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,

@@ -143,3 +143,21 @@ def original_cameras(cams: Cameras, records: dict) -> tuple[Cameras, list[str]]:
         paths.append(r["original"] if r else n)
     return Cameras(cams.c2w, np.array(fx), np.array(fy), np.array(cx), np.array(cy), np.array(w), np.array(h),
                    cams.dist, cams.names), paths
+
+
+def image_paths(run_dir: str | Path, names: list[str], records: dict) -> list[str]:
+    """The image file of each registered camera ``names``: the SfM working copy, else the original photo."""
+    run_dir = Path(run_dir)
+    by: dict[str, tuple[str, dict]] = {}
+    for r in records.get("photos", []):
+        if r.get("working"):
+            by[r["working"]] = ("working", r)
+        if r.get("rel"):
+            by.setdefault(r["rel"], ("original", r))
+    out = []
+    for n in names:
+        if n not in by:
+            raise FileNotFoundError(f"no photo recorded for camera {n!r} in {run_dir}/sfm/images.json")
+        kind, r = by[n]
+        out.append(str(run_dir / "sfm" / "images" / n) if kind == "working" else r["original"])
+    return out

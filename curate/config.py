@@ -1,0 +1,61 @@
+"""Every option of ``curate run`` in one dataclass tree: :class:`RunConfig`.
+
+The command line is built from these dataclasses (:mod:`curate.cli`, :mod:`curate.core.options`):
+each default and each help text lives here or in the stage configs it nests, nowhere else.
+A run saves its resolved config in ``RUN/run.json``; every stage re-run starts from it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from curate.core.budget import parse_budget
+from curate.evaluate.units import EvalConfig
+from curate.occupancy.masks import OccupancyConfig, RefineConfig
+from curate.select.select import SelectConfig
+from curate.sfm.config import SfmConfig
+
+EXPORT_MODES = ("link", "copy")
+"""``RunConfig.export_mode`` choices."""
+
+
+@dataclass
+class RunConfig:
+    """Every option of ``curate run``."""
+
+    budget: str = "15%"
+    """Images to choose: a count (60) or a fraction of the pool (15%)."""
+    sfm: SfmConfig = field(default_factory=SfmConfig)
+    """SfM stage options."""
+    occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
+    """Occupancy from the sparse points; ``occupancy.res`` is also the selection's node grid."""
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    """Refinement of the occupancy by the pool field's density."""
+    surface_band: int = 1
+    """Selection nodes: the refined occupied set's surface, widened by this many voxels on each side."""
+    box: tuple[float, float, float, float, float, float] | None = None
+    """Scene box x0,y0,z0,x1,y1,z1 of the selection's node grid, in the poses' frame (default: from the sparse
+    points and the cameras)."""
+    select: SelectConfig = field(default_factory=SelectConfig)
+    """Selection method and energy."""
+    evaluate: EvalConfig = field(default_factory=EvalConfig)
+    """Evaluation protocol (hold-out split, trainings)."""
+    run_evaluation: bool = True
+    """Train and score the subsets (off: selection, report and export only)."""
+    export_mode: str = "link"
+    """Export links to the original photos ('link') or copies of them ('copy')."""
+
+    def __post_init__(self) -> None:
+        parse_budget(str(self.budget))  # ValueError on a malformed budget
+        if self.export_mode not in EXPORT_MODES:
+            raise ValueError(f"export mode must be one of {EXPORT_MODES}, got {self.export_mode!r}")
+        if self.surface_band < 0:
+            raise ValueError(f"surface band must be >= 0, got {self.surface_band}")
+        if self.box is not None:
+            b = tuple(float(v) for v in self.box)
+            if len(b) != 6 or not all(math.isfinite(v) for v in b):
+                raise ValueError(f"--box wants six finite numbers x0,y0,z0,x1,y1,z1, got {self.box!r}")
+            if any(b[i + 3] <= b[i] for i in range(3)):
+                raise ValueError("--box: each max (x1,y1,z1) must be > its min (x0,y0,z0)")
+            self.box = b

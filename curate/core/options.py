@@ -1,0 +1,186 @@
+"""Command-line options read from the config dataclasses: each default and help text is declared once.
+
+A config dataclass documents each field with an attribute docstring (a string right after
+the field) or, for the older ones, a trailing ``#`` comment. :class:`Opt` names a flag and
+the dotted path of the field it sets (``"evaluate.iters"``); :func:`add_options` adds it to
+an argparse parser with the field's default and docstring as its help, and
+:func:`apply_options` writes the flags the user gave (and only those) into a config, so a
+saved run's options stay the base of every stage re-run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import re
+import textwrap
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Callable, Sequence
+
+
+NO_CONST = object()
+"""Marks an :class:`Opt` that takes a value (the default of ``Opt.const``)."""
+
+
+@dataclass(frozen=True)
+class Opt:
+    """One command-line flag bound to config field(s)."""
+
+    flag: str
+    """The flag, e.g. ``--iters``."""
+    path: str | tuple[str, ...]
+    """Dotted path of the field it sets in the root config (a tuple: the parsed value is a
+    tuple, one item per path, e.g. ``--bins 5x10``)."""
+    parse: Callable[[str], Any] | None = None
+    """argparse ``type`` (default: the type of the field's default value)."""
+    const: Any = NO_CONST
+    """A flag without a value that stores this constant (e.g. ``--no-evaluate`` stores False)."""
+    choices: Sequence[Any] | None = None
+    """Allowed values."""
+    help: str | None = None
+    """Help text (default: the field's docstring)."""
+    metavar: str | None = None
+    """Name of the value in the help."""
+
+    @property
+    def paths(self) -> tuple[str, ...]:
+        return self.path if isinstance(self.path, tuple) else (self.path,)
+
+    @property
+    def dest(self) -> str:
+        return "opt_" + self.flag.lstrip("-").replace("-", "_")
+
+
+def _clean(text: str) -> str:
+    return re.sub(r"\s+", " ", text).strip()
+
+
+@lru_cache(maxsize=None)
+def field_docs(cls: type) -> dict[str, str]:
+    """{field name: its documentation} of a dataclass: the attribute docstring after the
+    field, else the trailing ``#`` comment on its line and on comment-only lines below it."""
+    try:
+        src = textwrap.dedent(inspect.getsource(cls))
+    except (OSError, TypeError):  # pragma: no cover - no source (frozen app)
+        return {}
+    tree = ast.parse(src)
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    lines = src.splitlines()
+    out: dict[str, str] = {}
+    for i, node in enumerate(body):
+        if not isinstance(node, ast.AnnAssign) or not isinstance(node.target, ast.Name):
+            continue
+        name = node.target.id
+        nxt = body[i + 1] if i + 1 < len(body) else None
+        if isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant) and isinstance(nxt.value.value, str):
+            out[name] = _clean(nxt.value.value)
+            continue
+        line = lines[node.end_lineno - 1]
+        if "#" in line:
+            parts = [line.split("#", 1)[1]]
+            for more in lines[node.end_lineno:]:
+                s = more.strip()
+                if not s.startswith("#") or s.startswith("# ---"):
+                    break
+                parts.append(s[1:])
+            out[name] = _clean(" ".join(parts))
+    return out
+
+
+def get_path(cfg: Any, path: str) -> Any:
+    for part in path.split("."):
+        cfg = getattr(cfg, part)
+    return cfg
+
+
+def set_path(cfg: Any, path: str, value: Any) -> Any:
+    """A copy of the dataclass ``cfg`` with the field at ``path`` set to ``value``
+    (nested dataclasses are copied too; ``__post_init__`` checks run)."""
+    head, _, rest = path.partition(".")
+    if rest:
+        value = set_path(getattr(cfg, head), rest, value)
+    return dataclasses.replace(cfg, **{head: value})
+
+
+def field_of(cfg: Any, path: str) -> tuple[type, str]:
+    """(the dataclass that declares the field at ``path``, the field's name)."""
+    *parents, name = path.split(".")
+    owner = cfg
+    for p in parents:
+        owner = getattr(owner, p)
+    return type(owner), name
+
+
+def doc_of(cfg: Any, path: str) -> str:
+    cls, name = field_of(cfg, path)
+    for klass in cls.__mro__:
+        if dataclasses.is_dataclass(klass):
+            d = field_docs(klass).get(name)
+            if d:
+                return d
+    return ""
+
+
+def _show(v: Any) -> str:
+    if hasattr(v, "width") and hasattr(v, "height"):
+        return f"{v.width}x{v.height}"
+    if isinstance(v, tuple):
+        return "x".join(map(str, v)) if all(isinstance(x, int) for x in v) else ",".join(map(str, v))
+    return "none" if v is None else str(v)
+
+
+def _esc(text: str) -> str:
+    return text.replace("%", "%%")
+
+
+def brief(doc: str) -> str:
+    """The first sentence of a field's docstring, without reStructuredText markup (for ``--help``)."""
+    doc = re.sub(r":\w+:`~?([^`]+)`", lambda m: m.group(1).rsplit(".", 1)[-1], doc)
+    doc = doc.replace("``", "")
+    m = re.match(r"(.+?[.!?])(?=\s+[A-Z(\"']|$)", doc)
+    return (m.group(1) if m else doc).rstrip(".")
+
+
+def _default_note(default: Any) -> str:
+    return "" if default is None else f" (default: {_show(default)})"
+
+
+def add_options(parser: argparse.ArgumentParser | Any, base: Any, opts: Sequence[Opt]) -> None:
+    """Add ``opts`` to ``parser``; defaults and help come from ``base`` (a config instance)
+    and its fields' docstrings. A flag the user does not give leaves no attribute (its
+    value stays whatever the config it is applied to holds)."""
+    for o in opts:
+        default = tuple(get_path(base, p) for p in o.paths) if isinstance(o.path, tuple) else get_path(base, o.path)
+        text = o.help if o.help is not None else brief(doc_of(base, o.paths[0]))
+        metavar = o.metavar or o.flag.lstrip("-").upper().replace("-", "_")
+        kw: dict[str, Any] = {"dest": o.dest, "default": argparse.SUPPRESS}
+        if o.const is not NO_CONST:
+            parser.add_argument(o.flag, action="store_const", const=o.const, help=_esc(text), **kw)
+            continue
+        if isinstance(default, bool) and o.parse is None:
+            parser.add_argument(o.flag, action=argparse.BooleanOptionalAction,
+                                help=_esc(f"{text} (default: {'on' if default else 'off'})"), **kw)
+            continue
+        typ = o.parse or (type(default) if default is not None and not isinstance(default, tuple) else str)
+        parser.add_argument(o.flag, type=typ, choices=o.choices, metavar=None if o.choices else metavar,
+                            help=_esc(text + _default_note(default)), **kw)
+
+
+def given(args: argparse.Namespace, opts: Sequence[Opt]) -> list[Opt]:
+    """The options of ``opts`` that the user gave on the command line."""
+    return [o for o in opts if hasattr(args, o.dest)]
+
+
+def apply_options(cfg: Any, args: argparse.Namespace, opts: Sequence[Opt]) -> Any:
+    """``cfg`` with the value of every flag of ``opts`` that the user gave."""
+    for o in given(args, opts):
+        v = getattr(args, o.dest)
+        if isinstance(o.path, tuple):
+            for p, x in zip(o.path, v):
+                cfg = set_path(cfg, p, x)
+        else:
+            cfg = set_path(cfg, o.path, v)
+    return cfg

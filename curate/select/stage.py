@@ -1,0 +1,95 @@
+"""The select stage: choose the budget from the pool -> ``RUN/select``.
+
+``selection.json`` has one schema, written by :func:`selection_record` for a run folder
+and for ``curate select`` on a pose file alike: ``method`` (what ran), ``budget`` (the
+resolved count), ``budget_text`` (as given), ``pool`` and ``holdout`` (camera indices),
+``holdout_every``, ``chosen`` (camera indices in the order chosen), ``chosen_names``,
+per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``, ``n_nodes``, ``up_axis``,
+``note``, and ``box`` / ``res`` of the node grid. ``nodes.npz``: ``nodes`` [M,3], per-node
+``angular`` and ``frequency`` of the chosen set, ``flat`` [M] grid indices, ``res``,
+``box_min``, ``box_max``. Camera indices are into ``RUN/sfm/cameras.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from curate.core.stage import StageResult
+
+if TYPE_CHECKING:
+    from curate.config import RunConfig
+    from curate.core.cameras import Cameras
+    from curate.core.grid import NodeGrid
+    from curate.select.select import Selection
+
+
+def up_axis(cams: "Cameras") -> int:
+    """World axis closest to the cameras' mean up direction (-y of OpenCV cameras)."""
+    up = -cams.c2w[:, :3, 1].mean(0)
+    return int(np.argmax(np.abs(up)))
+
+
+def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout: list[int], holdout_every: int,
+                     budget_text: str, grid: "NodeGrid") -> dict:
+    """The ``selection.json`` record of ``sel`` (chosen indices into ``pool``) over all cameras ``cams``."""
+    chosen = [int(pool[k]) for k in sel.chosen]
+    return {**sel.to_dict(), "chosen": chosen, "initial": [], "chosen_names": [cams.names[i] for i in chosen],
+            "budget": len(chosen), "budget_text": budget_text, "holdout_every": holdout_every,
+            "holdout": list(holdout), "pool": list(pool), "n_nodes": len(grid.active_indices()), "up_axis": up_axis(cams),
+            "res": int(grid.res), "box": grid.box_min.tolist() + grid.box_max.tolist()}
+
+
+def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
+    """Selection over the pool -> ``RUN/select``."""
+    from curate.core.budget import parse_budget, resolve_budget
+    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.occupancy.stage import check_budget_fits, key_of, load_node_grid, read_split
+    from curate.select.energy import energy_of_subset
+    from curate.select.select import select
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import load_sfm
+
+    t0 = time.perf_counter()
+    run_dir = Path(run_dir)
+    d = run_dir / "select"
+    key = stage_key({"select": cfg.select, "budget": cfg.budget}, [key_of(run_dir / "occupancy")])
+    if begin_stage(d, key, force):
+        return StageResult("select", d, False, time.perf_counter() - t0)
+    sfm = load_sfm(run_dir)
+    split = read_split(run_dir)
+    pool = split["pool"]
+    budget = resolve_budget(parse_budget(cfg.budget), len(pool))
+    check_budget_fits(cfg.budget, budget, len(pool))
+    grid = load_node_grid(run_dir)
+    pc = sfm.cameras[pool]
+    t_vis = time.perf_counter()
+    index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
+    t_vis = time.perf_counter() - t_vis
+    sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
+    sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
+    terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
+    np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
+                        frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
+                        res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
+    rec = selection_record(sel, sfm.cameras, pool, split["holdout"], split["holdout_every"], cfg.budget, grid)
+    write_json_atomic(d / "selection.json", rec)
+    finish_stage(d, key, {"select": cfg.select, "budget": cfg.budget}, t0,
+                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
+    e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
+    how = sel.method if sel.method == cfg.select.method else f"{cfg.select.method}: {sel.method}"
+    return StageResult("select", d, True, time.perf_counter() - t0,
+                       f"{len(rec['chosen'])} of {len(pool)} pool images ({how}{e}), {rec['n_nodes']} nodes, "
+                       f"{sel.seconds:.2f}s")
+
+
+def read_selection(run_dir: Path) -> dict:
+    """``RUN/select/selection.json``."""
+    p = Path(run_dir) / "select" / "selection.json"
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no selection yet (run the select stage first)")
+    return json.loads(p.read_text())

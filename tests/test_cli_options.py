@@ -1,0 +1,131 @@
+"""Every command-line flag reaches its config field, and the defaults are the config's own."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import pytest
+
+from curate import cli
+from curate.core.options import NO_CONST, Opt, apply_options, get_path
+
+# arguments of each command that are inputs, outputs or switches, not config options
+NOT_CONFIG = {"-h", "--help", "--out", "--poses", "--force", "--json", "--list", "--executor", "--ray-address",
+              "--jobs", "--adopt"}
+POSITIONAL = {"sfm": [], "run": [], "score": ["x.json"], "select": ["x.json"], "batch": [], "occupancy": ["RUN"],
+              "evaluate": ["RUN"], "export": ["RUN"], "report": ["RUN"], "simulate": []}
+REQUIRED = {"sfm": ["--out", "o"], "run": ["--out", "o"], "batch": ["--out", "o"], "simulate": ["--out", "o"]}
+
+
+def _other_value(opt: Opt, current):
+    """A command-line text and the value it must produce, different from ``current``."""
+    if opt.const is not NO_CONST:
+        return None, opt.const
+    if opt.choices:
+        v = next(c for c in opt.choices if c != current)
+        return str(v), v
+    if opt.flag == "--budget" and isinstance(current, str):
+        return ("37" if current != "37" else "12%"), ("37" if current != "37" else "12%")
+    if opt.flag == "--bins":
+        return "3x7", (3, 7)
+    if opt.flag == "--box":
+        return "-1,-2,-3,4,5,6", (-1.0, -2.0, -3.0, 4.0, 5.0, 6.0)
+    if opt.flag == "--size":
+        from curate.simulate.progressive import CameraSpec
+        return "96x64", CameraSpec(96, 64)
+    if opt.flag == "--methods":
+        return "ours,fvs", ("ours", "fvs")
+    if opt.flag == "--device":
+        return "cpu", "cpu"
+    if isinstance(current, bool):
+        return ("--no-" if current else "--"), (not current)
+    if isinstance(current, float):
+        return repr(current * 1.5 + 0.25), current * 1.5 + 0.25
+    if isinstance(current, int) or current is None:
+        v = (current or 0) + 3
+        return str(v), v
+    raise AssertionError(f"no test value for {opt.flag} (default {current!r})")
+
+
+def _cases():
+    for cmd, opts in cli.COMMAND_OPTS.items():
+        for o in opts:
+            yield pytest.param(cmd, o, id=f"{cmd}{o.flag}")
+
+
+@pytest.mark.parametrize("cmd, opt", list(_cases()))
+def test_every_flag_reaches_its_config(cmd, opt):
+    base = cli._base_for(cmd)
+    current = tuple(get_path(base, p) for p in opt.paths) if isinstance(opt.path, tuple) else get_path(base, opt.path)
+    text, want = _other_value(opt, current)
+    if text is None:
+        flag_args = [opt.flag]
+    elif text in ("--", "--no-"):
+        flag_args = [text + opt.flag[2:]]
+    else:
+        flag_args = [f"{opt.flag}={text}"]   # the = form: values such as -1,-2,... are not taken for flags
+    argv = [cmd, *POSITIONAL[cmd], *REQUIRED.get(cmd, []), *flag_args]
+    args = cli.build_parser(cmd).parse_args(argv)
+    cfg = apply_options(base, args, cli.COMMAND_OPTS[cmd])
+    got = tuple(get_path(cfg, p) for p in opt.paths) if isinstance(opt.path, tuple) else get_path(cfg, opt.path)
+    assert got == want and got != current
+    # and nothing else moved: the other fields keep the base's values
+    others = dataclasses.replace(cfg)
+    for p in opt.paths:
+        from curate.core.options import set_path
+        others = set_path(others, p, get_path(base, p))
+    assert others == base
+
+
+@pytest.mark.parametrize("cmd", list(cli.COMMANDS))
+def test_every_option_of_every_command_is_a_config_field_or_an_input(cmd):
+    """A flag that is neither bound to a config field nor a known input/output is a flag that reaches nothing."""
+    p = cli.build_parser(cmd)
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[cmd]
+    bound = {o.flag for o in cli.COMMAND_OPTS[cmd]}
+    for a in sub._actions:
+        for s in a.option_strings:
+            if s.startswith("--no-") and s[:2] + s[5:] in bound:
+                continue
+            assert s in bound or s in NOT_CONFIG, f"curate {cmd} {s} reaches no config"
+
+
+@pytest.mark.parametrize("cmd", list(cli.COMMANDS))
+def test_no_flag_given_leaves_the_config_as_it_is(cmd):
+    """A saved run's options are the base of a re-run: flags not given must not reset them."""
+    base = cli._base_for(cmd)
+    opts = cli.COMMAND_OPTS[cmd]
+    changed = base
+    for o in opts:   # a base that differs from the defaults everywhere it can
+        cur = tuple(get_path(base, p) for p in o.paths) if isinstance(o.path, tuple) else get_path(base, o.path)
+        _, v = _other_value(o, cur)
+        from curate.core.options import set_path
+        if isinstance(o.path, tuple):
+            for p, x in zip(o.path, v):
+                changed = set_path(changed, p, x)
+        else:
+            changed = set_path(changed, o.path, v)
+    args = cli.build_parser(cmd).parse_args([cmd, *POSITIONAL[cmd], *REQUIRED.get(cmd, [])])
+    assert apply_options(changed, args, opts) == changed
+
+
+def test_defaults_in_help_are_the_configs():
+    """--help shows the dataclass default (declared once), e.g. --iters 800 and --holdout-every 14."""
+    from curate.config import RunConfig
+    text = cli.build_parser("run")._subparsers._group_actions[0].choices["run"].format_help()
+    cfg = RunConfig()
+    assert f"(default: {cfg.evaluate.iters})" in " ".join(text.split())
+    assert "--holdout-every" in text and f"(default: {cfg.evaluate.holdout_every})" in " ".join(text.split())
+
+
+def test_help_and_version_are_instant_and_light():
+    """`curate --help` and `--version` import no heavy module (torch, pycolmap, open3d)."""
+    import subprocess
+    import sys
+    code = ("import sys; from curate import cli\n"
+            "try:\n    cli.main(['--version'])\nexcept SystemExit: pass\n"
+            "try:\n    cli.main(['--help'])\nexcept SystemExit: pass\n"
+            "print([m for m in ('torch', 'pycolmap', 'open3d', 'numpy') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "curate 0." in out and out.strip().splitlines()[-1] == "[]"
