@@ -194,3 +194,22 @@ def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp
     assert np.allclose(z["box_min"], [1, 1, 0.2]) and np.allclose(z["box_max"], [5, 4, 2.5])
     split = json.loads((out / "occupancy" / "split.json").read_text())
     assert split["holdout_every"] == 14 and split["holdout"] == list(range(0, 160, 14))
+
+
+def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
+    """`--no-evaluate` with view medoids (or FVS) trains no pool field: the selection needs none. The
+    energy on a pose import (no sparse points to give its occupancy) still gets one."""
+    out = tmp_path / "run"
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "medoids"), capture_output=True, text=True,
+                         env=_env(), timeout=600)
+    assert res.returncode == 0, res.stderr
+    rec = json.loads((out / "occupancy" / "stage.json").read_text())
+    assert not (out / "occupancy" / "field.pt").exists() and rec["train"] is None
+    assert "not needed" in rec["field"] and "no pool field" in res.stdout
+    assert len(json.loads((out / "select" / "selection.json").read_text())["chosen"]) == 12
+    assert (out / "export" / "transforms.json").is_file() and (out / "report.html").is_file()
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "energy"), capture_output=True, text=True,
+                         env=_env(), timeout=600)
+    assert res.returncode == 0, res.stderr
+    assert (out / "occupancy" / "field.pt").is_file()
+    assert "energy" in json.loads((out / "occupancy" / "stage.json").read_text())["field"]

@@ -53,7 +53,7 @@ from curate.report.html_parts import fmt_num
 
 log = logging.getLogger(__name__)
 
-STAGES = ("sfm", "occupancy", "select", "evaluate", "export", "report")
+from curate.core.stage import STAGES  # noqa: E402  (re-exported: the stages a batch row reports)
 
 
 @dataclass

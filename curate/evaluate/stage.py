@@ -76,7 +76,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     if not hold:
         raise ValueError("no held-out views: set holdout_every >= 2 and register enough images")
     cams = eval_cameras(sfm.cameras, cfg.evaluate.max_side)
-    fp = {"all": str(run_dir / "occupancy" / "field.pt")}
+    pool_field = run_dir / "occupancy" / "field.pt"   # absent when the run skipped it (no evaluation): 'all' trains
+    fp = {"all": str(pool_field)} if pool_field.is_file() else {}
     res = run_units(run_dir, units, keys, cfg.evaluate, cams, paths, hold, default_box(sfm.cameras), fp,
                     executor=executor)
     methods, paired, gap = summarize(res)

@@ -88,11 +88,26 @@ def train_settings(cfg: "RunConfig") -> dict:
             "train_seed": ev.train_seed, "holdout_every": ev.holdout_every}
 
 
+def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
+    """(train the pool field?, why). The field serves the evaluation (its all-images ceiling) and
+    refines the occupancy the paper's energy scores; view medoids, FVS, every n-th frame and
+    random need neither. So with the evaluation off, the field is trained only for the energy
+    on a capture whose SfM points cannot give its occupancy (a pose import without points)."""
+    from curate.select.select import resolve_method
+    if cfg.run_evaluation:
+        return True, "the evaluation's all-images field"
+    method, _ = resolve_method(cams, cfg.select.method)
+    if method == "energy" and n_points < cfg.occupancy.min_points:
+        return True, "the energy needs an occupancy the sparse points cannot give"
+    return False, f"not needed: {method} without evaluation (occupancy from the sparse points)"
+
+
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
-    """Split, pool field and occupancy grid (points, refined, node band) -> ``RUN/occupancy``."""
+    """Split, pool field (when needed: :func:`needs_field`) and occupancy grid (points, refined,
+    node band) -> ``RUN/occupancy``."""
     from curate.core.budget import parse_budget, resolve_budget
     from curate.core.grid import NodeGrid
-    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, is_fresh, stage_key, write_json_atomic
     from curate.core.stats import holdout_split
     from curate.evaluate.units import eval_cameras
     from curate.field.train import default_box, train_field
@@ -103,14 +118,19 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     run_dir = Path(run_dir)
     d = run_dir / "occupancy"
     ev = cfg.evaluate
-    train_part = train_settings(cfg)
-    parts = {"occupancy": cfg.occupancy, "refine": cfg.refine, "band": cfg.surface_band, "train": train_part}
+    sfm = load_sfm(run_dir)
+    field_needed, why = needs_field(cfg, sfm.cameras, 0 if sfm.points is None else len(sfm.points))
+    parts = {"occupancy": cfg.occupancy, "refine": cfg.refine, "band": cfg.surface_band, "train": train_settings(cfg)}
     if cfg.box is not None:
         parts["box"] = list(cfg.box)
-    key = stage_key(parts, [key_of(run_dir / "sfm")])
+    deps = [key_of(run_dir / "sfm")]
+    key_field = stage_key(parts, deps)
+    if not field_needed and not force and is_fresh(d, key_field):
+        return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too
+    train_part = parts["train"] if field_needed else None
+    key = key_field if field_needed else stage_key({**parts, "train": None}, deps)
     if begin_stage(d, key, force):
         return StageResult("occupancy", d, False, time.perf_counter() - t0)
-    sfm = load_sfm(run_dir)
     paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
     pool, hold = (v.tolist() for v in holdout_split(len(sfm.cameras), ev.holdout_every))
     if len(pool) < 2:
@@ -119,12 +139,16 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     n_budget = resolve_budget(parse_budget(cfg.budget), len(pool))
     check_budget_fits(cfg.budget, n_budget, len(pool))
     write_json_atomic(d / "split.json", {"holdout_every": ev.holdout_every, "holdout": hold, "pool": pool})
-    cams = eval_cameras(sfm.cameras, ev.max_side)
     box = default_box(sfm.cameras)
-    fld, st = train_field(ev.field, cams[pool], [paths[i] for i in pool], d, time_budget_s=ev.time_budget_s,
-                          iters=ev.iters, seed=ev.train_seed, box=box)
-    write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds,
-                                         "stop_reason": st.stop_reason, "n_train": len(pool)})
+    fld = st = None
+    if field_needed:
+        cams = eval_cameras(sfm.cameras, ev.max_side)
+        fld, st = train_field(ev.field, cams[pool], [paths[i] for i in pool], d, time_budget_s=ev.time_budget_s,
+                              iters=ev.iters, seed=ev.train_seed, box=box)
+        write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds,
+                                             "stop_reason": st.stop_reason, "n_train": len(pool)})
+    else:
+        log.info("occupancy: no pool field (%s)", why)
     R = cfg.occupancy.res
     user_box = (np.array(cfg.box[:3]), np.array(cfg.box[3:])) if cfg.box is not None else None
     try:
@@ -135,8 +159,12 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
         lo, hi = user_box if user_box is not None else box
         grid = NodeGrid(lo, hi, R)
         pts_mask = None
-    refined = refine_occupancy(fld, grid, cfg=cfg.refine if pts_mask is not None else replace(cfg.refine, mode="field"))
-    rmask = refined.mask
+    if fld is not None:
+        refined = refine_occupancy(fld, grid, cfg=cfg.refine if pts_mask is not None
+                                   else replace(cfg.refine, mode="field"))
+        rmask = refined.mask
+    else:
+        rmask = pts_mask if pts_mask is not None else np.ones((R,) * 3, bool)
     if not rmask.any():
         log.warning("the field confirms no occupied node: using the point occupancy (or every node)")
         rmask = pts_mask if pts_mask is not None else np.ones((R,) * 3, bool)
@@ -146,9 +174,11 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
                         refined_mask=rmask, nodes_mask=band)
     n = {"points": int(pts_mask.sum()) if pts_mask is not None else 0, "refined": int(rmask.sum()),
          "nodes": int(band.sum())}
+    outputs = {"occupancy": "occupancy.npz", "split": "split.json", **({"field": "field.pt"} if fld is not None else {})}
     finish_stage(d, key, {"occupancy": cfg.occupancy, "refine": cfg.refine, "train": train_part, "box": cfg.box}, t0,
-                 outputs={"occupancy": "occupancy.npz", "field": "field.pt", "split": "split.json"},
-                 seed=ev.train_seed, counts=n, train={"iters": st.iters, "train_seconds": st.train_seconds})
+                 outputs=outputs, seed=ev.train_seed, counts=n, field=why,
+                 train={"iters": st.iters, "train_seconds": st.train_seconds} if st is not None else None)
     return StageResult("occupancy", d, True, time.perf_counter() - t0,
                        f"{n['refined']} occupied nodes of {R}^3 ({n['points']} from points), "
-                       f"{n['nodes']} selection nodes; pool field {st.iters} it")
+                       f"{n['nodes']} selection nodes; " + (f"pool field {st.iters} it" if st is not None
+                                                            else "no pool field (not needed)"))
