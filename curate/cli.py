@@ -18,7 +18,7 @@ from pathlib import Path
 from curate import __version__
 from curate.core.options import Opt, add_options, apply_options, given
 from curate.select.methods import METHODS
-from curate.sfm.config import CAMERA_MODES, MATCHERS
+from curate.sfm.config import CAMERA_MODES, MATCHERS, ON_SPLIT
 
 
 class CliError(Exception):
@@ -101,7 +101,8 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--keep-duplicates", "sfm.drop_duplicates", const=False, help="keep near-duplicate photos"),
        Opt("--sift-peak-threshold", "sfm.sift_peak_threshold", parse=float),
        Opt("--guided-matching", "sfm.guided_matching"),
-       Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA")]
+       Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
+       Opt("--on-split", "sfm.on_split", choices=ON_SPLIT)]
 RUN = BUDGET + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
 
 SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen")),
@@ -337,6 +338,8 @@ def cmd_sfm(args) -> int:
     print(f"sfm: {res.summary}" + (f" of {st['n_kept']} kept photos" if "n_kept" in st else "")
           + (f", {st['n_points']} points" if "n_points" in st else "")
           + ("" if res.ran else " (unchanged: skipped)") + f" in {res.seconds:.1f}s -> {res.path}")
+    if res.warning:
+        print(f"WARNING: {res.warning}", file=sys.stderr)
     return 0
 
 

@@ -73,4 +73,7 @@ def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: s
     out = report.run(cfg, run_dir, str(photos) if photos else None, [r.timing() for r in results],
                      time.perf_counter() - t_start)
     print(out.line(), flush=True)
+    for r in results:
+        if r.warning:
+            print(f"WARNING ({r.name}): {r.warning}", flush=True)
     return out.path

@@ -38,6 +38,8 @@ class StageResult:
     """Seconds of this call (a skip takes milliseconds)."""
     summary: str = ""
     """One line for the terminal: what the stage produced."""
+    warning: str | None = None
+    """Something the user must know about the result (repeated at the end of ``curate run``)."""
 
     def line(self) -> str:
         return f"{self.name:10s} {self.summary if self.ran else 'skipped (unchanged)'}  [{self.seconds:.1f}s]"

@@ -10,6 +10,8 @@ MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
 ``sequential`` finds loops with a tree trained on the capture itself (``loop_detection``)."""
 CAMERA_MODES = ("auto", "single", "per_image")
 """``SfmConfig.camera_mode`` choices."""
+ON_SPLIT = ("largest", "stop")
+"""``SfmConfig.on_split`` choices."""
 
 
 @dataclass
@@ -50,13 +52,15 @@ class SfmConfig:
     #                                   tree's training sample: same photos and config, same matches and model
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
+    on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
+    #                                   'largest' curates the largest part with a loud warning; 'stop' stops
     normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
     # --- execution (not in the stage key)
     num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
     progress: bool = True             # tqdm bars on the terminal
 
     def __post_init__(self) -> None:
-        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off")}
+        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:
                 raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")

@@ -20,7 +20,7 @@ from curate.core.stage import hash_files, stage_key, write_json_atomic
 
 logger = logging.getLogger(__name__)
 
-_NOT_IN_KEY = ("num_threads", "progress")
+_NOT_IN_KEY = ("num_threads", "progress", "on_split")
 
 
 def refuse_inside(out: Path, photos: Path) -> None:

@@ -7,6 +7,8 @@ the work is :func:`curate.sfm.colmap.run_sfm` (COLMAP) or :func:`curate.sfm.colm
 from __future__ import annotations
 
 import json
+import logging
+import re
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -16,10 +18,48 @@ from curate.core.stage import StageResult
 if TYPE_CHECKING:
     from curate.config import RunConfig
 
+log = logging.getLogger(__name__)
+
 
 def _record_stamp(d: Path):
     p = d / "stage.json"
     return (p.stat().st_mtime_ns, p.read_bytes()) if p.is_file() else None
+
+
+def _trailing(name: str):
+    m = re.match(r"^(.*?)(\d+)(\D*)$", Path(name).name)
+    return (m.group(1), int(m.group(2)), m.group(3)) if m else None
+
+
+def name_ranges(names: list[str], limit: int = 6) -> str:
+    """Photo names shortened to runs of consecutive frame numbers, e.g. ``frame_0190..frame_0361 (172)``."""
+    runs: list[list[str]] = []
+    for n in sorted(names):
+        t = _trailing(n)
+        if runs and t is not None:
+            u = _trailing(runs[-1][-1])
+            if u is not None and u[0] == t[0] and u[2] == t[2] and t[1] - u[1] <= 2:
+                runs[-1].append(n)
+                continue
+        runs.append([n])
+    parts = [r[0] if len(r) == 1 else f"{r[0]}..{r[-1]} ({len(r)})" for r in runs]
+    return ", ".join(parts[:limit]) + (f" and {len(parts) - limit} more" if len(parts) > limit else "")
+
+
+def split_warning(run_dir: Path) -> str | None:
+    """A warning when SfM left kept photos out of the model curate uses (the capture split, or
+    photos that did not register): the models' sizes and which photos are lost; None when it kept all."""
+    from curate.core.stage import read_stage
+    st = (read_stage(Path(run_dir) / "sfm") or {}).get("stats", {})
+    lost = st.get("unregistered") or []
+    if not lost:
+        return None
+    sizes = st.get("model_sizes") or []
+    kept = st.get("n_kept", st.get("n_registered", 0) + len(lost))
+    how = (f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos)" if len(sizes) > 1
+           else "SfM could not register every photo")
+    return (f"{how}: curate uses the largest, {st.get('n_registered', kept - len(lost))} of {kept} photos; "
+            f"{len(lost)} are left out of the selection, the export and the evaluation: {name_ranges(lost)}")
 
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path | None = None,
@@ -41,4 +81,9 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
         run_sfm(cfg.sfm, photos, run_dir, force=force)
     ran = _record_stamp(d) != before
     n = len(json.loads((d / "cameras.json").read_text())["cameras"])
-    return StageResult("sfm", d, ran, time.perf_counter() - t0, f"{n} cameras registered")
+    warn = split_warning(run_dir)
+    if warn is not None:
+        if cfg.sfm.on_split == "stop":
+            raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part)")
+        log.warning("sfm: %s", warn)
+    return StageResult("sfm", d, ran, time.perf_counter() - t0, f"{n} cameras registered", warning=warn)
