@@ -168,3 +168,30 @@ def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
     assert (out / "images.txt").read_text() == "img_03.png\nimg_04.png\nimg_05.png\n"
     with pytest.raises(ValueError, match="photo folder"):
         export_subset(run, chosen, photos / "sub")
+    # connectivity of the subset through shared points, as a brute force over the projections counts it
+    from curate.sfm.colmap import covisible_groups, write_subset_model
+    for min_shared in (1, 15, 10_000):
+        got = write_subset_model(out_sfm / "sparse" / "0", chosen, tmp_path / f"m{min_shared}",
+                                 min_shared=min_shared)["components"]
+        kept_pts = [p for p in range(40) if sum(int(inside[i, p]) for i in keep) >= 2]
+        edges = [(a, b) for a in keep for b in keep if a < b
+                 and sum(int(inside[a, p] and inside[b, p]) for p in kept_pts) >= min_shared]
+        assert got == covisible_groups(sorted(keep), edges)
+    assert write_subset_model(out_sfm / "sparse" / "0", chosen, tmp_path / "mx", min_shared=10_000)["components"] \
+        == [1, 1, 1]
+
+
+def test_covisible_groups():
+    from curate.sfm.colmap import covisible_groups
+    assert covisible_groups([1, 2, 3, 4, 5], [(1, 2), (2, 3), (4, 5)]) == [3, 2]
+    assert covisible_groups([1, 2, 3], []) == [1, 1, 1]
+    assert covisible_groups([], []) == []
+    assert covisible_groups([7], [(7, 7)]) == [1]
+
+
+def test_connectivity_warning():
+    from curate.export.stage import connectivity_warning
+    assert connectivity_warning({"n_points3D_source": 100, "components": [12]}) is None
+    assert connectivity_warning({"n_points3D_source": 0, "components": [1] * 12}) is None   # poses without points
+    w = connectivity_warning({"n_points3D_source": 100, "components": [9, 3]})
+    assert "12 exported images form 2 groups" in w and "9, 3" in w

@@ -445,7 +445,7 @@ def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos
 # ------------------------------------------------------------------ subset export
 def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: str | Path,
                        rename: dict[str, str] | None = None, sizes: dict[str, tuple[int, int]] | None = None,
-                       min_track: int = 2) -> dict:
+                       min_track: int = 2, min_shared: int = 15) -> dict:
     """Write a COLMAP binary model holding only the images ``keep_names`` of the model in ``sparse_dir``.
 
     Same world frame and poses as the source. Each kept image keeps all its keypoints;
@@ -462,9 +462,13 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
             (the originals): the camera is rescaled per axis (focal length and principal point;
             a single-focal model takes the mean scale) and the keypoints with it.
         min_track: fewest kept observations for a 3D point to be kept.
+        min_shared: two kept images are connected when they observe at least this many kept
+            points in common (COLMAP's fewest verified matches of a pair, 15 by default).
 
     Returns:
-        {"n_images", "n_cameras", "n_points3D", "n_points3D_source"}.
+        {"n_images", "n_cameras", "n_points3D", "n_points3D_source", "components"}: ``components``,
+        the sizes of the groups of kept images connected through shared points (largest first;
+        one group: the subset is one connected set that 3DGS / NeRF tools can register as a whole).
     """
     import pycolmap
 
@@ -495,10 +499,16 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
         out_im = pycolmap.Image(name=rename.get(n, n), keypoints=xy, camera_id=cam_ids[key], image_id=iid)
         rec.add_image_with_trivial_frame(out_im, im.cam_from_world())
         keep_ids.add(iid)
+    shared: dict[tuple[int, int], int] = {}
     for p in src.points3D.values():
         els = [e for e in p.track.elements if e.image_id in keep_ids]
-        if len({e.image_id for e in els}) >= min_track:
+        ids = sorted({e.image_id for e in els})
+        if len(ids) >= min_track:
             rec.add_point3D(p.xyz, pycolmap.Track(els), p.color)
+            for a in range(len(ids)):
+                for b in range(a + 1, len(ids)):
+                    shared[(ids[a], ids[b])] = shared.get((ids[a], ids[b]), 0) + 1
+    components = covisible_groups(sorted(keep_ids), [e for e, n in shared.items() if n >= min_shared])
     rec.update_point_3d_errors()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -506,4 +516,24 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
     logger.info("subset model: %d images, %d of %d points -> %s", rec.num_reg_images(), rec.num_points3D(),
                 src.num_points3D(), out_dir)
     return {"n_images": rec.num_reg_images(), "n_cameras": rec.num_cameras(), "n_points3D": rec.num_points3D(),
-            "n_points3D_source": src.num_points3D()}
+            "n_points3D_source": src.num_points3D(), "components": components}
+
+
+def covisible_groups(nodes: list[int], edges: list[tuple[int, int]]) -> list[int]:
+    """Sizes of the connected components of the graph (``nodes``, ``edges``), largest first."""
+    parent = {n: n for n in nodes}
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+    for a, b in edges:
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+    sizes: dict[int, int] = {}
+    for n in nodes:
+        r = find(n)
+        sizes[r] = sizes.get(r, 0) + 1
+    return sorted(sizes.values(), reverse=True)
