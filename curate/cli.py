@@ -25,6 +25,13 @@ class CliError(Exception):
     """A user-facing error: printed without a traceback, exit status 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (the usage of a command with 30 options buries the message)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+
 # ---------------------------------------------------------------------- value parsers
 def _box(text: str):
     try:
@@ -461,11 +468,11 @@ def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
     """The ``curate`` parser. Every command is listed; the options (whose defaults and help
     are read from the config dataclasses) are built for ``command`` only (None: for no
     command, as ``curate --help`` needs), or for every command (:data:`ALL`)."""
-    p = argparse.ArgumentParser(prog="curate", description="Pick the best photos of a capture for NeRF / "
+    p = _Parser(prog="curate", description="Pick the best photos of a capture for NeRF / "
                                 "Gaussian splatting (Kopanas & Drettakis 2023, extended).")
     p.add_argument("--version", action="version", version=f"curate {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
     for name, text in COMMANDS.items():
         desc = DESCRIPTIONS.get(name, text[0].upper() + text[1:] + ", with the options saved by `curate run`"
                                 " (a flag given here overrides the saved option and is saved).")

@@ -47,7 +47,9 @@ class RunConfig:
     """Export links to the original photos ('link') or copies of them ('copy')."""
 
     def __post_init__(self) -> None:
-        parse_budget(str(self.budget))  # ValueError on a malformed budget
+        b = parse_budget(str(self.budget))  # ValueError on a malformed budget
+        if isinstance(b, int) and b < 2:
+            raise ValueError(f"budget {self.budget}: choose at least 2 images")
         if self.export_mode not in EXPORT_MODES:
             raise ValueError(f"export mode must be one of {EXPORT_MODES}, got {self.export_mode!r}")
         if self.surface_band < 0:
