@@ -1,0 +1,85 @@
+"""Which COLMAP mapper keeps the whole capture: incremental against global (GLOMAP) on the same matches.
+
+Takes a run folder whose SfM stage finished (``RUN/sfm/database.db`` and ``RUN/sfm/images``, as
+``curate sfm`` leaves them), maps its matches again with each mapper, and prints one JSON
+object: per mapper the models' sizes, the registered fraction, the mapping time and, when a
+ground-truth folder is given (``poses.txt`` + ``K.txt``, a transforms.json, or templering's
+parameters), the median rotation error and centre error after a similarity alignment.
+
+    python3 -m curate sfm ../shared/data/office/images --out /tmp/office_sfm
+    python3 -m research.sfm_mappers /tmp/office_sfm --truth ../shared/data/office
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+
+def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
+    """{model id: Reconstruction} of ``kind`` ('incremental' or 'global') on the matches of ``db``, and its seconds."""
+    import pycolmap
+    pycolmap.set_random_seed(seed)
+    out.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
+    if kind == "incremental":
+        from curate.sfm.config import SfmConfig
+        cfg = SfmConfig()
+        opts = pycolmap.IncrementalPipelineOptions()
+        opts.random_seed = seed
+        opts.mapper.random_seed = seed
+        opts.min_num_matches = cfg.min_num_matches
+        opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+        opts.ba_refine_principal_point = False
+        models = pycolmap.incremental_mapping(db, images, out, options=opts)
+    elif kind == "global":
+        opts = pycolmap.GlobalPipelineOptions()
+        models = pycolmap.global_mapping(db, images, out, options=opts)
+    else:
+        raise ValueError(kind)
+    return models, time.perf_counter() - t
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
+    ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
+    ap.add_argument("--mappers", default="incremental,global")
+    a = ap.parse_args(argv)
+    from curate.sfm.colmap import cameras_from_reconstruction
+    from research.align import pose_errors
+    from research.datasets import load_ground_truth
+    sfm = a.run / "sfm"
+    db = sfm / "database.db"
+    if not db.is_file():
+        raise SystemExit(f"{db}: no database (run `curate sfm` first)")
+    n_kept = json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"]
+    truth = load_ground_truth(a.truth) if a.truth else None
+    out = {"run": str(a.run), "n_kept": n_kept}
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in a.mappers.split(","):
+            # each mapper on its own copy of the database (mappers write to it)
+            import shutil
+            dbk = Path(tmp) / f"{kind}.db"
+            shutil.copy2(db, dbk)
+            models, secs = map_with(kind, dbk, sfm / "images", Path(tmp) / kind)
+            sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+            row = {"model_sizes": sizes, "registered_fraction": round(sizes[0] / n_kept, 4) if sizes else 0.0,
+                   "map_seconds": round(secs, 1)}
+            if models and truth is not None:
+                best = max(models.values(), key=lambda r: r.num_reg_images())
+                cams = cameras_from_reconstruction(best)[0]
+                e = pose_errors(cams, truth)
+                row.update({k: e[k] for k in ("n_matched", "rotation_deg_median", "rotation_deg_max",
+                                              "centre_rel_median")})
+            out[kind] = row
+            print(json.dumps({kind: row}), flush=True)
+    print(json.dumps(out))
+    return out
+
+
+if __name__ == "__main__":
+    main()
