@@ -20,6 +20,26 @@ class CliError(Exception):
     """A user-facing error: printed without a traceback, exit status 2."""
 
 
+def _claims(folder: str, inputs: tuple[str, ...] = (), writes: tuple[str, ...] = (), must_exist: bool = False):
+    """runsafe: run the command inside the claimed and locked folder ``args.<folder>``
+    (:func:`curate.core.runfolder.claimed`; ``args.<inputs>``: the command's inputs;
+    ``args.adopt`` when the command has it). Refusals are one-line errors (exit 2)."""
+    import functools
+
+    def deco(fn):
+        @functools.wraps(fn)
+        def wrapper(args):
+            from curate.core import runfolder
+            try:
+                with runfolder.claimed(getattr(args, folder), [getattr(args, i, None) for i in inputs],
+                                       adopt=getattr(args, "adopt", False), writes=writes, must_exist=must_exist):
+                    return fn(args)
+            except runfolder.RunFolderError as e:
+                raise CliError(str(e))
+        return wrapper
+    return deco
+
+
 # ---------------------------------------------------------------------- argument helpers
 def _box(text: str):
     try:
@@ -175,14 +195,19 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    from curate.select.select import select, uses_sharpness
-    from curate.core.transforms_json import write_transforms
-    from curate.core.stage import write_json_atomic, config_dict
-
     if (Path(args.input) / "occupancy" / "stage.json").is_file():
         return _select_stage(args)
     if args.out is None:
         raise CliError("--out is required (except for a run folder)")
+    return _select_posed(args)
+
+
+@_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))  # runsafe
+def _select_posed(args) -> int:
+    """``curate select POSES --out OUT``."""
+    from curate.select.select import select, uses_sharpness
+    from curate.core.transforms_json import write_transforms
+    from curate.core.stage import write_json_atomic, config_dict
     cams, files = load_cameras(Path(args.input))
     if len(cams) == 0:
         raise CliError("the pool has no cameras")
@@ -214,6 +239,7 @@ def cmd_select(args) -> int:
     return 0
 
 
+@_claims("out", ("photos", "poses"), writes=("sfm",))  # runsafe
 def cmd_sfm(args) -> int:
     import time
     from curate.sfm.config import SfmConfig
@@ -309,7 +335,7 @@ def cmd_run(args) -> int:
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
     try:
-        out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force)
+        out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force, adopt=args.adopt)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
     rep = json.loads(Path(out).read_text())
@@ -337,7 +363,7 @@ def cmd_batch(args) -> int:
         raise CliError("give photo folders, or --list FILE")
     try:
         summ = run_batch(folders, args.out, cfg, executor=args.executor, jobs=args.jobs,
-                         ray_address=args.ray_address, force=args.force)
+                         ray_address=args.ray_address, force=args.force, adopt=args.adopt)
     except (RayMissing, ValueError) as e:
         raise CliError(str(e))
     for r in summ["rows"]:
@@ -350,6 +376,7 @@ def cmd_batch(args) -> int:
     return 0 if summ["n_failed"] == 0 else 1
 
 
+@_claims("run", must_exist=True)  # runsafe
 def cmd_stage(args) -> int:
     """occupancy / evaluate / report / export on an existing run folder, with its saved config."""
     from curate import pipeline as pl
@@ -371,6 +398,7 @@ def cmd_stage(args) -> int:
     return 0
 
 
+@_claims("input", must_exist=True)  # runsafe
 def _select_stage(args) -> int:
     """``curate select RUN``: the select stage of a run folder, with its saved config."""
     from dataclasses import replace
@@ -413,6 +441,9 @@ def _add_run_options(s: argparse.ArgumentParser) -> None:
     _add_energy_args(s)
 
 
+_ADOPT = "use --out although it is a non-empty folder curate did not create (its files are never touched)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="curate", description="Pick the best photos of a capture for NeRF / "
                                 "Gaussian splatting (Kopanas & Drettakis 2023, extended).")
@@ -440,6 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="COLMAP guided matching: more matches, about twice the matching time")
     s.add_argument("--no-dense", action="store_true", help="skip dense MVS even with CUDA")
     s.add_argument("--force", action="store_true", help="redo the stage even if its inputs did not change")
+    s.add_argument("--adopt", action="store_true", help=_ADOPT)
     s.set_defaults(func=cmd_sfm)
 
     s = sub.add_parser("score", help="score an existing capture with the energy (no NeRF needed)",
@@ -461,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.add_argument("--force", action="store_true", help="run folder: redo the stage even if unchanged")
+    s.add_argument("--adopt", action="store_true", help=_ADOPT)
     _add_energy_args(s)
     s.set_defaults(func=cmd_select)
 
@@ -472,6 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="run folder")
     s.add_argument("--poses", default=None, help="import this COLMAP model or transforms.json instead of SfM")
     _add_run_options(s)
+    s.add_argument("--adopt", action="store_true", help=_ADOPT)
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("batch", help="curate many photo folders (locally or on a Ray cluster), with a summary",
@@ -488,6 +522,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--jobs", type=int, default=0,
                    help="folders at once (default: one per core, capped by memory; ray: the cluster's CPUs)")
     _add_run_options(s)
+    s.add_argument("--adopt", action="store_true", help=_ADOPT)
     s.set_defaults(func=cmd_batch)
 
     for name, text in (("occupancy", "occupancy grid and pool field of a run folder"),

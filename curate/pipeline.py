@@ -296,16 +296,15 @@ def stage_evaluate(cfg: RunConfig, run_dir: Path, force: bool = False, timings: 
 
     ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
-    import shutil
-    from curate.evaluate.units import eval_cameras, run_units, summarize
+    from curate.evaluate.units import clear_evaluation, eval_cameras, run_units, summarize
     from curate.core.stage import is_fresh, write_json_atomic
     from curate.field.train import default_box
 
     t0 = time.perf_counter()
     d = run_dir / "evaluate"
     units, keys, sel = eval_units(cfg, run_dir)
-    if force and d.exists():
-        shutil.rmtree(d)
+    if force:
+        clear_evaluation(run_dir)  # only what curate wrote there (runfolder)
     fresh = all(is_fresh(d / u.key, keys[u.key]) for u in units)
     sfm, paths, pool, hold = load_split(run_dir, cfg.evaluate.holdout_every)
     if not hold:
@@ -403,8 +402,21 @@ def stage_export(cfg: RunConfig, run_dir: Path, force: bool = False, timings: li
     return d
 
 
+RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "select", "evaluate", "export")
+"""Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
+
+
 def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
-        force: bool = False, executor=None) -> Path:
+        force: bool = False, executor=None, adopt: bool = False) -> Path:
+    """:func:`_run` inside the claimed and locked run folder (:mod:`curate.core.runfolder`;
+    ``adopt``: accept a non-empty folder curate did not create)."""
+    from curate.core import runfolder  # runsafe: claim + lock, before any work
+    with runfolder.claimed(run_dir, inputs=[photos, poses], adopt=adopt, writes=RUN_WRITES):
+        return _run(cfg, photos, run_dir, poses, force, executor)
+
+
+def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
+         force: bool = False, executor=None) -> Path:
     """The whole pipeline into ``run_dir``; returns the path of ``report.json``.
 
     ``photos``: the photo folder (SfM), or with ``poses`` (a COLMAP model or a
