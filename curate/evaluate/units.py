@@ -135,6 +135,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     else:
         fld, st = train_field(cfg.field, cams[sub], [paths[i] for i in sub], d, time_budget_s=cfg.time_budget_s,
                               iters=cfg.iters, seed=cfg.train_seed, box=box)
+    check_holder(run_dir, lock_token)  # after the long training: do not render into a folder taken since
     per = []
     test = cams[list(holdout)]
     with torch.no_grad():
