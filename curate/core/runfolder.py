@@ -121,7 +121,8 @@ def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool
     """Make sure ``out`` is a run folder curate may write; create and mark it if new. Returns it resolved.
 
     ``inputs``: the photo folder, poses file or model... (None entries are ignored): none
-    may lie inside ``out``, and ``out`` may not lie inside any of them. ``adopt``: accept a
+    may lie inside ``out``, and ``out`` may not lie inside any of them (a folder; a run folder
+    beside a transforms.json is accepted: nothing there is cleared but curate's own). ``adopt``: accept a
     non-empty folder without the marker (its present top-level entries stay the user's).
     ``writes``: top-level names the command writes (``report.html``, ``export``...): refused
     when they are the user's (present when the folder was adopted). ``must_exist``: a stage
@@ -455,5 +456,7 @@ def clear_tree(d: str | Path, own: Iterable[str] = ()) -> None:
 def manifest(d: str | Path) -> list[str]:
     """Relative paths (POSIX) of every file under the stage folder ``d`` (for its ``stage.json``)."""
     d = Path(d)
+    if not d.is_dir():
+        return []
     return sorted(p.relative_to(d).as_posix() for p in _walk(d)
                   if p.name not in BOOKKEEPING and not _is_tmp(p.name))

@@ -5,6 +5,10 @@ content of its inputs), the resolved config itself, versions, the seed when ther
 one, the stage's outputs and its wall time. A stage whose ``stage.json`` exists with
 the same key is skipped; a stage killed half-way leaves no ``stage.json`` and is
 redone. Writes go to a temporary file and are renamed, so a record is whole or absent.
+
+``stage.json`` also lists (``files``) every file the stage wrote in its folder: a re-run
+clears those and nothing else (:func:`curate.core.runfolder.clear_tree`), and only in a
+run folder curate claimed.
 """
 
 from __future__ import annotations
