@@ -360,9 +360,11 @@ def _is_worker(pid: int) -> bool:
     return "spawn_main" in cmd and "resource_tracker" not in cmd
 
 
-def _kill_when_training(cmd: list[str], depth: int) -> tuple[subprocess.Popen, list[int]]:
-    """Start ``cmd``; once training workers exist (``depth`` 1: children, 2: grandchildren) SIGKILL it alone."""
-    p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+def _kill_when_training(cmd: list[str], depth: int, victim: str = "main") -> tuple[subprocess.Popen, list[int]]:
+    """Start ``cmd``; once ``depth`` spawned processes exist (1: the run's training worker; 2: a batch
+    folder's process and its worker) SIGKILL the command alone (``victim`` 'main') or the folder's
+    process alone ('folder'). Returns the command and the descendants of the killed process."""
+    p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                          start_new_session=True)
     t0 = time.time()
     try:
@@ -374,8 +376,13 @@ def _kill_when_training(cmd: list[str], depth: int) -> tuple[subprocess.Popen, l
             if len(workers) >= depth:
                 break
             time.sleep(0.05)
-        os.kill(p.pid, signal.SIGKILL)
-        p.wait()
+        if victim == "main":
+            os.kill(p.pid, signal.SIGKILL)
+            p.wait()
+            return p, desc
+        folder = next(d for d in _children(p.pid) if _is_worker(d))
+        desc = _descendants(folder)
+        os.kill(folder, signal.SIGKILL)
         return p, desc
     except BaseException:
         os.killpg(p.pid, signal.SIGKILL)
@@ -401,15 +408,21 @@ def test_kill_9_of_curate_run_leaves_no_training_worker(tmp_path):
 
 
 @pytest.mark.slow
-def test_kill_9_of_curate_batch_leaves_no_folder_process_nor_worker(tmp_path):
+@pytest.mark.parametrize("victim", ["main", "folder"])
+def test_kill_9_of_curate_batch_or_of_a_folder_process_leaves_no_worker(tmp_path, victim):
     photos = project(tmp_path / "cap", n=40)
     runs = tmp_path / "runs"
     cmd = [sys.executable, "-m", "curate", "batch", str(photos), "--out", str(runs), "--budget", "6", "--iters",
            "40", "--eval-size", "32", "--res", "8", "--random-seeds", "2", "--workers", "2", "--jobs", "1"]
-    p, desc = _kill_when_training(cmd, 2)  # the folder's process and one of its training workers
+    p, desc = _kill_when_training(cmd, 2, victim)  # the folder's process and one of its training workers
     try:
         assert desc and _gone(desc, 5.0), [(d, _state(d)) for d in desc if rf.pid_alive(d)]
+        if victim == "folder":  # the batch goes on and reports the folder failed
+            out = p.communicate(timeout=60)[0]
+            assert p.returncode == 1 and "killed by signal 9" in out, out
     finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
         for d in desc:
             if rf.pid_alive(d):
                 os.kill(d, signal.SIGKILL)
