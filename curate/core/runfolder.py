@@ -449,7 +449,7 @@ def clear_tree(d: str | Path, own: Iterable[str] = ()) -> None:
     (d / "stage.json").unlink(missing_ok=True)  # the record first: a crash never leaves a stale one
     for p in sorted(_walk(d), key=lambda q: len(q.parts), reverse=True):
         p.unlink(missing_ok=True)
-    for sub, dirs, _ in sorted(os.walk(d), key=lambda t: len(Path(t[0]).parts), reverse=True):
+    for sub, _, _ in sorted(os.walk(d), key=lambda t: len(Path(t[0]).parts), reverse=True):
         os.rmdir(sub)
 
 
