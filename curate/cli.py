@@ -32,6 +32,29 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
 
 
+def _claims(folder: str, inputs: tuple[str, ...] = (), writes: tuple[str, ...] = (), must_exist: bool = False):
+    """Run the command inside the claimed and locked folder ``args.<folder>``
+    (:func:`curate.core.runfolder.claimed`; ``args.<inputs>``: the command's inputs;
+    ``args.adopt`` when the command has it). Refusals are one-line errors (exit 2)."""
+    import functools
+
+    def deco(fn):
+        @functools.wraps(fn)
+        def wrapper(args):
+            from curate.core import runfolder
+            try:
+                with runfolder.claimed(getattr(args, folder), [getattr(args, i, None) for i in inputs],
+                                       adopt=getattr(args, "adopt", False), writes=writes, must_exist=must_exist):
+                    return fn(args)
+            except runfolder.RunFolderError as e:
+                raise CliError(str(e))
+        return wrapper
+    return deco
+
+
+_ADOPT = "use --out although it is a non-empty folder curate did not create (its files are never touched)"
+
+
 # ---------------------------------------------------------------------- value parsers
 def _box(text: str):
     try:
@@ -230,6 +253,14 @@ def cmd_score(args) -> int:
 def cmd_select(args) -> int:
     if (Path(args.input) / "run.json").is_file():
         return _select_run_folder(args)
+    if args.out is None:
+        raise CliError("--out is required (except for a run folder)")
+    return _select_posed(args)
+
+
+@_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))
+def _select_posed(args) -> int:
+    """``curate select POSES --out OUT``."""
     from curate.core.budget import parse_budget, resolve_budget
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
@@ -237,8 +268,6 @@ def cmd_select(args) -> int:
     from curate.select.select import select
     from curate.select.stage import selection_record
 
-    if args.out is None:
-        raise CliError("--out is required (except for a run folder)")
     if not hasattr(args, Opt("--budget", "budget").dest):
         raise CliError("--budget is required (except for a run folder, which keeps its own)")
     cfg = run_config(args)
@@ -289,6 +318,7 @@ def _config_dict(cfg) -> dict:
     return config_dict(cfg)
 
 
+@_claims("input", must_exist=True)
 def _select_run_folder(args) -> int:
     """``curate select RUN``: the select stage of a run folder, its saved options overridden by the flags given."""
     from curate.select import stage
@@ -316,6 +346,7 @@ def _stage(args, fn, run_dir: Path) -> int:
     return 0
 
 
+@_claims("run", must_exist=True)
 def cmd_stage(args) -> int:
     """occupancy / evaluate / export / report on an existing run folder."""
     run_dir = Path(args.run)
@@ -332,6 +363,7 @@ def cmd_stage(args) -> int:
     return _stage(args, fn, run_dir)
 
 
+@_claims("out", ("photos", "poses"), writes=("sfm",))
 def cmd_sfm(args) -> int:
     from curate.sfm import stage
     cfg = run_config(args)
@@ -376,7 +408,7 @@ def cmd_run(args) -> int:
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
     try:
-        out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force)
+        out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force, adopt=args.adopt)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
     rep = json.loads(Path(out).read_text())
@@ -404,7 +436,7 @@ def cmd_batch(args) -> int:
         raise CliError("give photo folders, or --list FILE")
     try:
         summ = run_batch(folders, args.out, cfg, executor=args.executor, jobs=args.jobs,
-                         ray_address=args.ray_address, force=args.force)
+                         ray_address=args.ray_address, force=args.force, adopt=args.adopt)
     except (RayMissing, ValueError) as e:
         raise CliError(str(e))
     for r in summ["rows"]:
@@ -515,6 +547,8 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
         s.add_argument("run", help="run folder")
     if name != "simulate":
         s.add_argument("--force", action="store_true", help="redo the stage(s) even if unchanged")
+    if name in ("run", "sfm", "select", "batch"):
+        s.add_argument("--adopt", action="store_true", help=_ADOPT)
     s.set_defaults(func={"sfm": cmd_sfm, "score": cmd_score, "select": cmd_select, "run": cmd_run,
                          "batch": cmd_batch, "simulate": cmd_simulate}.get(name, cmd_stage))
 

@@ -37,8 +37,22 @@ def _done(res: StageResult, results: list[StageResult]) -> StageResult:
     return res
 
 
+RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "select", "evaluate", "export")
+"""Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
+
+
 def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
-        force: bool = False, executor=None, until: str | None = None) -> Path:
+        force: bool = False, executor=None, until: str | None = None, adopt: bool = False) -> Path:
+    """:func:`_run` inside the claimed and locked run folder (:mod:`curate.core.runfolder`: refused
+    before any work when it is not curate's, holds an input, lies inside one, or another run holds
+    it; ``adopt``: accept a non-empty folder curate did not create, whose files are never touched)."""
+    from curate.core import runfolder
+    with runfolder.claimed(run_dir, inputs=[photos, poses], adopt=adopt, writes=RUN_WRITES):
+        return _run(cfg, photos, run_dir, poses, force, executor, until)
+
+
+def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
+         force: bool = False, executor=None, until: str | None = None) -> Path:
     """The whole pipeline into ``run_dir``; returns the path of ``report.json`` (or, with
     ``until``, the folder of that stage, the last one run).
 

@@ -31,6 +31,13 @@ finished record; the others go on. Resume: a folder whose last batch row is ``ok
 the same key (options, poses source and the folder's file listing: names, sizes, mtimes)
 and whose report is there is skipped; anything else re-runs ``pipeline.run``, which skips
 its finished stages and trainings by their keys. ``force`` redoes everything.
+
+Run-folder safety (:mod:`curate.core.runfolder`): the batch folder is claimed and locked
+for the whole batch (no input folder inside it), every run folder is claimed before any
+folder starts and locked by the process working in it; a folder's process and its
+training workers die with the batch process, whatever kills it (``local``); with ``ray``,
+Ray kills the tasks of a dead driver, and a training still running would not write its
+unit (its run's lock is gone).
 """
 
 from __future__ import annotations
@@ -162,11 +169,11 @@ def _reason(e: BaseException) -> str:
 
 def _prep(cfg, item: Folder, run_dir: Path, force: bool) -> None:
     """SfM (or pose import), occupancy and selection: the part of ``pipeline.run`` before the evaluation."""
-    import shutil
+    from curate.evaluate.units import clear_evaluation
     from curate.pipeline import run
-    run(cfg, item.photos, run_dir, poses=item.poses, force=force, until="select")
+    run(cfg, item.photos, run_dir, poses=item.poses, force=force, until="select")  # claims and locks the folder
     if force:
-        shutil.rmtree(run_dir / "evaluate", ignore_errors=True)
+        clear_evaluation(run_dir)
 
 
 def run_folder(item: Folder, cfg, force: bool = False, executor=None, phase: str = "all",
@@ -204,8 +211,10 @@ def run_folder(item: Folder, cfg, force: bool = False, executor=None, phase: str
     return row
 
 
-def _local_child(item: Folder, cfg, force: bool, key: str) -> None:
-    """Entry point of a folder's own process (``local`` executor)."""
+def _local_child(item: Folder, cfg, force: bool, key: str, parent: int | None = None) -> None:
+    """Entry point of a folder's own process (``local`` executor); it dies with the batch process ``parent``."""
+    from curate.core.runfolder import die_with_parent
+    die_with_parent(parent)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     run_folder(item, cfg, force, fd_level=True, key=key)
 
@@ -229,7 +238,7 @@ def _run_local(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, eve
             while pending and len(running) < jobs:
                 it = pending.pop(0)
                 (Path(it.run_dir) / "batch.json").unlink(missing_ok=True)
-                p = ctx.Process(target=_local_child, args=(it, cfg, force, keys[it.name]), name=f"curate-{it.name}")
+                p = ctx.Process(target=_local_child, args=(it, cfg, force, keys[it.name], os.getpid()), name=f"curate-{it.name}")
                 p.start()
                 running[p.sentinel] = (it, p, time.perf_counter())
                 event("start", it, None)
@@ -301,14 +310,23 @@ def _write_row(it: Folder, row: dict, key: str) -> None:
 # ------------------------------------------------------------------ the batch
 def run_batch(folders: Iterable[str | Path], out: str | Path, cfg, executor: str = "local", jobs: int = 0,
               ray_address: str | None = None, ray_cpus: int | None = None, force: bool = False,
-              progress: bool = True) -> dict:
+              progress: bool = True, adopt: bool = False) -> dict:
     """Curate every folder into ``out/<name>``; write and return ``out/summary.json``'s content.
 
     ``cfg``: the :class:`curate.pipeline.RunConfig` of every folder. ``executor``: 'local'
     or 'ray'. ``jobs``: folders at once (0: see :func:`default_jobs`, or the Ray cluster's
     CPUs). ``ray_address``: 'auto' or 'HOST:PORT' of a running cluster (None: a local
-    instance with ``ray_cpus`` CPUs, default this machine's cores).
+    instance with ``ray_cpus`` CPUs, default this machine's cores). ``adopt``: accept a
+    non-empty batch folder (and run folders) curate did not create; their files are never touched.
     """
+    from curate.core.runfolder import claimed
+    folders = list(folders)
+    with claimed(out, folders, adopt=adopt, writes=("summary.json", "summary.html", "batch.log")):
+        return _run_batch(folders, out, cfg, executor, jobs, ray_address, ray_cpus, force, progress, adopt)
+
+
+def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, ray_cpus, force: bool,
+               progress: bool, adopt: bool) -> dict:
     from tqdm import tqdm
     from curate.core.executors import cpu_count, require_ray
     if executor not in ("local", "ray"):
@@ -320,6 +338,9 @@ def run_batch(folders: Iterable[str | Path], out: str | Path, cfg, executor: str
     items = plan(folders, out)
     if not items:
         raise ValueError("no folders given")
+    from curate.core.runfolder import claim
+    for it in items:  # every run folder is claimed before any folder starts
+        claim(it.run_dir, [it.photos, it.poses, it.folder], adopt=adopt)
     t_start = time.perf_counter()
     keys = {it.name: folder_key(it, cfg) for it in items}
     rows: dict[str, dict] = {it.name: make_row(it, "pending") for it in items}

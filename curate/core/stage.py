@@ -5,6 +5,10 @@ content of its inputs), the resolved config itself, versions, the seed when ther
 one, the stage's outputs and its wall time. A stage whose ``stage.json`` exists with
 the same key is skipped; a stage killed half-way leaves no ``stage.json`` and is
 redone. Writes go to a temporary file and are renamed, so a record is whole or absent.
+
+``stage.json`` also lists (``files``) every file the stage wrote in its folder: a re-run
+clears those and nothing else (:func:`curate.core.runfolder.clear_tree`), and only in a
+run folder curate claimed.
 """
 
 from __future__ import annotations
@@ -125,18 +129,20 @@ def is_fresh(stage_dir: str | Path, key: str) -> bool:
 def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
     """True when the stage finished earlier with the same ``key`` (and ``force`` is off): skip it.
 
-    Otherwise the stage's folder is emptied (a stale or half-written run is removed,
-    its record first, so a crash in between never leaves a stale record) and False is
-    returned: run the stage, then :func:`finish_stage`.
+    Otherwise the stage's folder is emptied (its record first, so a crash in between never
+    leaves a stale record), recreated with the ``.curate-stage`` marker and False is
+    returned: run the stage, then :func:`finish_stage`. Only a folder of a claimed run
+    folder whose files are all curate's is emptied (:func:`curate.core.runfolder.clear_tree`):
+    otherwise :class:`curate.core.runfolder.RunFolderError` and nothing is removed.
     """
-    import shutil
+    from curate.core.runfolder import STAGE_MARKER, check_writable, clear_tree
     stage_dir = Path(stage_dir)
     if not force and is_fresh(stage_dir, key):
         return True
-    (stage_dir / STAGE_FILE).unlink(missing_ok=True)
-    if stage_dir.exists():
-        shutil.rmtree(stage_dir)
+    check_writable(stage_dir)
+    clear_tree(stage_dir)
     stage_dir.mkdir(parents=True)
+    (stage_dir / STAGE_MARKER).write_text(time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
     return False
 
 
@@ -161,6 +167,8 @@ def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outp
     rec = {"key": key, "config": _record(cfg), "versions": versions(), "seed": seed,
            "seconds": round(time.perf_counter() - started, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
            "outputs": outputs or {}, **extra}
+    from curate.core.runfolder import manifest
+    rec["files"] = manifest(stage_dir)  # what curate wrote here: the only files a re-run may clear
     write_json_atomic(Path(stage_dir) / STAGE_FILE, rec)
     return rec
 

@@ -59,9 +59,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
 
     ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
-    import shutil
     from curate.core.stage import is_fresh, write_json_atomic
-    from curate.evaluate.units import eval_cameras, run_units, summarize
+    from curate.evaluate.units import clear_evaluation, eval_cameras, run_units, summarize
     from curate.field.train import default_box
     from curate.occupancy.stage import load_split
 
@@ -69,8 +68,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     run_dir = Path(run_dir)
     d = run_dir / "evaluate"
     units, keys, sel = eval_units(cfg, run_dir)
-    if force and d.exists():
-        shutil.rmtree(d)
+    if force:
+        clear_evaluation(run_dir)  # only what curate wrote there (curate.core.runfolder)
     fresh = all(is_fresh(d / u.key, keys[u.key]) for u in units)
     sfm, paths, pool, hold = load_split(run_dir)
     if not hold:

@@ -20,7 +20,9 @@ Each unit is a stage of its own, ``RUN/evaluate/<key>/``:
 
 ``RUN/evaluate/gt/<stem>.png`` holds the held-out ground truth at evaluation size.
 Units run in a process pool (one single-threaded training per CPU core on a CPU
-machine, one at a time on CUDA).
+machine, one at a time on CUDA). The pool's workers die with the process that started
+them, and a training writes its results only while that process still holds the run's
+lock (:func:`curate.core.runfolder.check_holder`): a stale worker never writes a unit.
 """
 
 from __future__ import annotations
@@ -99,18 +101,24 @@ def auto_workers(cfg: EvalConfig, n_units: int, pixels: int) -> int:
 
 
 def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: Sequence[str],
-               holdout: Sequence[int], box: tuple, key: str, field_path: str | None = None) -> dict:
+               holdout: Sequence[int], box: tuple, key: str, field_path: str | None = None,
+               lock_token: str | None = None) -> dict:
     """Train (or load ``field_path``) on ``unit.subset``, render and score ``holdout``; write the unit's folder.
 
     ``cams`` are the registered cameras at evaluation size, ``paths`` their image files.
-    Returns the metrics dict (also written as ``metrics.json``).
+    Returns the metrics dict (also written as ``metrics.json``). ``lock_token``: the run
+    lock's token of the process that started this training (see
+    :func:`curate.core.runfolder.held_token`): the unit is written only while that process
+    still holds the run folder (else :class:`curate.core.runfolder.StaleWorker`).
     """
+    from curate.core.runfolder import check_holder
     import torch
     from curate.field.metrics import psnr, render_image, save_png, ssim
     from curate.core.stage import begin_stage, finish_stage, write_json_atomic
     from curate.field.train import TrainStats, load_image, train_field
 
     d = Path(run_dir) / "evaluate" / unit.key
+    check_holder(run_dir, lock_token)
     if begin_stage(d, key):
         return json.loads((d / "metrics.json").read_text())
     t0 = time.perf_counter()
@@ -127,6 +135,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     else:
         fld, st = train_field(cfg.field, cams[sub], [paths[i] for i in sub], d, time_budget_s=cfg.time_budget_s,
                               iters=cfg.iters, seed=cfg.train_seed, box=box)
+    check_holder(run_dir, lock_token)  # after the long training: do not render into a folder taken since
     per = []
     test = cams[list(holdout)]
     with torch.no_grad():
@@ -138,6 +147,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     m = {"method": unit.method, "seed": unit.seed, "subset": sub, "n_train": len(sub),
          "psnr": float(np.mean([r["psnr"] for r in per])), "ssim": float(np.mean([r["ssim"] for r in per])),
          "per_view": per, "train_seconds": round(st.train_seconds, 2), "iters": st.iters}
+    check_holder(run_dir, lock_token)  # a worker whose run lost the folder writes nothing
     write_json_atomic(d / "metrics.json", m)
     finish_stage(d, key, cfg, t0, outputs={"metrics": "metrics.json", "renders": "renders/"}, seed=cfg.train_seed,
                  method=unit.method, psnr=m["psnr"])
@@ -147,7 +157,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
 
 
 def _unit_entry(args: tuple) -> dict:
-    """Process-pool entry point (spawned workers re-import curate)."""
+    """Process-pool entry point (spawned workers re-import curate); ``args``: :func:`train_unit`'s, then the log level."""
     logging.basicConfig(level=args[-1], format="%(levelname)s %(name)s: %(message)s")
     return train_unit(*args[:-1])
 
@@ -196,8 +206,10 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     n_train = [u for u in todo if u.key not in field_paths]
     workers = auto_workers(cfg, len(n_train), pix)
     level = logging.getLogger("curate").getEffectiveLevel()
-    args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), level)
-            for u in todo]
+    from curate.core.runfolder import held_token
+    token = held_token(run_dir)
+    args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), token,
+             level) for u in todo]
     bar = tqdm(total=len(units), initial=len(fresh), desc="evaluate (trainings)", disable=not progress)
     from concurrent.futures import as_completed
     if executor is not None and todo:
@@ -211,8 +223,11 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
             bar.update(1)
     else:
         import multiprocessing as mp
+        import os
         from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+        from curate.core.runfolder import die_with_parent
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
+                                 initargs=(os.getpid(),)) as ex:
             futs = {ex.submit(_unit_entry, a): a[1].key for a in args}
             for f in as_completed(futs):
                 results[futs[f]] = f.result()
@@ -228,15 +243,27 @@ def _copy_unit(ev_dir: Path, src_key: str, unit: Unit, metrics: dict) -> dict:
     """Copy the finished unit ``src_key`` as ``unit`` (same key: same subset and settings);
     its record last, so a crash leaves no stale record."""
     import shutil
+    from curate.core.runfolder import clear_tree
     from curate.core.stage import STAGE_FILE, write_json_atomic, write_text_atomic
     src, dst = ev_dir / src_key, ev_dir / unit.key
-    if dst.exists():
-        shutil.rmtree(dst)
+    clear_tree(dst)
     shutil.copytree(src, dst, ignore=shutil.ignore_patterns(STAGE_FILE))
     m = {**metrics, "method": unit.method, "seed": unit.seed, "copied_from": src_key}
     write_json_atomic(dst / "metrics.json", m)
     write_text_atomic(dst / STAGE_FILE, (src / STAGE_FILE).read_text())
     return m
+
+
+EVAL_OWN = ("summary.json", "gt/*.png")
+"""Files of ``RUN/evaluate`` outside the units' records: the summary and the ground truth."""
+
+
+def clear_evaluation(run_dir: str | Path) -> None:
+    """Remove ``RUN/evaluate`` (``--force``): the units' recorded files, the summary and the ground
+    truth; nothing at all when it holds a file curate did not write
+    (:class:`curate.core.runfolder.RunFolderError`)."""
+    from curate.core.runfolder import clear_tree
+    clear_tree(Path(run_dir) / "evaluate", own=EVAL_OWN)
 
 
 def summarize(results: dict[str, dict]) -> tuple[dict, dict, float | None]:

@@ -87,14 +87,41 @@ def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
     return sorted(roots)
 
 
+_WRITES = ("images", "sparse", "transforms.json", "images.txt", "export.json")
+_MODEL_FILES = tuple(f"{n}.{e}" for n in ("cameras", "images", "points3D", "rigs", "frames") for e in ("bin", "txt"))
+
+
 def _clear(out: Path) -> None:
-    """Remove what an earlier export wrote (links are removed, never their targets)."""
-    for name in ("images", "sparse"):
-        p = out / name
+    """Remove what an earlier export wrote, as its ``export.json`` lists it (links are removed,
+    never their targets); never anything else.
+
+    Without an ``export.json`` (no earlier export) a folder already holding one of the names an
+    export writes (``images``, ``sparse``, ``transforms.json``, ``images.txt``) is refused
+    (``ValueError``): those are the user's. After clearing, a folder that still holds
+    foreign files keeps them (an ``images/`` with the user's photos is refused later only if
+    a name clashes).
+    """
+    man = out / "export.json"
+    if not man.is_file():
+        clash = [n for n in _WRITES if (out / n).exists() or (out / n).is_symlink()]
+        if clash:
+            raise ValueError(f"export folder {out} already holds {clash[0]}, not written by a curate export: "
+                             "choose an empty folder")
+        return
+    try:
+        prev = json.loads(man.read_text())
+        names = [it["name"] for it in prev.get("images", [])]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        raise ValueError(f"{man}: not an export record of curate; choose an empty folder") from None
+    for n in names:
+        p = out / "images" / n
         if p.is_symlink() or p.is_file():
             p.unlink()
-        elif p.is_dir():
-            shutil.rmtree(p)  # does not follow the symbolic links inside
+    for n in _MODEL_FILES:
+        (out / "sparse" / "0" / n).unlink(missing_ok=True)
+    for d in (out / "images", out / "sparse" / "0", out / "sparse"):
+        if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
+            d.rmdir()
     for name in ("transforms.json", "images.txt", "export.json"):
         (out / name).unlink(missing_ok=True)
 
@@ -148,7 +175,10 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     out.mkdir(parents=True, exist_ok=True)
     _clear(out)
     img_dir = out / "images"
-    img_dir.mkdir()
+    img_dir.mkdir(exist_ok=True)
+    clash = [n for n in names if (img_dir / n).exists() or (img_dir / n).is_symlink()]
+    if clash:
+        raise ValueError(f"{img_dir / clash[0]} exists and was not written by a curate export: choose an empty folder")
     for src, name in zip(originals, names):
         dst = img_dir / name
         if cfg.mode == "link":

@@ -298,6 +298,13 @@ def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
 
 
 def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
+    """:func:`_run_sfm` in the claimed and locked run folder (:mod:`curate.core.runfolder`)."""
+    from curate.core.runfolder import claimed  # runsafe
+    with claimed(run_dir, [photos]):
+        return _run_sfm(cfg, photos, run_dir, force)
+
+
+def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
     """Run the SfM stage on the photos of ``photos``; returns ``RUN/sfm`` (see the module docstring).
 
     Skipped (returns at once) when ``RUN/sfm/stage.json`` has the same key: same config
@@ -409,6 +416,14 @@ def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[
 
 def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
                  force: bool = False) -> Path:
+    """:func:`_import_poses` in the claimed and locked run folder (:mod:`curate.core.runfolder`)."""
+    from curate.core.runfolder import claimed  # runsafe
+    with claimed(run_dir, [source, photos]):
+        return _import_poses(cfg, source, run_dir, photos, force)
+
+
+def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
+                  force: bool = False) -> Path:
     """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.
 
     Args:

@@ -1,0 +1,462 @@
+"""A run folder is curate's own: claim it, lock it, and clear only what curate wrote there.
+
+Three guarantees, for every command that writes a run folder (``run``, ``sfm``, ``select``,
+the stage commands, ``batch``):
+
+* **Claim** (:func:`claim`), before any work: ``RUN/.curate-run.json`` (tool version,
+  created time) marks a folder curate created. Refused, with one line naming both paths:
+  a non-empty folder without the marker (unless ``adopt``: the marker is written and the
+  top-level entries already there are recorded as the user's, ``adopted``: curate never
+  writes, clears or deletes them); any input (photo folder, poses file or model) inside the
+  run folder, anywhere; the run folder inside an input folder; a run folder that cannot be
+  written (read-only). Symbolic links are resolved first.
+* **Lock** (:class:`RunLock`): one process per run folder at a time. ``RUN/.curate-lock``
+  is held with ``fcntl.flock`` (released by the kernel when its process dies, whatever
+  kills it) and holds the holder's PID, its start time (``/proc/PID/stat``: a reused PID
+  is not mistaken for the holder), host, command, wall-clock start and a random token. A
+  second process is refused (:class:`RunFolderBusy`: "RUN is in use by curate run, PID
+  1234, started 13:02:11"); a lock whose holder is gone is taken over with a log line.
+  The lock file is never deleted (deleting it would let two processes lock two inodes);
+  on release it is emptied. Re-entrant within a process.
+* **Never delete what curate did not write** (:func:`clear_tree`): a stage folder is
+  cleared only inside a claimed run folder, and only when every file in it is curate's:
+  listed in the stage's manifest (``files`` of ``stage.json``, written by
+  :func:`curate.core.stage.finish_stage`), curate's bookkeeping (``stage.json``,
+  ``.curate-stage``, ``*.tmp<pid>``), a file pattern the caller names as the stage's own, or
+  anything in a folder that carries the ``.curate-stage`` marker but no record yet (a stage
+  curate created empty and that was killed half-way: its contents are curate's scratch).
+  Otherwise nothing at all is removed and :class:`RunFolderError` names the first foreign
+  file.
+
+Stale workers: :func:`check_holder` (called by an evaluation training before it writes its
+results) raises :class:`StaleWorker` unless the run's lock is still held, by the process
+that started the worker (same token, holder alive). Workers also die with their parent:
+:func:`die_with_parent` (``prctl(PR_SET_PDEATHSIG, SIGKILL)`` on Linux, plus a thread that
+exits the process when ``os.getppid()`` changes) is the initializer of every process pool
+curate starts. Ray: a task whose owner (driver or parent task) dies is killed by Ray's
+fate sharing, and a training that still ran would fail :func:`check_holder`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fnmatch
+import json
+import logging
+import os
+import socket
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Iterable, Iterator
+
+log = logging.getLogger(__name__)
+
+MARKER = ".curate-run.json"
+"""Written in every run folder curate creates (or adopts)."""
+LOCK = ".curate-lock"
+"""The run's lock file (flock'ed by the process working there)."""
+STAGE_MARKER = ".curate-stage"
+"""Written by :func:`curate.core.stage.begin_stage` in every stage folder it creates."""
+BOOKKEEPING = (MARKER, LOCK, STAGE_MARKER, "stage.json")
+
+try:  # POSIX
+    import fcntl
+except ImportError:  # pragma: no cover - Windows: the PID / start time check alone
+    fcntl = None  # type: ignore[assignment]
+
+
+class RunFolderError(ValueError):
+    """A run folder curate must not or cannot use: a one-line message naming the paths."""
+
+
+class RunFolderBusy(RunFolderError):
+    """Another process holds the run folder's lock."""
+
+
+class StaleWorker(RuntimeError):
+    """A worker whose run lost its lock (its parent died, another run took the folder)."""
+
+
+# ------------------------------------------------------------------ claim
+def _resolve(p: str | Path) -> Path:
+    return Path(os.path.abspath(Path(p).expanduser())).resolve()
+
+
+def is_claimed(path: str | Path) -> bool:
+    """True when ``path`` carries curate's run-folder marker."""
+    return (Path(path) / MARKER).is_file()
+
+
+def run_root(path: str | Path) -> Path | None:
+    """The nearest claimed run folder holding ``path`` (``path`` itself included), or None."""
+    p = _resolve(path)
+    for d in (p, *p.parents):
+        if (d / MARKER).is_file():
+            return d
+    return None
+
+
+def read_marker(path: str | Path) -> dict:
+    try:
+        return json.loads((Path(path) / MARKER).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _write_marker(out: Path, adopted: list[str] | None) -> None:
+    from curate import __version__
+    rec = {"tool": "curate", "version": __version__, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    if adopted is not None:
+        rec["adopted"] = adopted
+    tmp = out / f"{MARKER}.tmp{os.getpid()}"
+    tmp.write_text(json.dumps(rec, indent=1))
+    os.replace(tmp, out / MARKER)
+
+
+def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
+          writes: Iterable[str] = (), must_exist: bool = False) -> Path:
+    """Make sure ``out`` is a run folder curate may write; create and mark it if new. Returns it resolved.
+
+    ``inputs``: the photo folder, poses file or model... (None entries are ignored): none
+    may lie inside ``out``, and ``out`` may not lie inside any of them (a folder; a run folder
+    beside a transforms.json is accepted: nothing there is cleared but curate's own). ``adopt``: accept a
+    non-empty folder without the marker (its present top-level entries stay the user's).
+    ``writes``: top-level names the command writes (``report.html``, ``export``...): refused
+    when they are the user's (present when the folder was adopted). ``must_exist``: a stage
+    command on an existing run folder (never created here). Raises :class:`RunFolderError`.
+    """
+    raw = Path(out)
+    o = _resolve(out)
+    for inp in inputs:
+        if inp is None or str(inp) == "":
+            continue
+        i = _resolve(inp)
+        if i == o or o in i.parents:
+            raise RunFolderError(f"the input {inp} is inside the run folder {raw}: curate writes and clears "
+                                 "stage folders there; choose another --out")
+        if i.is_dir() and i in o.parents:
+            what = "poses folder" if any((i / f).is_file() for f in ("cameras.bin", "cameras.txt")) else "photo folder"
+            raise RunFolderError(f"the run folder {raw} is inside the {what} {inp}: curate never writes there")
+    if o.exists() and not o.is_dir():
+        raise RunFolderError(f"the run folder {raw} is a file, not a folder")
+    if must_exist and not o.is_dir():
+        raise RunFolderError(f"{raw}: no such run folder")
+    if o.is_dir() and not (o / MARKER).is_file():
+        entries = sorted(e.name for e in o.iterdir())
+        if entries and not adopt:
+            raise RunFolderError(f"{raw} is a non-empty folder curate did not create (no {MARKER}; it holds "
+                                 f"{entries[0]!r}{' and more' if len(entries) > 1 else ''}): give an empty or new "
+                                 "folder, or --adopt to use it (curate never deletes its files)")
+        try:
+            _write_marker(o, entries if entries else None)
+        except OSError as e:
+            raise RunFolderError(f"cannot write the run folder {raw}: {e.strerror or e}") from None
+        if entries:
+            log.warning("%s: adopted (%d entries of yours kept, never written)", raw, len(entries))
+    elif not o.exists():
+        try:
+            o.mkdir(parents=True, exist_ok=True)
+            _write_marker(o, None)
+        except OSError as e:
+            raise RunFolderError(f"cannot create the run folder {raw}: {e.strerror or e}") from None
+    if not os.access(o, os.W_OK | os.X_OK):
+        raise RunFolderError(f"cannot write the run folder {raw}: read-only")
+    theirs = set(read_marker(o).get("adopted") or ())
+    clash = [w for w in writes if w in theirs]
+    if clash:
+        raise RunFolderError(f"{raw}/{clash[0]} was there when {raw} was adopted: curate never writes over it; "
+                             "move it, or choose another --out")
+    return o
+
+
+def check_writable(path: str | Path) -> None:
+    """Raise :class:`RunFolderError` when ``path``'s top-level entry in its run folder is the user's (adopted)."""
+    p = _resolve(path)
+    root = run_root(p.parent)
+    if root is None or p == root:
+        return
+    top = p.relative_to(root).parts[0]
+    if top in set(read_marker(root).get("adopted") or ()):
+        raise RunFolderError(f"{root / top} was there when {root} was adopted: curate never writes over it")
+
+
+# ------------------------------------------------------------------ processes
+def proc_start_time(pid: int) -> int | None:
+    """Start time of process ``pid`` (clock ticks since boot, /proc/PID/stat field 22), None when unknown or gone."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            stat = f.read().decode(errors="replace")
+        return int(stat[stat.rindex(")") + 2:].split()[19])
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import psutil  # noqa: PLC0415 - optional
+        return int(psutil.Process(pid).create_time() * 100)
+    except Exception:  # noqa: BLE001 - no psutil, no such process
+        return None
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def holder_alive(info: dict) -> bool:
+    """True when the process a lock record names still runs (same host, PID alive with the same start time)."""
+    pid = info.get("pid")
+    if not isinstance(pid, int):
+        return False
+    if info.get("host") not in (None, socket.gethostname()):
+        return True  # another machine: cannot tell; the flock (shared file system) decides
+    if not pid_alive(pid):
+        return False
+    st = info.get("start_time")
+    return st is None or proc_start_time(pid) in (None, st)
+
+
+def _command() -> str:
+    argv = sys.argv
+    if argv and Path(argv[0]).name in ("curate", "__main__.py"):
+        sub = next((a for a in argv[1:] if not a.startswith("-")), "")
+        return f"curate {sub}".strip()
+    return Path(argv[0]).name if argv and argv[0] else "python"
+
+
+def die_with_parent(parent_pid: int | None = None) -> None:
+    """Make this (worker) process die when its parent dies, SIGKILL included.
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills us when the thread that
+    started us ends: start pools from a long-lived thread, e.g. the main one). Everywhere:
+    a daemon thread that exits the process when ``os.getppid()`` changes (polls every 0.5 s).
+    ``parent_pid``: the parent's PID when the worker was started (default: the current one);
+    a parent already gone exits at once.
+    """
+    parent = parent_pid if parent_pid is not None else os.getppid()
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):  # pragma: no cover
+            pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="curate-die-with-parent", daemon=True).start()
+
+
+# ------------------------------------------------------------------ lock
+_held: dict[Path, list] = {}  # resolved run folder -> [fd, token, depth]
+_held_mutex = threading.Lock()
+
+
+def read_lock(path: str | Path) -> dict:
+    """The record of ``RUN/.curate-lock`` ({} when empty or unreadable)."""
+    try:
+        text = (Path(path) / LOCK).read_text()
+        return json.loads(text) if text.strip() else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _describe(run: Path, info: dict) -> str:
+    when = info.get("started", "?")
+    when = when[11:19] if len(when) >= 19 else when
+    host = f" on {info['host']}" if info.get("host") not in (None, socket.gethostname()) else ""
+    return f"{run} is in use by {info.get('command', 'curate')}, PID {info.get('pid', '?')}{host}, started {when}"
+
+
+def held_token(run_dir: str | Path) -> str | None:
+    """The lock token when this process holds ``run_dir``'s lock, else None."""
+    rec = _held.get(_resolve(run_dir))
+    return rec[1] if rec else None
+
+
+class RunLock:
+    """``with RunLock(run_dir):`` one process works in ``run_dir`` at a time (see the module docstring).
+
+    Raises :class:`RunFolderBusy` naming the holder; takes over a lock whose holder is gone.
+    """
+
+    def __init__(self, run_dir: str | Path, command: str | None = None):
+        self.run_dir = _resolve(run_dir)
+        self.command = command or _command()
+        self.token: str | None = None
+
+    def __enter__(self) -> "RunLock":
+        with _held_mutex:
+            rec = _held.get(self.run_dir)
+            if rec is not None:
+                rec[2] += 1
+                self.token = rec[1]
+                return self
+            path = self.run_dir / LOCK
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as e:
+                raise RunFolderError(f"cannot write the run folder {self.run_dir}: {e.strerror or e}") from None
+            prev = read_lock(self.run_dir)
+            if fcntl is not None:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except OSError:
+                    os.close(fd)
+                    raise RunFolderBusy(_describe(self.run_dir, read_lock(self.run_dir) or prev)) from None
+                prev = read_lock(self.run_dir)
+            elif prev and holder_alive(prev) and prev.get("pid") != os.getpid():  # pragma: no cover
+                os.close(fd)
+                raise RunFolderBusy(_describe(self.run_dir, prev))
+            if prev.get("pid") is not None:
+                why = "no longer running" if not holder_alive(prev) else "its lock was released"
+                log.warning("%s: taking over the lock of %s, PID %s (%s)", self.run_dir, prev.get("command", "?"),
+                            prev.get("pid"), why)
+            self.token = uuid.uuid4().hex
+            info = {"pid": os.getpid(), "start_time": proc_start_time(os.getpid()), "host": socket.gethostname(),
+                    "command": self.command, "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "token": self.token}
+            data = json.dumps(info).encode()
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, data, 0)
+            os.fsync(fd)
+            _held[self.run_dir] = [fd, self.token, 1]
+            return self
+
+    def __exit__(self, *exc) -> None:
+        with _held_mutex:
+            rec = _held.get(self.run_dir)
+            if rec is None:
+                return
+            rec[2] -= 1
+            if rec[2] > 0:
+                return
+            fd = rec[0]
+            del _held[self.run_dir]
+            try:
+                os.ftruncate(fd, 0)
+                if fcntl is not None:
+                    fcntl.flock(fd, fcntl.LOCK_UN)
+            finally:
+                os.close(fd)
+
+
+@contextlib.contextmanager
+def claimed(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
+            writes: Iterable[str] = (), must_exist: bool = False, command: str | None = None) -> Iterator[Path]:
+    """:func:`claim` then hold the :class:`RunLock` for the ``with`` block; yields the resolved folder."""
+    o = claim(out, inputs, adopt=adopt, writes=writes, must_exist=must_exist)
+    with RunLock(o, command):
+        yield o
+
+
+def check_holder(run_dir: str | Path, token: str | None) -> None:
+    """Raise :class:`StaleWorker` unless the run's lock still holds ``token`` and its holder is alive.
+
+    ``token``: :func:`held_token` of the process that started the worker (None: no check,
+    the caller works without a lock)."""
+    if token is None:
+        return
+    info = read_lock(_resolve(run_dir))
+    if info.get("token") != token or not holder_alive(info):
+        raise StaleWorker(f"{run_dir}: the run that started this worker no longer holds the folder "
+                          f"({'taken by PID ' + str(info.get('pid')) if info.get('token') else 'released'}): "
+                          "results not written")
+
+
+# ------------------------------------------------------------------ clearing
+def _walk(d: Path) -> Iterator[Path]:
+    """Every non-directory entry under ``d`` (links are entries: never followed)."""
+    for e in os.scandir(d):
+        p = Path(e.path)
+        if e.is_dir(follow_symlinks=False):
+            yield from _walk(p)
+        else:
+            yield p
+
+
+def _is_tmp(name: str) -> bool:
+    base, _, tail = name.rpartition(".tmp")
+    return bool(base) and tail.isdigit()
+
+
+def foreign_files(d: str | Path, own: Iterable[str] = ()) -> list[Path]:
+    """Files under the folder ``d`` curate did not write (see the module docstring); [] when all are curate's.
+
+    ``own``: glob patterns (relative to ``d``) of files the caller writes there outside any stage record.
+    """
+    d = Path(d)
+    if not d.is_dir() or d.is_symlink():
+        return [d] if d.exists() or d.is_symlink() else []
+    own = tuple(own)
+    rec = None
+    try:
+        rec = json.loads((d / "stage.json").read_text())
+    except (OSError, ValueError):
+        rec = None
+    listed = set(rec.get("files") or ()) if isinstance(rec, dict) else set()
+    scratch = (d / STAGE_MARKER).is_file() and rec is None
+    out = []
+    nested: dict[Path, bool] = {}
+    for p in _walk(d):
+        rel = p.relative_to(d).as_posix()
+        if scratch or rel in listed or p.name in BOOKKEEPING and p.parent == d or _is_tmp(p.name):
+            continue
+        if any(fnmatch.fnmatch(rel, g) for g in own):
+            continue
+        # a nested stage folder (evaluate/<unit>) follows its own record
+        sub = next((q for q in p.relative_to(d).parents if q != Path(".") and (d / q / STAGE_MARKER).is_file()), None)
+        if sub is not None:
+            if sub not in nested:
+                nested[sub] = not foreign_files(d / sub, ())
+            if nested[sub]:
+                continue
+        out.append(p)
+    return out
+
+
+def clear_tree(d: str | Path, own: Iterable[str] = ()) -> None:
+    """Remove the folder ``d`` of a claimed run folder when every file in it is curate's; else remove nothing.
+
+    Raises :class:`RunFolderError` when ``d`` is not inside a claimed run folder, or holds
+    a file curate did not write (named in the message). Links are removed, never followed.
+    """
+    d = Path(d)
+    if not d.exists() and not d.is_symlink():
+        return
+    root = run_root(d.parent)
+    if root is None:
+        raise RunFolderError(f"refusing to clear {d}: not inside a run folder curate created (no {MARKER})")
+    check_writable(d)
+    bad = foreign_files(d, own)
+    if bad:
+        raise RunFolderError(f"refusing to clear {d}: it holds {len(bad)} file(s) curate did not write, e.g. "
+                             f"{bad[0]}; move them out or choose another run folder")
+    (d / "stage.json").unlink(missing_ok=True)  # the record first: a crash never leaves a stale one
+    for p in sorted(_walk(d), key=lambda q: len(q.parts), reverse=True):
+        p.unlink(missing_ok=True)
+    for sub, _, _ in sorted(os.walk(d), key=lambda t: len(Path(t[0]).parts), reverse=True):
+        os.rmdir(sub)
+
+
+def manifest(d: str | Path) -> list[str]:
+    """Relative paths (POSIX) of every file under the stage folder ``d`` (for its ``stage.json``)."""
+    d = Path(d)
+    if not d.is_dir():
+        return []
+    return sorted(p.relative_to(d).as_posix() for p in _walk(d)
+                  if p.name not in BOOKKEEPING and not _is_tmp(p.name))
