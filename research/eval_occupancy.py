@@ -1,7 +1,7 @@
 """Occupancy from the radiance field on the office walk, scored against ground-truth depth.
 
-    python scripts/eval_occupancy.py --data ../shared/data/office --ckpt runs/bench_field/office/field.pt
-    python scripts/eval_occupancy.py --data ../shared/data/office --budget 300     # trains a field first
+    python research/eval_occupancy.py --data ../shared/data/office --ckpt runs/bench_field/office/field.pt
+    python research/eval_occupancy.py --data ../shared/data/office --budget 300     # trains a field first
 
 Ground truth: the depth maps (uint16 mm, 0 invalid) back-projected with K.txt and poses.txt.
 Printed as the last line, one JSON object per occupancy grid (``field`` = the field's own,
@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import sys
 import time
 from pathlib import Path
 

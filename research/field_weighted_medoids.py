@@ -3,7 +3,7 @@
 View medoids weigh every pool view by the stretch of path it stands for. A pool view
 that is hard to render (fine texture, close surfaces) might deserve more weight, and an
 easy one less, so that chosen frames crowd where the field needs them. This tries it on a
-harness run folder (``scripts/bench_selection_quality.py --out DIR ... --extra
+harness run folder (``python3 -m research.harness --out DIR ... --extra
 medoids_path`` trains ``DIR/<scene>/evaluate/q_medoids_path_b<B>_t0[_o<fold>]``, `auto`'s
 subset on a walk, and keeps its field):
 
@@ -21,7 +21,7 @@ subset on a walk, and keeps its field):
 (PSNR is a log: a view with little error loses more dB for the same added error). Pooled
 over the folds, the last line is JSON. Example::
 
-    python scripts/field_weighted_medoids.py --run .gpudata/quality/office --folds 0,1,2,3 --beta 1
+    python research/field_weighted_medoids.py --run .gpudata/quality/office --folds 0,1,2,3 --beta 1
 """
 
 from __future__ import annotations
@@ -62,12 +62,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     import torch
-    from research.bench_selection_quality import train_key, unit_key       # the harness's unit names and keys
+    from research.harness import train_key, unit_key       # the harness's unit names and keys
     from curate.evaluate.units import EvalConfig, Unit, eval_cameras, train_unit
     from curate.field.model import RadianceField
     from curate.select.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
     from curate.field.metrics import render_image
-    from curate.pipeline import load_node_grid, load_split
+    from curate.occupancy.stage import load_node_grid
+    from curate.sfm.io import image_paths, load_sfm
     from curate.select.select import SelectConfig
     from curate.core.stats import holdout_split, paired_difference
     from curate.field.train import default_box, load_image
@@ -75,7 +76,8 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     run, B = Path(args.run), args.budget
     ev = EvalConfig(holdout_every=14, max_side=160, iters=600, workers=1)   # the harness's settings
-    sfm, paths, _, _ = load_split(run, ev.holdout_every)
+    sfm = load_sfm(run)
+    paths = image_paths(run, list(sfm.cameras.names), sfm.records)
     cams = eval_cameras(sfm.cameras, ev.max_side)
     grid = load_node_grid(run)
     tag = f"medfitloo{args.beta:g}"                 # loo: weights from leave-out errors

@@ -4,7 +4,7 @@ Holding out every n-th frame of a video leaves a hole in the pool at each held-o
 and the test is exactly in those holes. A selection that centres its frames on where the
 pool is dense (view medoids) may drift away from the holes; one blind to the pool's
 density (every n-th frame) does not. For each hold-out fold of a harness run folder
-(``scripts/bench_selection_quality.py --out DIR`` writes ``DIR/<scene>``), this prints, per
+(``python3 -m research.harness --out DIR`` writes ``DIR/<scene>``), this prints, per
 method:
 
 * ``adjacent``: the share of chosen frames whose neighbour in capture order is held out
@@ -21,7 +21,7 @@ change comes from the holes.
 
 The last line is JSON. Example::
 
-    python scripts/holdout_holes.py --run .gpudata/quality/office --budget 17%
+    python research/holdout_holes.py --run .gpudata/quality/office --budget 17%
 """
 
 from __future__ import annotations
@@ -54,15 +54,16 @@ def main(argv=None) -> int:
     from curate.core.budget import parse_budget, resolve_budget
     from curate.select.medoids import (PATH_ORDER_MIN, MedoidsConfig, embed, medoids_select, path_order_share,
                                 path_weights, view_depths, view_distance)
-    from curate.pipeline import load_node_grid, load_split
+    from curate.occupancy.stage import load_node_grid
+    from curate.sfm.io import load_sfm
     from curate.select.select import SelectConfig, select
     from curate.core.stats import holdout_split
     from curate.select.visibility import build_pair_index
 
-    from research.bench_selection_quality import _variants                  # the harness's named variants
+    from research.harness import _variants                  # the harness's named variants
     variants = _variants()
     run = Path(args.run)
-    sfm, _, _, _ = load_split(run, args.every)
+    sfm = load_sfm(run)
     cams = sfm.cameras
     grid = load_node_grid(run)
     bins = SelectConfig().energy.bins                                # every method and variant here uses these

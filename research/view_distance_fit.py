@@ -2,7 +2,7 @@
 
 View medoids minimise the mean of ``d = |c_i - c_j| + w |a_i - a_j|`` (w = 1; c the camera
 centre, a the look-at point) from each pool view to its nearest chosen view. This reads
-every trained unit of a harness run folder (``scripts/bench_selection_quality.py --out
+every trained unit of a harness run folder (``python3 -m research.harness --out
 DIR`` writes ``DIR/<scene>/evaluate/q_*``) and asks how well the nearest chosen view, in
 ``d`` with another look weight ``w`` and through a cost ``g`` (``d``, ``sqrt d``,
 ``log(1 + d / tau)``, tau the pool's median nearest-view distance), predicts each held-out
@@ -16,7 +16,7 @@ Off-path test views (the synthetic room) are listed apart (``--part off``).
 
 The last line is JSON. Example::
 
-    python scripts/view_distance_fit.py --run .gpudata/quality/office
+    python research/view_distance_fit.py --run .gpudata/quality/office
 """
 
 from __future__ import annotations
@@ -65,9 +65,9 @@ def main(argv=None) -> int:
     ap.add_argument("--part", default="on", choices=("on", "off"), help="test views on the path or off it")
     args = ap.parse_args(argv)
 
-    from research.bench_selection_quality import UNIT_KEY                 # the harness's unit folder names
+    from research.harness import UNIT_KEY                 # the harness's unit folder names
     from curate.select.medoids import embed, view_depths
-    from curate.pipeline import load_node_grid
+    from curate.occupancy.stage import load_node_grid
     from curate.select.select import SelectConfig
     from curate.sfm.io import load_sfm
     from curate.select.visibility import build_pair_index

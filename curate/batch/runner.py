@@ -60,7 +60,6 @@ from curate.report.html_parts import fmt_num
 
 log = logging.getLogger(__name__)
 
-from curate.core.stage import STAGES  # noqa: E402  (re-exported: the stages a batch row reports)
 
 
 @dataclass

@@ -41,7 +41,7 @@ import numpy as np
 
 from curate.select.baselines import farthest_point
 from curate.core.cameras import Cameras
-from curate.select.methods import PATH_WEIGHTS, SHARPNESS_WEIGHT
+from curate.select.methods import PATH_WEIGHTS
 
 
 @dataclass(frozen=True)
@@ -53,22 +53,6 @@ class MedoidsConfig:
     the nodes it observes)."""
     max_iters: int = 100
     """Voronoi iterations at most (it usually stops in under 20)."""
-    power: float = 1.0
-    """Minimise the mean of ``d ** power``: 1 is k-medoids (the mean distance); larger values
-    weigh far, badly covered views more, towards farthest-view sampling's largest distance."""
-
-    energy_share: float = 0.0
-    """Share of the budget chosen after the medoids by the paper's greedy energy, with the
-    medoids as the initial set (method "medoids" in :func:`curate.select.select.select`): the
-    medoids cover the path, the energy adds views that widen the directions each node is
-    seen from (for views off the path). 0: medoids only."""
-
-    sharpness_weight: float = SHARPNESS_WEIGHT
-    """How much a blurry view is avoided as a medoid: a view whose image sharpness is
-    ``r`` times the median of its nearest pool views counts as ``sharpness_weight * tau *
-    -ln(r)`` farther from every view (``tau``: the pool's median distance from a view to its
-    nearest other view; ``ln r`` clipped to [-1, 1]). 0: sharpness is ignored."""
-
     path_weights: bool = PATH_WEIGHTS
     """Weigh each pool view by the stretch of the capture path it stands for (half the view
     distance to the previous plus to the next view in name order, i.e. capture order for
@@ -79,16 +63,10 @@ class MedoidsConfig:
     (:func:`path_weights`)."""
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.sharpness_weight) and self.sharpness_weight >= 0):
-            raise ValueError(f"sharpness_weight must be finite and >= 0, got {self.sharpness_weight}")
-        if not (0.0 <= self.energy_share <= 1.0):
-            raise ValueError(f"energy_share must be in [0, 1], got {self.energy_share}")
         if self.depth is not None and not (np.isfinite(self.depth) and self.depth > 0):
             raise ValueError(f"depth must be finite and > 0, got {self.depth}")
         if self.max_iters < 0:
             raise ValueError(f"max_iters must be >= 0, got {self.max_iters}")
-        if not (np.isfinite(self.power) and self.power > 0):
-            raise ValueError(f"power must be finite and > 0, got {self.power}")
 
 
 def view_depths(cams: Cameras, nodes: np.ndarray | None, index=None) -> np.ndarray:
@@ -125,57 +103,6 @@ def view_distance(c: np.ndarray, a: np.ndarray, rows, cols) -> np.ndarray:
     return dc + da
 
 
-SHARP_NEIGHBOURS = 6
-"""A view's sharpness is compared with the median over itself and this many nearest views."""
-
-
-def blur_penalty(c: np.ndarray, a: np.ndarray, sharp,
-                 neighbours: int = SHARP_NEIGHBOURS) -> tuple[np.ndarray, float, np.ndarray]:
-    """Blur penalty of embedded views ``c``, ``a`` [K, 3] with image sharpness ``sharp`` [K].
-
-    Returns (penalty [K], tau, nearest [K, k]). penalty_i = -clip(ln(s_i / m_i), -1, 1), m_i
-    the median sharpness of view i and its ``k = min(neighbours, K - 1)`` nearest views (view
-    distance, listed in ``nearest``): a frame is compared with frames of the same content (a
-    blurred video frame with its sharp neighbours), not textured walls with plain ones. A
-    view whose sharpness is missing, non-finite or not positive (unreadable, flat) gets the
-    full penalty 1 when its neighbours have usable values, 0 when none has. tau: the median
-    distance from a view to its nearest other view (0 when every view coincides). Memory [1024, K]."""
-    K = len(c)
-    s = np.asarray(sharp, np.float64).reshape(-1)
-    if len(s) != K:
-        raise ValueError(f"sharpness has {len(s)} entries for {K} views")
-    pen, nearest = np.zeros(K), np.zeros(K)
-    k = max(0, min(int(neighbours), K - 1))
-    nbrs = np.zeros((K, k), np.int64)
-    if K < 2 or k == 0:
-        return pen, 0.0, nbrs
-    allk = np.arange(K)
-    tiny = np.finfo(np.float64).tiny
-    ok = np.isfinite(s) & (s > 0)
-    for lo in range(0, K, 1024):
-        rows = allk[lo:lo + 1024]
-        d = view_distance(c, a, rows, allk)                    # [r, K]
-        d[np.arange(len(rows)), rows] = np.inf
-        nn = np.argpartition(d, k - 1, axis=1)[:, :k]          # [r, k]
-        nbrs[rows] = nn
-        nearest[rows] = d[np.arange(len(rows)), nn.T].min(0)
-        grp_idx = np.c_[rows[:, None], nn]                      # [r, 1 + k]: the view and its nearest
-        grp = np.where(ok[grp_idx], s[grp_idx], np.nan)
-        with warnings.catch_warnings():                          # all-NaN groups give NaN: handled below
-            warnings.simplefilter("ignore", RuntimeWarning)
-            med = np.nanmedian(grp, axis=1)
-        both = ok[rows] & np.isfinite(med)
-        lr = np.zeros(len(rows))
-        lr[both] = np.log(s[rows][both] / np.maximum(med[both], tiny))
-        lr[~ok[rows] & np.isfinite(med)] = -1.0                # an unusable image next to usable ones
-        pen[rows] = -np.clip(lr, -1.0, 1.0)
-    tau = float(np.median(nearest))
-    if not tau > 0:
-        pos = nearest[nearest > 0]
-        tau = float(pos.mean()) if len(pos) else 0.0
-    return pen, tau, nbrs
-
-
 class PathOrderWarning(UserWarning):
     """Path weights were asked for, but the views are not in capture order: plain weights."""
 
@@ -185,7 +112,7 @@ PATH_CAP = 4.0
 the video, a second sequence)."""
 PATH_ORDER_MIN = 0.6
 """Views count as a path when at least this share of them has its previous or next view
-among its two nearest views (:func:`path_order_share`; ``scripts/holdout_holes.py`` prints
+among its two nearest views (:func:`path_order_share`; ``research/holdout_holes.py`` prints
 it: 0.78-0.98 on the office, the synthetic room and the object sets)."""
 PATH_ORDER_SAMPLE = 512
 """The share is measured on this many views, evenly spread in capture order (all of a
@@ -229,25 +156,15 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
 
 
 def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfig(), initial=(),
-                   nodes: np.ndarray | None = None, index=None, sharpness=None,
-                   weights=None) -> tuple[list[int], list[float]]:
+                   nodes: np.ndarray | None = None, index=None) -> tuple[list[int], list[float]]:
     """Choose ``budget`` more pool views (k-medoids with ``initial`` fixed).
 
-    ``sharpness`` [K] (image sharpness, e.g. :func:`curate.sfm.quality.sharpness`) is used when
-    ``cfg.sharpness_weight`` > 0: a medoid m then costs ``d(i, m) ** power + off_m`` for each
-    view i it serves, ``off_m = sharpness_weight * tau ** power * blur_penalty_m``
-    (:func:`blur_penalty`), so a blurred frame gives way to a sharp neighbour. A medoid may
-    then also move to one of its nearest views outside its cluster, and one that serves no
-    view moves to the view whose cost it lowers most.
-
-    With ``cfg.path_weights`` each view's cost is weighted by :func:`path_weights` (the
-    cameras in capture order): a weighted k-medoids. ``weights`` [K] (finite, >= 0, not all
-    0) gives the weights instead.
+    With ``cfg.path_weights`` each view's distance is weighted by :func:`path_weights` (the
+    cameras in capture order): a weighted k-medoids.
 
     Returns (chosen, cost): chosen in the order of their farthest-point initialisation,
-    cost the (weighted) mean of that per-view cost (view distance ** ``cfg.power`` when sharpness is
-    ignored) from a pool view to its medoid after each Voronoi iteration (the first entry:
-    after initialisation).
+    cost the (weighted) mean view distance from a pool view to its medoid after each Voronoi
+    iteration (the first entry: after initialisation).
     """
     K = len(cams)
     initial = [int(k) for k in dict.fromkeys(initial)]
@@ -263,20 +180,8 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0],
                             int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1))), initial)
 
-    off, nbrs = np.zeros(K), None                                 # [K] per-medoid cost offset
-    if cfg.sharpness_weight > 0 and sharpness is not None:
-        pen, tau, nbrs = blur_penalty(c, a, sharpness)
-        off = cfg.sharpness_weight * tau ** cfg.power * pen
-        if not np.any(off):
-            nbrs = None
-
-    w = np.ones(K)                                                # [K] weight of each view's cost
-    if weights is not None:
-        w = np.asarray(weights, np.float64).reshape(-1)
-        if len(w) != K or not np.all(np.isfinite(w) & (w >= 0)) or not w.sum() > 0:
-            raise ValueError(f"weights must be {K} finite values >= 0, not all 0")
-        w = w / w.mean()
-    elif cfg.path_weights:
+    w = np.ones(K)                                                # [K] weight of each view's distance
+    if cfg.path_weights:
         pw = path_weights(c, a)
         if pw is None:
             warnings.warn("medoids: the views are not in capture order (or too few); path weights ignored",
@@ -291,7 +196,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     for _ in range(cfg.max_iters + 1):
         D = np.empty((K, len(med)))
         for s in range(0, K, 2048):                               # [K, B] in chunks
-            D[s:s + 2048] = view_distance(c, a, allk[s:s + 2048], med) ** cfg.power + off[med]
+            D[s:s + 2048] = view_distance(c, a, allk[s:s + 2048], med)
         assign = np.argmin(D, axis=1)                             # ties: the earlier medoid
         costs.append(float((w * D[allk, assign]).mean()))
         if len(costs) > cfg.max_iters:
@@ -300,20 +205,13 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
         for j in range(n_fixed, len(med)):
             served = np.flatnonzero(assign == j)                 # the views medoid j serves
             if len(served) == 0:
-                if nbrs is not None:                             # a blurred medoid nobody wants: move
-                    gain = np.where(np.isin(allk, med), -np.inf, w * (D[allk, assign] - off))   # to the view
-                    if gain.max() > 1e-12 * max(1.0, abs(costs[-1])):                  # that gains most
-                        med[j] = int(np.argmax(gain))
-                        moved = True
                 continue
-            cand = served if nbrs is None else np.union1d(served, nbrs[med[j]])   # with sharpness: the
-            cand = cand[~np.isin(cand, np.delete(med, j))]       # medoid's nearest views too; never another medoid
+            cand = served[~np.isin(served, np.delete(med, j))]   # never another medoid
             if len(cand) == 0:
                 continue
             ws = w[served]                                       # [s]
-            tot = ((view_distance(c, a, cand, served) ** cfg.power) @ ws
-                   + ws.sum() * off[cand])                       # [m] cluster cost with each as medoid
-            cur = float((view_distance(c, a, [med[j]], served)[0] ** cfg.power) @ ws + ws.sum() * off[med[j]])
+            tot = view_distance(c, a, cand, served) @ ws          # [m] cluster cost with each as medoid
+            cur = float(view_distance(c, a, [med[j]], served)[0] @ ws)
             if tot.min() < cur - 1e-12 * abs(cur):
                 med[j] = cand[int(np.argmin(tot))]               # ties: the lowest index
                 moved = True

@@ -1,15 +1,16 @@
 """Names of the selection methods (no heavy imports: the CLI reads them for ``--help``).
 
-"energy" is the paper's greedy on its energy, unchanged; "medoids" is k-medoids of the pool's views in a centre +
-look-at distance (:mod:`curate.select.medoids`); "fvs" is farthest-view sampling; "stride" takes
-every n-th camera in name order (every n-th frame of a video); "random" and
-"hemisphere" are baselines. "auto" picks by the kind of capture
+"energy" is the paper's greedy on its energy, unchanged; "medoids" is k-medoids of the pool's
+views in a centre + look-at distance (:mod:`curate.select.medoids`); "fvs" is farthest-view
+sampling; "stride" takes every n-th camera in name order (every n-th frame of a video);
+"random" is a baseline. Variants that were measured and not adopted (pool coverage, medoid
+cost powers, a sharpness prior, an energy share) live in ``research/``. "auto" picks by the kind of capture
 (:func:`curate.select.select.capture_kind`): ``WALK_METHOD`` for a walk-through (viewing axes that
 meet nowhere, or near-parallel ones), ``OBJECT_METHOD`` for an object capture (cameras around
 a point, looking at it).
 """
 
-METHODS = ("auto", "energy", "random", "fvs", "stride", "hemisphere", "medoids")
+METHODS = ("auto", "energy", "random", "fvs", "stride", "medoids")
 """Every selection method :func:`curate.select.select.select` knows."""
 
 DEFAULT_METHOD = "auto"
@@ -25,12 +26,6 @@ the earlier choice, in 5 of 6 cells of three object sets and two budgets)."""
 
 METHOD_HELP = ("selection method (default %(default)s; energy: the paper's, unchanged; "
                "see the README's 'Which selection method, and why')")
-
-SHARPNESS_WEIGHT = 0.0
-"""Default of ``MedoidsConfig.sharpness_weight`` (README, 'Which selection method, and why')."""
-
-SHARPNESS_HELP = ("view medoids: how strongly a frame blurrier than its nearest views is avoided "
-                  "(0 ignores sharpness; default %(default)s)")
 
 PATH_WEIGHTS = True
 """Default of ``MedoidsConfig.path_weights`` (README, 'Which selection method, and why')."""

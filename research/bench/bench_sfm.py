@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark the SfM stage on sample folders, against ground-truth poses where there are some.
 
-    python scripts/bench_sfm.py --data ../shared/data/fox ../shared/data/office [--matcher sequential] ...
+    python3 -m research.bench.bench_sfm --data ../shared/data/fox ../shared/data/office [--matcher sequential] ...
 
 Runs ``curate.sfm.colmap.run_sfm`` at the default config (overridable below) on each folder
 (photos: ``FOLDER/images`` when it exists, else ``FOLDER``), compares the registered
@@ -16,11 +16,9 @@ import argparse
 import dataclasses
 import json
 import logging
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from research.align import pose_errors  # noqa: E402
 from research.datasets import image_folder, load_ground_truth  # noqa: E402

@@ -1,6 +1,6 @@
 """Wall time of one folder's evaluation trainings: serially in this process vs as Ray tasks.
 
-    nice -n 5 python scripts/bench_batch.py --iters 100 --out /tmp/bench_batch
+    nice -n 5 python3 -m research.bench.bench_batch --iters 100 --out /tmp/bench_batch
 
 Prepares a run folder of the sample pool up to the selection (SfM import, occupancy with
 the pool field, selection), then runs the evaluation's trainings (selection, random
@@ -15,17 +15,16 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:
     from curate import pipeline as pl
+    from curate.evaluate.stage import run as evaluate_stage
     from curate.evaluate.units import EvalConfig
     from curate.core.executors import RayExecutor, cpu_count, ray_init
     from curate.occupancy.masks import OccupancyConfig
@@ -51,7 +50,7 @@ def main() -> None:
         shutil.rmtree(run_dir / "evaluate", ignore_errors=True)
         c = replace(cfg, evaluate=replace(cfg.evaluate, workers=workers))
         t = time.perf_counter()
-        pl.stage_evaluate(c, run_dir, executor=executor)
+        evaluate_stage(c, run_dir, executor=executor)
         dt = time.perf_counter() - t
         s = json.loads((run_dir / "evaluate" / "summary.json").read_text())["methods"]
         units = {p.parent.name: json.loads(p.read_text())["train_seconds"]

@@ -47,10 +47,10 @@ Prints a table per scene and budget, and ONE JSON line last; writes
 ``<out>/quality_psnr_<scenes>.svg`` (PSNR against budget per method, one chart per scene).
 
 Usage:
-  nice -n 5 python scripts/bench_selection_quality.py --scenes office --budgets 60 --train-seeds 2
-  python scripts/bench_selection_quality.py --proxy-only --budgets 10%,17%,30%
-  python scripts/bench_selection_quality.py --scenes office,fox,templering,skull --pack .gpudata/scenes
-  python scripts/bench_selection_quality.py --data .gpudata/scenes --out .gpudata/quality ...  (e.g. on a GPU)
+  nice -n 5 python3 -m research.harness --scenes office --budgets 60 --train-seeds 2
+  python3 -m research.harness --proxy-only --budgets 10%,17%,30%
+  python3 -m research.harness --scenes office,fox,templering,skull --pack .gpudata/scenes
+  python3 -m research.harness --data .gpudata/scenes --out .gpudata/quality ...  (e.g. on a GPU)
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def scene_cameras(scene: str):
         cams = load_templering(d)
         return cams, [str(d / n) for n in cams.names]
     if scene == "skull":
-        from curate.pipeline import image_paths
+        from curate.sfm.io import image_paths
         from curate.sfm.io import load_sfm
         if not (SKULL_SFM / "sfm" / "cameras.json").is_file():
             raise SystemExit(f"skull has no poses: run `curate sfm {d}/images --out {SKULL_SFM}` first "
@@ -190,7 +190,8 @@ def pack(scenes: list[str], dest: Path, side: int) -> None:
 
 def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = None) -> Path:
     """Run folder with imported poses and (``train``) the occupancy stage (pool field) done."""
-    from curate.pipeline import RunConfig, stage_occupancy
+    from curate.config import RunConfig
+    from curate.occupancy.stage import run as stage_occupancy
     from curate.sfm.colmap import import_poses
     run = out / scene
     cfg = RunConfig(evaluate=ev)
@@ -204,7 +205,7 @@ def node_grid(run: Path, cams):
     """The run's selection nodes; without an occupancy stage (``--proxy-only``), every node
     of a 32^3 grid over the scene box (printed)."""
     from curate.core.grid import NodeGrid
-    from curate.pipeline import load_node_grid
+    from curate.occupancy.stage import load_node_grid
     from curate.core.stage import read_stage
     from curate.field.train import default_box
     if read_stage(run / "occupancy") is not None:
@@ -216,20 +217,22 @@ def node_grid(run: Path, cams):
 
 def _variants():
     from research.coverage import CoverageConfig
+    from research.medoids_variants import MedoidsVariantConfig as M
+    from research.variants import Variant
     from curate.select.medoids import MedoidsConfig
     from curate.select.select import SelectConfig
-    return {"medoids_p2": SelectConfig("medoids", medoids=MedoidsConfig(power=2.0)),
-            "medoids_p05": SelectConfig("medoids", medoids=MedoidsConfig(power=0.5)),
-            "medoids_e25": SelectConfig("medoids", medoids=MedoidsConfig(energy_share=0.25)),
-            "medoids_sharp": SelectConfig("medoids", medoids=MedoidsConfig(sharpness_weight=1.0)),
+    return {"medoids_p2": Variant("medoids", medoids=M(power=2.0)),
+            "medoids_p05": Variant("medoids", medoids=M(power=0.5)),
+            "medoids_e25": Variant("medoids", medoids=M(energy_share=0.25)),
+            "medoids_sharp": Variant("medoids", medoids=M(sharpness_weight=1.0)),
             "medoids_path": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=True)),
             "medoids_plain": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=False)),
-            "medoids_p025": SelectConfig("medoids", medoids=MedoidsConfig(power=0.25)),
-            "medoids_p025_plain": SelectConfig("medoids", medoids=MedoidsConfig(power=0.25, path_weights=False)),
-            "fvs_rot1": SelectConfig("fvs", fvs_rot_weight=1.0),
-            "cells_T1": SelectConfig("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
-            "cov_pose": SelectConfig("coverage", coverage=CoverageConfig(similarity="pose")),
-            "cov_cells": SelectConfig("coverage", coverage=CoverageConfig(similarity="cells"))}
+            "medoids_p025": Variant("medoids", medoids=M(power=0.25)),
+            "medoids_p025_plain": Variant("medoids", medoids=M(power=0.25, path_weights=False)),
+            "fvs_rot1": Variant("fvs", fvs_rot_weight=1.0),
+            "cells_T1": Variant("coverage", coverage=CoverageConfig(objective="cells", cell_views=1)),
+            "cov_pose": Variant("coverage", coverage=CoverageConfig(similarity="pose")),
+            "cov_cells": Variant("coverage", coverage=CoverageConfig(similarity="cells"))}
 
 
 def oracle_subset(view_dist_hold: np.ndarray, budget: int) -> list[int]:
@@ -453,6 +456,7 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     from curate.core.budget import parse_budget, resolve_budget
     from curate.evaluate.units import Unit, eval_cameras, run_units
     from curate.select.select import SelectConfig, select
+    from research.variants import Variant, select_variant
     from curate.core.stage import read_stage
     from curate.core.stats import holdout_split
     from curate.field.train import default_box
@@ -496,7 +500,10 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
             for c in cfgs:
                 if c.energy.bins not in index:       # one pair index per fold and bins, not per method
                     index[c.energy.bins] = build_pair_index(pc, grid.nodes(), c.energy.bins, device=c.device)
-                s = select(pc, grid, B, c, index=index[c.energy.bins], sharpness=measures.sharpness[pool])
+                if isinstance(c, Variant):
+                    s = select_variant(c, pc, grid, B, index=index[c.energy.bins], sharpness=measures.sharpness[pool])
+                else:
+                    s = select(pc, grid, B, c, index=index[c.energy.bins])
                 subsets[m].append(s.chosen)
                 timing[m] = round(s.seconds, 3)
         prox = {m: [proxies(pc, hc, cs_hold, ch, vd_hold) for ch in v] for m, v in subsets.items()}
@@ -652,10 +659,11 @@ def main(argv=None) -> int:
     h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)
     offsets = list(range(ev.holdout_every)) if args.holdout_offsets == "all" else \
         [int(x) for x in args.holdout_offsets.split(",") if x]
-    from curate.pipeline import load_split
+    from curate.sfm.io import image_paths, load_sfm
     for scene in scenes:
         run = prepare(scene, out, ev, train=not args.proxy_only, data=data)
-        sfm, paths, _, _ = load_split(run, ev.holdout_every)
+        sfm = load_sfm(run)
+        paths = image_paths(run, list(sfm.cameras.names), sfm.records)
         grid = node_grid(run, sfm.cameras)
         measures = PairMeasures.build(sfm.cameras, grid, default.energy.bins, paths)
         folds = [run_fold(h, scene, run, sfm, paths, grid, measures, fold, out, data) for fold in offsets]

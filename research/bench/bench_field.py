@@ -4,9 +4,9 @@ One training run is evaluated at checkpoints along the way (at the first iterati
 each budget; evaluation time is not counted as training time), which is cheaper than one
 run per budget and gives the same curve for a deterministic schedule.
 
-    python scripts/bench_field.py --data ../shared/data/fox                 # 1/8 res
-    python scripts/bench_field.py --data ../shared/data/office              # 1/4 res
-    python scripts/bench_field.py --data ../shared/data/templering --scale 0.5
+    python3 -m research.bench.bench_field --data ../shared/data/fox                 # 1/8 res
+    python3 -m research.bench.bench_field --data ../shared/data/office              # 1/4 res
+    python3 -m research.bench.bench_field --data ../shared/data/templering --scale 0.5
 
 Every ``--holdout``-th image (indices 0, 14, 28, ... by default) is a test view, the rest
 train. The last printed line is one JSON object (``curve``, ``psnr_at_300s``, ...).
@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from curate.core.cameras import Cameras  # noqa: E402
 from curate.field.model import FieldConfig  # noqa: E402

@@ -9,7 +9,7 @@ Prints one JSON object as its last line: ``table`` maps train method (ours, rand
 hemisphere, fvs) -> test set (random, hemisphere, ours, average) -> mean PSNR over the
 rooms, ``per_scene`` the same per room, plus ``seeds`` and timings.
 
-Usage: python scripts/bench_simulate.py [--budget 60] [--train-seconds 60] [--scenes livingroom,office,kitchen]
+Usage: python3 -m research.bench.bench_simulate [--budget 60] [--train-seconds 60] [--scenes livingroom,office,kitchen]
 
 ``--occupancy field`` runs ours with occupancy from the field trained as cameras are added
 (``--train-between`` iterations after each, the paper's Algorithm 1); ``--occupancy both``
