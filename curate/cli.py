@@ -414,10 +414,11 @@ def cmd_run(args) -> int:
     rep = json.loads(Path(out).read_text())
     m = rep.get("methods", {})
     if m:
-        sel = f"selection ({(rep.get('selection') or {}).get('method', cfg.select.method)})"  # key "energy": any method
-        print("held-out PSNR (dB): " + ", ".join(f"{sel if k == 'energy' else k} {v['psnr']:.2f}" for k, v in m.items())
-              + (f"; {sel} - random {rep['paired']['energy-random']['mean']:+.2f} dB"
-                 if "energy-random" in rep.get("paired", {}) else ""))
+        sel = f"selection ({(rep.get('selection') or {}).get('method', cfg.select.method)})"
+        print("held-out PSNR (dB): " + ", ".join(f"{sel if k == 'selection' else k} {v['psnr']:.2f}"
+                                                 for k, v in m.items())
+              + (f"; {sel} - random {rep['paired']['selection-random']['mean']:+.2f} dB"
+                 if "selection-random" in rep.get("paired", {}) else ""))
     print(f"report: {Path(args.out) / 'report.html'} ({rep['wall_seconds']:.0f}s)")
     return 0
 
@@ -442,7 +443,7 @@ def cmd_batch(args) -> int:
     for r in summ["rows"]:
         p = r["psnr"]
         print(f"{r['name']:24s} {r['status']:6s} " + (f"{r['chosen']}/{r['registered']} chosen, PSNR selection "
-              f"{p['energy'] or float('nan'):.2f} random {p['random'] or float('nan'):.2f}" if r["status"] == "ok"
+              f"{p['selection'] or float('nan'):.2f} random {p['random'] or float('nan'):.2f}" if r["status"] == "ok"
               else r["reason"]))
     print(f"summary: {Path(args.out) / 'summary.html'} ({summ['n_ok']} ok, {summ['n_failed']} failed, "
           f"{summ['wall_seconds']:.0f}s)")

@@ -65,7 +65,7 @@ def _check(out: Path, res: subprocess.CompletedProcess) -> dict:
         r = rows[name]
         assert r["status"] == "ok" and r["reason"] == "" and r["poses"] == "transforms.json"
         assert r["photos"] == 40 and r["registered"] == 40 and r["chosen"] == 8 == len(r["chosen_names"])
-        assert all(isinstance(r["psnr"][m], float) for m in ("energy", "random", "fvs", "all"))
+        assert all(isinstance(r["psnr"][m], float) for m in ("selection", "random", "fvs", "all"))
         assert r["wall_seconds"] > 0 and r["report"] == f"{name}/report.html"
         assert (out / r["report"]).is_file() and (out / name / "export" / "transforms.json").is_file()
         log = (out / name / "run.log").read_text()
@@ -80,7 +80,7 @@ def _same(r1: dict, r2: dict) -> None:
     for name in r1:
         assert r1[name]["status"] == r2[name]["status"]
         assert r1[name]["chosen_names"] == r2[name]["chosen_names"], name
-        for m in ("energy", "random", "fvs", "all"):
+        for m in ("selection", "random", "fvs", "all"):
             a, b = r1[name]["psnr"][m], r2[name]["psnr"][m]
             assert (a is None and b is None) or abs(a - b) < 1e-3, (name, m, a, b)
 
@@ -117,7 +117,7 @@ def test_batch_ray_agrees_with_local(folders, local_run, tmp_path):
     # the trainings ran as Ray tasks, in parallel: every unit's record is there
     for name in ("pool_a", "pool_b"):
         units = sorted(p.parent.name for p in (out / name / "evaluate").glob("*/stage.json"))
-        assert units == ["all", "energy", "fvs", "random_s0", "random_s1"]
+        assert units == ["all", "fvs", "random_s0", "random_s1", "selection"]
 
 
 def test_ray_missing_is_a_clear_error(tmp_path, folders):

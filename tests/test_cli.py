@@ -59,6 +59,10 @@ def test_select_writes_subset(pool_json, tmp_path):
     assert names == [f"img_{k:03d}.png" for k in res["chosen"]]
     tj = json.loads((out / "transforms.json").read_text())
     assert len(tj["frames"]) == 6
+    # image paths relative to the written transforms.json (not to the current directory)
+    want = [str((path.parent / f"img_{k:03d}.png").resolve()) for k in res["chosen"]]
+    assert [str((out / f["file_path"]).resolve()) for f in tj["frames"]] == want
+    assert sel["pool"] == list(range(30)) and sel["holdout"] == [] and sel["budget"] == 6
     rnd = json.loads(run("select", str(path), "--budget", "6", "--method", "random", "--res", "8",
                          "--out", str(tmp_path / "r"), "--json").stdout)
     assert rnd["energy"] <= res["energy"] + 1e-9

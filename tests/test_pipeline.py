@@ -45,7 +45,7 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
                             start_new_session=True)
     t0 = time.time()
     # wait until the selection's unit has finished and the next training has started
-    while not ((run / "evaluate" / "energy" / "stage.json").is_file() and (run / "evaluate" / "random_s0").is_dir()):
+    while not ((run / "evaluate" / "selection" / "stage.json").is_file() and (run / "evaluate" / "random_s0").is_dir()):
         assert proc.poll() is None, proc.stdout.read().decode()
         assert time.time() - t0 < 600, "the run never reached the evaluation"
         time.sleep(0.2)
@@ -54,7 +54,7 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     assert not (run / "report.json").exists()
     assert not (run / "evaluate" / "random_s0" / "stage.json").exists()
     before = _mtimes(run)
-    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/energy/stage.json"} <= set(before)
+    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/selection/stage.json"} <= set(before)
 
     res = subprocess.run(_cmd(run), env=_env(), capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -64,7 +64,7 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     for line in ("occupancy  skipped", "select     skipped"):
         assert line in res.stdout
     rep = json.loads((run / "report.json").read_text())
-    assert set(rep["methods"]) == {"energy", "random", "fvs", "all"}
+    assert set(rep["methods"]) == {"selection", "random", "fvs", "all"}
     assert len(rep["methods"]["random"]["runs"]) == 2
     n_hold = len(range(0, 160, 14))
     for m in rep["methods"].values():
@@ -73,7 +73,7 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     assert rep["n_holdout"] == n_hold and rep["n_pool"] == 160 - n_hold
     assert len(rep["selection"]["chosen"]) == 12
     assert not set(rep["selection"]["chosen"]) & set(range(0, 160, 14)), "a held-out view was selected"
-    assert {"lo", "hi", "mean"} <= set(rep["paired"]["energy-random"])
+    assert {"lo", "hi", "mean"} <= set(rep["paired"]["selection-random"])
     assert (run / "report.html").is_file()
     # export: the chosen photos, linked to the originals
     names = (run / "export" / "images.txt").read_text().split()
@@ -124,15 +124,15 @@ def _metrics(method, seed, psnrs):
 
 
 def test_summarize_random_over_seeds_paired_and_gap():
-    res = {"energy": _metrics("energy", None, [20, 22, 24]), "random_s0": _metrics("random", 0, [19, 20, 21]),
+    res = {"selection": _metrics("selection", None, [20, 22, 24]), "random_s0": _metrics("random", 0, [19, 20, 21]),
            "random_s1": _metrics("random", 1, [17, 20, 23]), "fvs": _metrics("fvs", None, [20, 21, 22]),
            "all": _metrics("all", None, [24, 25, 26])}
     methods, paired, gap = summarize(res)
     assert methods["random"]["psnr"] == pytest.approx(20.0)
     assert methods["random"]["psnr_std"] == pytest.approx(0.0)
     assert [v["psnr"] for v in methods["random"]["per_view"]] == [18, 20, 22]
-    assert paired["energy-random"]["mean"] == pytest.approx(2.0)
-    assert paired["energy-fvs"]["mean"] == pytest.approx(1.0)
+    assert paired["selection-random"]["mean"] == pytest.approx(2.0)
+    assert paired["selection-fvs"]["mean"] == pytest.approx(1.0)
     assert gap == pytest.approx((22 - 20) / (25 - 20))
     res["all"] = _metrics("all", None, [19, 20, 21])  # no room above random: no gap figure
     assert summarize(res)[2] is None

@@ -50,7 +50,7 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
         gt.mkdir(parents=True)
         for i in hold:
             Image.fromarray(rng.integers(0, 255, (24, 32, 3), np.uint8)).save(gt / f"img_{i:02d}.png")
-        keys = ["energy", "random_s0", "random_s1", "random_s2", "fvs", "all"]
+        keys = ["selection", "random_s0", "random_s1", "random_s2", "fvs", "all"]
         for k in keys:
             (run / "evaluate" / k / "renders").mkdir(parents=True)
             for i in hold:
@@ -61,12 +61,12 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
             return {"psnr": psnr, "ssim": 0.5, "n_train": n_train, "train_seconds": 12.0, "key": key,
                     "per_view": [{"name": names[i], "psnr": psnr + d, "ssim": 0.5} for i, d in zip(hold, (-0.5, 0.5))]}
         rep["methods"] = {
-            "energy": m(25.125, "energy"), "fvs": m(23.5, "fvs"), "all": m(26.75, "all", 8),
+            "selection": m(25.125, "selection"), "fvs": m(23.5, "fvs"), "all": m(26.75, "all", 8),
             "random": {"psnr": 22.375, "psnr_std": 0.625, "ssim": 0.45, "ssim_std": 0.015, "seeds": [0, 1, 2],
                        "n_train": 3, "runs": {str(s): {**m(22 + s / 2, f"random_s{s}"), "seed": s} for s in range(3)},
                        "per_view": [{"name": names[i], "psnr": 22.375, "ssim": 0.45} for i in hold]}}
-        rep["paired"] = {"energy-random": {"mean": 2.75, "lo": 1.125, "hi": 4.375, "n": 2},
-                         "energy-fvs": {"mean": 1.625, "lo": -0.5, "hi": 3.75, "n": 2}}
+        rep["paired"] = {"selection-random": {"mean": 2.75, "lo": 1.125, "hi": 4.375, "n": 2},
+                         "selection-fvs": {"mean": 1.625, "lo": -0.5, "hi": 3.75, "n": 2}}
         rep["gap_closed"] = 0.6286
     (run / "report.json").write_text(json.dumps(rep))
     return run

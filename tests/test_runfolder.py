@@ -284,9 +284,9 @@ def test_a_worker_whose_run_lost_the_lock_does_not_write_its_unit(tmp_path):
         cams = eval_cameras(sfm.cameras, ev.max_side)
         paths = image_paths(r, list(sfm.cameras.names), sfm.records)
         old = rf.held_token(r)
-        args = (str(r), Unit("energy", "energy", None, [1, 2, 3]), ev, cams, paths, [0, 6], default_box(sfm.cameras))
+        args = (str(r), Unit("selection", "selection", None, [1, 2, 3]), ev, cams, paths, [0, 6], default_box(sfm.cameras))
         m = train_unit(*args, "key1", None, old)  # the holder's own worker writes
-        assert (r / "evaluate" / "energy" / "stage.json").is_file() and m["n_train"] == 3
+        assert (r / "evaluate" / "selection" / "stage.json").is_file() and m["n_train"] == 3
     with rf.claimed(run):  # another run took the folder
         with pytest.raises(rf.StaleWorker):
             train_unit(*args[:1], Unit("random_s0", "random", 0, [3, 4, 5]), *args[2:], "key2", None, old)
@@ -451,3 +451,17 @@ def test_two_runs_on_one_out_the_second_is_refused(tmp_path):
     finally:
         if a.poll() is None:
             os.killpg(a.pid, signal.SIGKILL)
+
+
+def test_a_run_folder_of_curate_0_1_is_refused_with_a_clear_message(tmp_path):
+    """A run folder written before the marker existed is refused, not guessed at, and not touched."""
+    from curate.core import runfolder
+    old = tmp_path / "old"
+    (old / "sfm").mkdir(parents=True)
+    (old / "run.json").write_text('{"config": {}}')
+    (old / "sfm" / "stage.json").write_text('{"key": "x"}')
+    before = sorted(p.name for p in old.rglob("*"))
+    for adopt in (False, True):
+        with pytest.raises(runfolder.RunFolderError, match="curate 0.1.*new folder"):
+            runfolder.claim(old, adopt=adopt)
+    assert sorted(p.name for p in old.rglob("*")) == before

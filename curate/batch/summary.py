@@ -13,8 +13,8 @@ from curate.report.html_parts import fmt_num
 if TYPE_CHECKING:
     from curate.batch.runner import Folder
 
-METHODS = ("energy", "random", "fvs", "all")
-"""The evaluation units a summary row has a PSNR for ("energy": the selection, whatever its method)."""
+METHODS = ("selection", "random", "fvs", "all")
+"""The evaluation units a summary row has a PSNR for (the selection, whatever its method)."""
 
 
 def failed_stage(run_dir: Path, cfg) -> str | None:
@@ -35,17 +35,19 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
     row = {"name": item.name, "folder": item.folder, "run_dir": item.run_dir, "poses": item.source,
            "status": status, "reason": reason, "failed_stage": None, "photos": None, "registered": None,
            "pool": None, "chosen": None, "chosen_names": [], "psnr": {m: None for m in METHODS},
-           "psnr_random_std": None, "energy_minus_random": None,
+           "psnr_random_std": None, "selection_minus_random": None,
            "wall_seconds": None if wall is None else round(wall, 2), "report": None, "resumed": False}
     if status == "ok" and (rd / "report.json").is_file():
         rep = json.loads((rd / "report.json").read_text())
         sel = rep.get("selection", {})
-        m = rep.get("methods", {})
+        from curate.evaluate.units import legacy_keys
+        m = legacy_keys(rep.get("methods", {}))
+        paired = legacy_keys(rep.get("paired", {}))
         row.update(photos=rep.get("n_photos"), registered=rep.get("n_registered"), pool=rep.get("n_pool"),
                    chosen=len(sel.get("chosen", [])), chosen_names=list(sel.get("chosen_names", [])),
                    psnr={k: (m[k]["psnr"] if k in m else None) for k in METHODS},
                    psnr_random_std=m.get("random", {}).get("psnr_std"),
-                   energy_minus_random=rep.get("paired", {}).get("energy-random", {}).get("mean"),
+                   selection_minus_random=paired.get("selection-random", {}).get("mean"),
                    report=f"{item.name}/report.html" if (rd / "report.html").is_file() else None)
     elif status == "failed":
         if cfg is not None and rd.is_dir():
@@ -75,12 +77,12 @@ def write_summary_html(out: Path, summ: dict) -> Path:
                   f"<span class=bad>failed</span> in {e(str(r.get('failed_stage')))}<br><small>{e(r['reason'])}</small>"
                   if st == "failed" else e(st))
         rnd = fmt_num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
-        dif = r.get("energy_minus_random")
+        dif = r.get("selection_minus_random")
         link = f'<a href="{e(r["report"])}">report</a>' if r.get("report") else ""
         wall = "—" if r.get("wall_seconds") is None else f"{r['wall_seconds']:.0f} s"
         body.append(f"<tr><td class=l><b>{e(r['name'])}</b><br><small>{e(r['folder'])} ({e(r['poses'])})</small></td>"
                     f"<td>{status}</td><td>{_n(r.get('photos'))}</td><td>{_n(r.get('registered'))}</td>"
-                    f"<td>{_n(r.get('chosen'))}</td><td><b>{fmt_num(p.get('energy'))}</b></td><td>{rnd}</td>"
+                    f"<td>{_n(r.get('chosen'))}</td><td><b>{fmt_num(p.get('selection'))}</b></td><td>{rnd}</td>"
                     f"<td>{fmt_num(p.get('fvs'))}</td><td>{fmt_num(p.get('all'))}</td>"
                     f"<td>{fmt_num(dif, 2, True)}</td>"
                     f"<td>{wall}</td>"

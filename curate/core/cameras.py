@@ -327,3 +327,36 @@ def look_at(centres: np.ndarray, targets: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.
     out = np.zeros((centres.shape[0], 4, 4))
     out[:, :3, 0], out[:, :3, 1], out[:, :3, 2], out[:, :3, 3], out[:, 3, 3] = x, y, z, centres, 1.0
     return out
+
+
+ROTATION_TOL = 1e-3
+""":func:`check_poses`: largest allowed |R^T R - I| entry of a camera rotation."""
+
+
+def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str) -> None:
+    """ValueError, naming ``source`` and the frame, unless every camera is usable.
+
+    ``c2w`` [N, 4, 4] camera-to-world: finite, rotation orthonormal within :data:`ROTATION_TOL` with
+    determinant +1 (not scaled, sheared or mirrored), bottom row [0, 0, 0, 1]; intrinsics ``fx fy``
+    finite and > 0, ``cx cy`` finite, ``width height`` >= 1. ``labels`` [N]: how to name each frame
+    (its file path)."""
+    c2w = np.asarray(c2w, np.float64)
+    arrays = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "width": width, "height": height}
+    n = len(c2w)
+    for i in range(n):
+        what = f"{source}: frame {i} ({labels[i]!r})" if labels is not None and i < len(labels) else f"{source}: frame {i}"
+        m = c2w[i]
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"{what}: the pose holds NaN or infinite values")
+        if np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-6:
+            raise ValueError(f"{what}: the pose's bottom row is {m[3].tolist()}, not [0, 0, 0, 1]")
+        R = m[:3, :3]
+        err = float(np.max(np.abs(R.T @ R - np.eye(3))))
+        if err > ROTATION_TOL:
+            raise ValueError(f"{what}: the rotation is not orthonormal (|R^T R - I| = {err:.3g}: scaled or sheared)")
+        if np.linalg.det(R) < 0:
+            raise ValueError(f"{what}: the rotation is a reflection (determinant -1)")
+        for k, v in arrays.items():
+            x = float(np.asarray(v, np.float64).reshape(-1)[i] if np.ndim(v) else v)
+            if not np.isfinite(x) or (k in ("fx", "fy") and x <= 0) or (k in ("width", "height") and x < 1):
+                raise ValueError(f"{what}: {k} = {x} is not a usable value")

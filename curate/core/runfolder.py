@@ -146,6 +146,9 @@ def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool
         raise RunFolderError(f"{raw}: no such run folder")
     if o.is_dir() and not (o / MARKER).is_file():
         entries = sorted(e.name for e in o.iterdir())
+        if (o / "run.json").is_file() and (o / "sfm" / "stage.json").is_file():
+            raise RunFolderError(f"{raw} is a run folder of curate 0.1 (no {MARKER}): this version cannot prove which "
+                                 "of its files are curate's, so it does not write there; run again into a new folder")
         if entries and not adopt:
             raise RunFolderError(f"{raw} is a non-empty folder curate did not create (no {MARKER}; it holds "
                                  f"{entries[0]!r}{' and more' if len(entries) > 1 else ''}): give an empty or new "

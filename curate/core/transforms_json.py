@@ -51,48 +51,69 @@ def read_transforms(path: str | Path) -> tuple[Cameras, list[str]]:
             an extension is added when the file path has none, as Blender-synthetic files do).
     """
     path = Path(path)
-    meta = json.loads(path.read_text())
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path}: not a transforms.json (a JSON object with 'frames')")
     frames = meta.get("frames")
     if not isinstance(frames, list) or not frames:
         raise ValueError(f"{path}: no 'frames' list")
     root = path.parent
     c2w, fx, fy, cx, cy, ws, hs, dist, names, files = [], [], [], [], [], [], [], [], [], []
     for i, fr in enumerate(frames):
-        if "transform_matrix" not in fr:
-            raise ValueError(f"{path}: frame {i} has no transform_matrix")
-        get = lambda k, fr=fr: fr.get(k, meta.get(k))  # noqa: E731
-        fp = str(fr.get("file_path", ""))
-        img = _resolve_image(root, fp) if fp else None
-        w, h = get("w"), get("h")
-        if w is None or h is None:
-            size = _image_size(img)
-            if size is None:
-                raise ValueError(f"{path}: frame {i} ({fp!r}) has no w/h and its image was not found")
-            w, h = size
-        w, h = float(w), float(h)
-        if get("fl_x") is not None:
-            f_x = float(get("fl_x"))
-            f_y = float(get("fl_y")) if get("fl_y") is not None else f_x
-        elif get("camera_angle_x") is not None:
-            f_x = 0.5 * w / math.tan(0.5 * float(get("camera_angle_x")))
-            f_y = 0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None else f_x
-        else:
-            raise ValueError(f"{path}: frame {i} has neither fl_x nor camera_angle_x")
-        m = np.asarray(fr["transform_matrix"], np.float64)
-        if m.shape == (3, 4):
-            m = np.vstack([m, [0, 0, 0, 1]])
-        if m.shape != (4, 4):
-            raise ValueError(f"{path}: frame {i} transform_matrix has shape {m.shape}")
-        c2w.append(m)
-        fx.append(f_x)
-        fy.append(f_y)
-        cx.append(float(get("cx")) if get("cx") is not None else 0.5 * w)
-        cy.append(float(get("cy")) if get("cy") is not None else 0.5 * h)
-        ws.append(int(round(w)))
-        hs.append(int(round(h)))
-        dist.append([float(get(k) or 0.0) for k in ("k1", "k2", "p1", "p2")])
-        names.append(fp)
-        files.append(str(img) if img is not None else str(root / fp))
+        fp = str(fr.get("file_path", "")) if isinstance(fr, dict) else ""
+        try:
+            if "transform_matrix" not in fr:
+                raise ValueError(f"{path}: frame {i} has no transform_matrix")
+            get = lambda k, fr=fr: fr.get(k, meta.get(k))  # noqa: E731
+            fp = str(fr.get("file_path", ""))
+            img = _resolve_image(root, fp) if fp else None
+            w, h = get("w"), get("h")
+            if w is None or h is None:
+                size = _image_size(img)
+                if size is None:
+                    raise ValueError(f"{path}: frame {i} ({fp!r}) has no w/h and its image was not found")
+                w, h = size
+            w, h = float(w), float(h)
+            if get("fl_x") is not None:
+                f_x = float(get("fl_x"))
+                f_y = float(get("fl_y")) if get("fl_y") is not None else f_x
+            elif get("camera_angle_x") is not None:
+                f_x = 0.5 * w / math.tan(0.5 * float(get("camera_angle_x")))
+                f_y = 0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None else f_x
+            else:
+                raise ValueError(f"{path}: frame {i} has neither fl_x nor camera_angle_x")
+            try:
+                m = np.asarray(fr["transform_matrix"], np.float64)
+                w, h = float(w), float(h)
+            except (TypeError, ValueError):
+                raise ValueError(f"{path}: frame {i} ({fp!r}) has a transform_matrix or size that is not numbers") from None
+            if m.shape == (3, 4):
+                m = np.vstack([m, [0, 0, 0, 1]])
+            if m.shape != (4, 4):
+                raise ValueError(f"{path}: frame {i} transform_matrix has shape {m.shape}")
+            c2w.append(m)
+            fx.append(f_x)
+            fy.append(f_y)
+            cx.append(float(get("cx")) if get("cx") is not None else 0.5 * w)
+            cy.append(float(get("cy")) if get("cy") is not None else 0.5 * h)
+            ws.append(int(round(w)))
+            hs.append(int(round(h)))
+            dist.append([float(get(k) or 0.0) for k in ("k1", "k2", "p1", "p2")])
+            names.append(fp)
+            files.append(str(img) if img is not None else str(root / fp))
+        except (TypeError, ValueError, KeyError, AttributeError, OverflowError) as e:
+            if str(e).startswith(str(path)):
+                raise
+            raise ValueError(f"{path}: frame {i} ({fp!r}): {type(e).__name__}: {e}") from None
+
+    from curate.core.cameras import check_poses
+    check_poses(np.stack(c2w), fx, fy, cx, cy, ws, hs, names, str(path))
+    dup = sorted({f for f in files if files.count(f) > 1})
+    if dup:
+        raise ValueError(f"{path}: {len(dup)} image file(s) appear in more than one frame, e.g. {dup[0]}")
     cams = Cameras(opencv_from_opengl(np.stack(c2w)), np.array(fx), np.array(fy), np.array(cx), np.array(cy),
                    np.array(ws), np.array(hs), np.array(dist), tuple(names))
     return cams, files

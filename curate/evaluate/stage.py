@@ -33,8 +33,8 @@ def eval_units(cfg: "RunConfig", run_dir: Path):
     ev = cfg.evaluate
     units = []
     for m in ev.methods:
-        if m == "energy":
-            units.append(Unit("energy", "energy", None, chosen))  # "energy": the selection, whatever its method
+        if m == "selection":
+            units.append(Unit("selection", "selection", None, chosen))  # whatever its method
         elif m == "random":
             for s in range(ev.random_seeds):
                 units.append(Unit(f"random_s{s}", "random", s,
@@ -81,7 +81,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
                     executor=executor)
     methods, paired, gap = summarize(res)
     write_json_atomic(d / "summary.json", {"methods": methods, "paired": paired, "gap_closed": gap})
-    label = f"selection ({sel['method']})"  # the unit "energy" is the selection, whatever its method
-    txt = ", ".join(f"{label if m == 'energy' else m} {v['psnr']:.2f}" for m, v in methods.items())
+    label = f"selection ({sel['method']})"
+    txt = ", ".join(f"{label if m == 'selection' else m} {v['psnr']:.2f}" for m, v in methods.items())
     return StageResult("evaluate", d, not fresh, time.perf_counter() - t0,
                        f"held-out PSNR: {txt} ({len(hold)} views)")

@@ -59,8 +59,8 @@ class EvalConfig:
     """Random subsets of the selection's size, one per seed 0..n-1."""
     train_seed: int = 0
     """Seed of every field training (weights, ray batches)."""
-    methods: tuple[str, ...] = ("energy", "random", "fvs", "all")
-    """Which subsets to train: the selection ('energy'), 'random', 'fvs', 'all'."""
+    methods: tuple[str, ...] = ("selection", "random", "fvs", "all")
+    """Which subsets to train: the selection (whatever its method), 'random', 'fvs', 'all'."""
     workers: int = 0
     """Trainings in parallel (0: one per CPU core, capped by memory; 1 on CUDA)."""
     field: FieldConfig = field(default_factory=FieldConfig)
@@ -72,7 +72,7 @@ class Unit:
     """One training: a subset of the registered cameras, scored on the held-out ones."""
 
     key: str
-    """Folder name under RUN/evaluate ('energy', 'random_s0', 'fvs', 'all')."""
+    """Folder name under RUN/evaluate ('selection', 'random_s0', 'fvs', 'all')."""
     method: str
     seed: int | None
     subset: list[int]
@@ -291,18 +291,28 @@ def summarize(results: dict[str, dict]) -> tuple[dict, dict, float | None]:
                              "seeds": [int(s) for s in runs], "runs": runs, "per_view": pv,
                              "n_train": next(iter(rand.values()))["n_train"]}
     paired = {}
-    if "energy" in methods:
-        e = [r["psnr"] for r in methods["energy"]["per_view"]]
+    if "selection" in methods:
+        e = [r["psnr"] for r in methods["selection"]["per_view"]]
         for other in ("random", "fvs"):
             if other in methods:
-                paired[f"energy-{other}"] = paired_difference(e, [r["psnr"] for r in methods[other]["per_view"]])
+                paired[f"selection-{other}"] = paired_difference(e, [r["psnr"] for r in methods[other]["per_view"]])
     gap = None
-    if all(m in methods for m in ("energy", "random", "all")):
+    if all(m in methods for m in ("selection", "random", "all")):
         room = methods["all"]["psnr"] - methods["random"]["psnr"]
         if room > 1e-6:
-            gap = (methods["energy"]["psnr"] - methods["random"]["psnr"]) / room
+            gap = (methods["selection"]["psnr"] - methods["random"]["psnr"]) / room
     return methods, paired, gap
 
 
 def _brief(v: dict) -> dict:
     return {k: v[k] for k in ("psnr", "ssim", "per_view", "n_train", "train_seconds", "iters", "seed") if k in v}
+
+
+LEGACY_KEYS = {"energy": "selection", "energy-random": "selection-random", "energy-fvs": "selection-fvs",
+               "energy_minus_random": "selection_minus_random"}
+"""Keys curate 0.1 wrote for the selection (called 'energy' whatever its method) and their names now."""
+
+
+def legacy_keys(d: dict) -> dict:
+    """``d`` (a report's ``methods`` or ``paired``, a batch row) with curate 0.1's 'energy' keys renamed."""
+    return {LEGACY_KEYS.get(k, k) if k not in ("psnr", "ssim") else k: v for k, v in d.items()}

@@ -33,13 +33,12 @@ def load_image(src, width: int, height: int) -> np.ndarray:
     """One image (path, or [H, W, 3] uint8 / float array) -> [height, width, 3] float32 in [0, 1]."""
     from PIL import Image
     if isinstance(src, (str, Path)):
-        with Image.open(src) as im:
-            if im.format == "JPEG":
-                im.draft("RGB", (width, height))  # decode at a reduced scale: much faster
-            im = im.convert("RGB")
-            if im.size != (width, height):
-                im = im.resize((width, height), Image.LANCZOS)
-            return np.asarray(im, np.float32) / 255.0
+        from curate.sfm.ingest import decode_upright   # the one decoder: EXIF orientation, 16-bit, grey, CMYK
+        try:
+            with Image.open(src) as im:
+                return decode_upright(im, (width, height)).astype(np.float32) / 255.0
+        except OSError as e:
+            raise ValueError(f"{src}: cannot decode ({type(e).__name__}: {e})") from None
     arr = np.asarray(src)
     if arr.ndim != 3 or arr.shape[2] < 3:
         raise ValueError(f"image must be [H, W, 3], got {arr.shape}")

@@ -30,14 +30,14 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["write_html", "floorplan", "top_down_axes"]
 
-METHOD_ORDER = ("energy", "random", "fvs", "all")
-METHOD_LABEL = {"energy": "energy (ours)", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
-SELECTION_NAME = {"energy": "the paper's energy", "coverage": "pool coverage", "coverage+energy": "coverage + energy",
-                  "medoids": "view medoids", "fvs": "farthest-view sampling", "random": "random"}
+METHOD_ORDER = ("selection", "random", "fvs", "all")
+METHOD_LABEL = {"selection": "selection", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
+SELECTION_NAME = {"energy": "the paper's energy", "medoids": "view medoids", "fvs": "farthest-view sampling",
+                  "stride": "every n-th frame", "random": "random"}
 
 
 def _selection_label(run) -> str:
-    """What the selection unit ('energy' in report.json) was chosen by, for a reader."""
+    """What the selection unit ('selection' in report.json) was chosen by, for a reader."""
     m = (run.rep.get("selection") or {}).get("method", "energy")
     return f"selection: {SELECTION_NAME.get(m, m)}"
 N_RENDER_VIEWS = 6
@@ -84,8 +84,9 @@ class _Run:
         self.sel = read_json(run_dir / "select" / "selection.json") or {}
         if not self.sel and isinstance(self.rep.get("selection"), dict):
             self.sel = self.rep["selection"]
-        self.methods: dict = self.rep.get("methods") or {}
-        self.paired: dict = self.rep.get("paired") or {}
+        from curate.evaluate.units import legacy_keys   # a report of curate 0.1 called the selection 'energy'
+        self.methods: dict = legacy_keys(self.rep.get("methods") or {})
+        self.paired: dict = legacy_keys(self.rep.get("paired") or {})
         self._cams = None
         self._records = None
 
@@ -133,8 +134,8 @@ def _header(run: _Run) -> str:
                                 "transforms.json, images.txt"))
     out = ["<h1>curate: photo selection report</h1>",
            '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in items) + "</dl>"]
-    p = run.paired.get("energy-random")
-    if p and "energy" in run.methods and "random" in run.methods:
+    p = run.paired.get("selection-random")
+    if p and "selection" in run.methods and "random" in run.methods:
         gap = r.get("gap_closed")
         sig = "significant" if p.get("lo") is not None and p["lo"] > 0 else "not significant at 95%"
         out.append(f'<div class="verdict">{esc(_selection_label(run)).capitalize()}: <b>{fmt_num(p["mean"], 2, True)} dB</b> held-out PSNR over '
@@ -166,8 +167,8 @@ def _method_table(run: _Run) -> str:
             name = f"random (mean ± std over {len(seeds)} seeds)"
         else:
             psnr, ssim, t, name = fmt_num(v.get("psnr")), fmt_num(v.get("ssim"), 3), fmt_num(v.get("train_seconds"), 0), \
-                _selection_label(run) if k == "energy" else METHOD_LABEL.get(k, k)
-        cls = ' class="hl"' if k == "energy" else ""
+                _selection_label(run) if k == "selection" else METHOD_LABEL.get(k, k)
+        cls = ' class="hl"' if k == "selection" else ""
         rows.append(f'<tr{cls}><td class="l">{esc(name)}</td><td>{psnr}</td><td>{ssim}</td>'
                     f'<td>{esc(v.get("n_train", "—"))}</td><td>{t}</td></tr>')
     out = ['<table><tr><th class="l">method</th><th>PSNR (dB)</th><th>SSIM</th><th>train images</th>'
@@ -175,7 +176,7 @@ def _method_table(run: _Run) -> str:
     if run.paired:
         pr = []
         for k, p in run.paired.items():
-            pr.append(f'<tr><td class="l">{esc(k.replace("energy-", "selection-").replace("-", " − "))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
+            pr.append(f'<tr><td class="l">{esc(k.replace("-", " − "))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
                       f'<td>{fmt_num(p.get("lo"), 2, True)} .. {fmt_num(p.get("hi"), 2, True)}</td><td>{esc(p.get("n", "—"))}'
                       f'</td></tr>')
         out.append('<p class="small">Paired per-view PSNR differences on the held-out views (random: each view\'s '
@@ -186,7 +187,7 @@ def _method_table(run: _Run) -> str:
     if gap is not None:
         out.append(f"<p>Fraction of the random → all-images gap closed by the {esc(_selection_label(run))}: "
                    f"<b>{100 * float(gap):.0f}%</b> ((selection − random) / (all − random)).</p>")
-    elif all(k in m for k in ("energy", "random", "all")):
+    elif all(k in m for k in ("selection", "random", "all")):
         out.append(note("Gap closed: not defined (all pool images do not beat random subsets)."))
     return "\n".join(out)
 
@@ -198,7 +199,7 @@ def _bars(run: _Run) -> str:
         return note("Not evaluated.")
     vals = [m[k]["psnr"] for k in keys]
     errs = [m[k].get("psnr_std") or 0.0 for k in keys]
-    names = ["selection" if k == "energy" else k for k in keys]
+    names = list(keys)
     return plots.bar_chart(names, vals, errs, title="Held-out PSNR per method (random: ± std over seeds)",
                            ylabel="PSNR (dB)", width=560, height=300)
 
@@ -284,7 +285,8 @@ def _renders(run: _Run) -> str:
     if not m or not gt_dir.is_dir():
         return note("Not evaluated: no held-out renders.")
     cols = []  # (label, key, per_view list)
-    for k, label in (("energy", "energy"), ("random", "random (seed 0)"), ("fvs", "FVS"), ("all", "all")):
+    for k, label in (("selection", _selection_label(run).replace("selection: ", "selection (") + ")"),
+                     ("random", "random (seed 0)"), ("fvs", "FVS"), ("all", "all")):
         v = m.get(k)
         if not v:
             continue

@@ -422,6 +422,42 @@ def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos
         return _import_poses(cfg, source, run_dir, photos, force)
 
 
+ASPECT_TOL = 0.01
+""":func:`check_photos`: largest relative difference of aspect ratio between a photo and its camera."""
+
+
+def check_photos(cams: Cameras, originals: list[str], source: Path) -> tuple[list[dict], list[int]]:
+    """Every posed photo decoded (reduced, fast) before any training: (images.json records, indices of
+    the usable cameras). An unreadable photo (missing, a dangling link, empty, truncated, not an image)
+    is skipped and listed with its reason, as SfM ingest does. A photo whose upright size has the
+    aspect of its camera but another size is used as it is (the loader resizes it to the camera's
+    size: the intrinsics hold); another aspect is an error naming the file and both sizes (the poses
+    do not describe that image, e.g. an EXIF-rotated photo under a landscape camera). Relative names
+    (a COLMAP model without a photo folder) are not checked."""
+    from curate.sfm.ingest import probe_image
+    records, keep = [], []
+    for i, (n, o) in enumerate(zip(cams.names, originals)):
+        rec = {"original": o, "rel": n, "status": "kept", "reason": "", "working": "", "registered": True}
+        if Path(o).is_absolute():
+            try:
+                w, h = probe_image(o)
+            except (OSError, ValueError) as e:
+                rec.update(status="skipped", reason=str(e), registered=False)
+                logger.warning("sfm import: %s skipped: %s", o, e)
+                records.append(rec)
+                continue
+            cw, ch = int(cams.width[i]), int(cams.height[i])
+            if abs((w / h) / (cw / ch) - 1.0) > ASPECT_TOL:
+                raise ValueError(f"{o}: the photo is {w}x{h} (upright) but its pose in {source} describes a "
+                                 f"{cw}x{ch} image: another aspect ratio (a rotated or cropped photo?)")
+            rec.update(orig_width=w, orig_height=h)
+        records.append(rec)
+        keep.append(i)
+    if not keep:
+        raise ValueError(f"{source}: none of its {len(cams)} photos can be read (see the log)")
+    return records, keep
+
+
 def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
                   force: bool = False) -> Path:
     """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.
@@ -443,13 +479,15 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
         return out
     started = time.perf_counter()
     cams, xyz, rgb, err, rec, originals = _read_source(source, photos)
+    records, keep = check_photos(cams, originals, source)
+    if len(keep) < len(cams):
+        cams, originals = cams[keep], [originals[i] for i in keep]
+        rec = None          # the model written describes the usable photos only
     if rec is None:
         rec = reconstruction_from_cameras(cams)
     sparse = out / "sparse" / "0"
     sparse.mkdir(parents=True)
     rec.write(sparse)
-    records = [{"original": o, "rel": n, "status": "kept", "reason": "", "working": "", "registered": True}
-               for n, o in zip(cams.names, originals)]
     stats = write_outputs(out, cams, xyz, rgb, err, records, originals, cfg.normalize_percentile)
     finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
                  mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)

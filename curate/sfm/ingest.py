@@ -129,6 +129,47 @@ def _to_rgb8(im) -> np.ndarray:
     return np.asarray(im.convert("RGB"))
 
 
+def decode_upright(im, size: tuple[int, int] | None = None) -> np.ndarray:
+    """A PIL image -> [H, W, 3] uint8, upright (EXIF orientation applied), whatever its mode
+    (16-bit, grayscale, CMYK, alpha, float). ``size`` (width, height of the upright image): a
+    JPEG is decoded at the smallest scale that is still at least that large (fast), then
+    resized to it. The one decoder of every path (SfM ingest, pose imports, the field's loader)."""
+    from PIL import Image, ImageOps
+    if size is not None and im.format == "JPEG":
+        o = im.getexif().get(0x0112, 1)
+        w, h = (size[1], size[0]) if o in (5, 6, 7, 8) else size
+        im.draft("RGB", (int(w), int(h)))
+    rgb = _to_rgb8(ImageOps.exif_transpose(im))
+    if size is not None and (rgb.shape[1], rgb.shape[0]) != tuple(size):
+        rgb = np.asarray(Image.fromarray(rgb).resize(tuple(int(v) for v in size), Image.LANCZOS))
+    return rgb
+
+
+def probe_image(path: str | Path) -> tuple[int, int]:
+    """(width, height) of a photo as curate sees it (upright), after checking that it decodes
+    whole (at a reduced scale for a JPEG: fast). ValueError with the reason otherwise: missing
+    (or a dangling link), empty, truncated, not an image."""
+    from PIL import Image
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError("missing file" + (" (a link whose target is gone)" if path.is_symlink() else ""))
+    if path.suffix.lower() in RAW_EXTS:
+        rgb, _ = read_image(path)
+        return int(rgb.shape[1]), int(rgb.shape[0])
+    if path.stat().st_size == 0:
+        raise ValueError("empty file (0 bytes)")
+    try:
+        with Image.open(path) as im:
+            o = im.getexif().get(0x0112, 1)
+            w, h = im.size
+            if im.format == "JPEG":
+                im.draft("RGB", (max(1, w // 8), max(1, h // 8)))
+            im.load()  # raises on truncated data
+    except Exception as e:  # noqa: BLE001 - UnidentifiedImageError, truncated, decoder errors
+        raise ValueError(f"cannot decode: {type(e).__name__}: {e}") from None
+    return (h, w) if o in (5, 6, 7, 8) else (w, h)
+
+
 def read_image(path: str | Path) -> tuple[np.ndarray, dict]:
     """Decode one photo, upright.
 

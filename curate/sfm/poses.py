@@ -85,9 +85,11 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
     try:
         if isinstance(data, dict) and "convention" in data:
             cams = Cameras.from_dict(data)
+            from curate.core.cameras import check_poses
+            check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source))
             return Poses(cams, list(cams.names))
         from curate.core.transforms_json import read_transforms
         cams, files = read_transforms(source)
         return Poses(cams, files)
-    except (KeyError, TypeError) as e:
+    except (KeyError, TypeError, IndexError) as e:
         raise ValueError(f"{source}: not a transforms.json or cameras.json ({type(e).__name__}: {e})") from None
