@@ -136,3 +136,21 @@ def test_simulate_report(tmp_path):
     page = write_simulate_html(tmp_path).read_text()
     assert "21.25" in page and "kitchen" in page and "ours − random" in page and "Not available" not in page
     assert "https://" not in page and "<img" not in page  # all charts are inline SVG
+
+
+def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path):
+    """A user must see, before any figure, that SfM kept only part of the capture and that the
+    exported images do not form one connected set."""
+    run = make_run(tmp_path)
+    page = write_html(run).read_text()
+    assert "warnbox" not in page.split("<style")[0] + page.split("</style>")[-1]
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {
+        "model_sizes": [6, 3], "n_kept": 10, "n_registered": 6,
+        "unregistered": ["img_07.jpg", "img_08.jpg", "img_09.jpg"]}}))
+    (run / "export").mkdir()
+    (run / "export" / "stage.json").write_text(json.dumps({"warning": "the 3 exported images form 2 groups"}))
+    page = write_html(run).read_text()
+    body = page.split("</style>")[-1]
+    assert body.count('class="warnbox"') == 2
+    assert "split into 2 models (6, 3 photos)" in body and "img_07.jpg..img_09.jpg (3)" in body
+    assert body.index("warnbox") < body.index("<dl")       # above the figures

@@ -66,6 +66,19 @@ class EvalConfig:
     field: FieldConfig = field(default_factory=FieldConfig)
     """The radiance field and its training settings."""
 
+    def __post_init__(self) -> None:
+        checks = (("--holdout-every", self.holdout_every, 2), ("--iters", self.iters, 1),
+                  ("--eval-size", self.max_side, 16), ("--random-seeds", self.random_seeds, 0),
+                  ("--workers", self.workers, 0))
+        for flag, v, lo in checks:
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
+                raise ValueError(f"{flag} must be an integer >= {lo}, got {v!r}")
+        if self.time_budget_s is not None and not (np.isfinite(self.time_budget_s) and self.time_budget_s > 0):
+            raise ValueError(f"time_budget_s must be > 0 or None, got {self.time_budget_s}")
+        unknown = set(self.methods) - {"selection", "random", "fvs", "all"}
+        if unknown:
+            raise ValueError(f"unknown evaluation methods {sorted(unknown)}")
+
 
 @dataclass
 class Unit:

@@ -18,7 +18,7 @@ color:#222;line-height:1.4}
 h1{font-size:24px;margin-bottom:4px}h2{font-size:18px;border-bottom:1px solid #ddd;padding-bottom:4px;margin-top:32px}
 table{border-collapse:collapse;margin:8px 0}td,th{border:1px solid #ddd;padding:4px 10px;text-align:right}
 th{background:#f4f4f4}td.l,th.l{text-align:left}tr.hl td{background:#fff6e0;font-weight:600}
-.note{color:#777;font-style:italic}.small{font-size:12px;color:#555}.row{display:flex;flex-wrap:wrap;gap:18px;
+.note{color:#777;font-style:italic}.warnbox{border:2px solid #c0392b;background:#fdecea;padding:10px 14px;margin:12px 0;border-radius:4px}.small{font-size:12px;color:#555}.row{display:flex;flex-wrap:wrap;gap:18px;
 align-items:flex-start}.fig{text-align:center;font-size:12px;color:#444}.fig img{display:block;margin:0 auto 3px}
 .thumbs{display:flex;flex-wrap:wrap;gap:6px}.thumbs figure{margin:0;width:164px;font-size:11px;text-align:center;
 overflow:hidden;text-overflow:ellipsis;white-space:nowrap}.thumbs img{max-width:160px;max-height:160px}

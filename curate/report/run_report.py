@@ -132,8 +132,13 @@ def _header(run: _Run) -> str:
         mode = (exp.get("config") or {}).get("mode", "")
         items.append(("export", f"{run.dir / 'export'}: {exp.get('n_images', '?')} photos ({mode}), COLMAP sparse/0, "
                                 "transforms.json, images.txt"))
-    out = ["<h1>curate: photo selection report</h1>",
-           '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in items) + "</dl>"]
+    out = ["<h1>curate: photo selection report</h1>"]
+    from curate.sfm.stage import split_warning
+    warns = [w for w in (split_warning(run.dir), ((read_json(run.dir / "export" / "stage.json") or {}).get("warning")))
+             if w]
+    for w in warns:   # what the user must know before reading the figures: at the top, in a box
+        out.append(f'<div class="warnbox"><b>Warning:</b> {esc(w)}.</div>')
+    out.append('<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in items) + "</dl>")
     p = run.paired.get("selection-random")
     if p and "selection" in run.methods and "random" in run.methods:
         gap = r.get("gap_closed")

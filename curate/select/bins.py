@@ -5,7 +5,10 @@ the angle from +z, ``phi = atan2(y, x)`` in [-pi, pi) (``phi = +pi`` is the same
 direction as ``-pi`` and falls in the first phi bin). Bin index
 ``b = i_theta * n_phi + i_phi``. Intervals are half-open ``[lo, hi)``, except the
 last theta bin, which also holds ``theta = pi`` (the -z pole); a direction exactly
-on an edge, up to floating-point rounding, goes to one of the two bins it touches.
+on an edge, up to floating-point rounding, goes to one of the two bins it touches. A
+vertical direction (horizontal part at most ``VERTICAL_TOL`` of its largest component,
+i.e. rounding noise) has no azimuth and takes ``phi = 0``, at every scale: its bin does not
+depend on the signs or sizes of the noise left in x and y.
 
 * ``paper`` (default, as in the authors' code): ``n_theta`` bins uniform in theta;
   bin ``i``'s uniform share is its solid angle over 4 pi,
@@ -21,6 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 BINNINGS = ("paper", "equal-area")
+
+
+VERTICAL_TOL = 1e-12
+"""A direction whose horizontal part is at most this fraction of its largest component is vertical."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +92,10 @@ class DirectionBins:
             it = np.floor(np.arccos(cos_t) * (self.n_theta / np.pi))
         it = np.clip(it, 0, self.n_theta - 1).astype(np.int64)
         phi = np.arctan2(d[:, 1], d[:, 0])  # [-pi, pi]
+        # a vertical direction has no azimuth: phi := 0, whatever rounding left in x and y (and their signs)
+        hyp = np.hypot(d[:, 0], d[:, 1])
+        mag = np.max(np.abs(d), axis=1)
+        phi[~(hyp > VERTICAL_TOL * mag)] = 0.0
         ip = np.floor((phi + np.pi) * (self.n_phi / (2.0 * np.pi))).astype(np.int64)
         ip %= self.n_phi  # phi = +pi wraps onto -pi's bin
         return it * self.n_phi + ip

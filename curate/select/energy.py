@@ -36,7 +36,7 @@ class EnergyConfig:
     """Parameters of the paper's energy."""
 
     gamma: float = 0.05
-    """Exponent on the observation frequency O_f (authors' code: 0.05). Must be >= 0."""
+    """Exponent on the observation frequency O_f (authors' code: 0.05), in [0, GAMMA_MAX]."""
     n_theta: int = 5
     """Direction bins along theta, the angle from the scene's +z axis (authors' code: 5)."""
     n_phi: int = 10
@@ -45,13 +45,19 @@ class EnergyConfig:
     """"paper": uniform in theta, solid-angle shares; "equal-area": uniform in cos(theta)."""
 
     def __post_init__(self) -> None:
-        if not (self.gamma >= 0 and math.isfinite(self.gamma)):
-            raise ValueError(f"gamma must be finite and >= 0, got {self.gamma}")
+        if not (0 <= self.gamma <= GAMMA_MAX):
+            raise ValueError(f"gamma must be in [0, {GAMMA_MAX:g}], got {self.gamma}")
         DirectionBins(self.n_theta, self.n_phi, self.binning)  # validates
 
     @property
     def bins(self) -> DirectionBins:
         return DirectionBins(self.n_theta, self.n_phi, self.binning)
+
+
+GAMMA_MAX = 20.0
+"""Largest ``EnergyConfig.gamma``. The greedy's exact incremental form works on view counts
+``n ** gamma`` (n up to the pool size), which must stay finite: 10^6 cameras ** 20 = 1e120. Beyond
+it the frequency term is 0 in practice anyway (a node seen by half the cameras scores 0.5 ** 20 = 1e-6)."""
 
 
 @dataclass

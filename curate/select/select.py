@@ -144,6 +144,14 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         log.info("select %s", note)
     if index is None:
         index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
+    if cfg.method == "energy" and index.n_pairs == 0:
+        # no camera sees any node: every subset scores E = 0 and the greedy would return the first
+        # cameras; a loud, recorded fallback instead
+        fallback = ("the energy sees no node (no camera observes the scene's nodes: check --box and the "
+                    "occupancy): fell back to farthest-view sampling")
+        log.warning("select: %s", fallback)
+        note = "; ".join(x for x in (note, fallback) if x)
+        cfg = replace(cfg, method="fvs")
     if cfg.method == "energy":
         tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
         sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)

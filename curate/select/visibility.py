@@ -8,7 +8,11 @@ the camera to the node is free.
 :class:`FrustumVisibility` (the paper's): a node is observed by a camera when it lies
 in front of it (positive depth) and projects inside the image,
 ``0 <= u < width, 0 <= v < height``. A node exactly at a camera's centre has depth 0
-and is therefore *not* observed by that camera (its direction would be undefined).
+and is therefore *not* observed by that camera (its direction would be undefined). So that
+this holds at every scale and offset of the scene, a depth is taken as 0 when it is below
+the rounding noise of its own computation or of the scene's coordinates: ``z <= DEPTH_TOL *
+max(|x r0| + |y r1| + |z r2| + |r3|, L)``, the magnitudes of its terms and L the extent of the
+camera centres (:func:`depth_floor`), about 10^4 times the float64 noise.
 The test is evaluated without division, as ``z > 0, 0 <= u' < W z, 0 <= v' < H z``
 with ``[u', v', z] = K [R | t] X``, one fixed order of float64 operations per
 (node, camera) pair, so chunking never changes a result.
@@ -54,19 +58,33 @@ class FrustumVisibility:
 
     def __call__(self, cams: Cameras, nodes: np.ndarray) -> np.ndarray:
         P = projection_rows(cams)
-        return frustum_mask(P, cams.width.astype(np.float64), cams.height.astype(np.float64), nodes)
+        return frustum_mask(P, cams.width.astype(np.float64), cams.height.astype(np.float64), nodes,
+                            depth_floor(cams))
 
 
-def frustum_mask(P: np.ndarray, W: np.ndarray, H: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """bool [m, K] frustum test for nodes [m, 3] against projections ``P`` [3, 4, K]."""
-    return _frustum_ops(np.asarray(nodes, np.float64), P, W, H)
+DEPTH_TOL = 1e-12
+"""A depth at or below this fraction of the magnitude of its terms counts as 0 (see the module docstring)."""
 
 
-def _frustum_ops(nodes, P, W, H):
+def depth_floor(cams: Cameras) -> float:
+    """Depths at or below this count as 0: ``DEPTH_TOL`` times the extent of the camera centres
+    (the scene's length scale; 0 for a single camera)."""
+    c = np.asarray(cams.centres, np.float64)
+    return DEPTH_TOL * float(np.max(np.ptp(c, axis=0))) if len(c) > 1 else 0.0
+
+
+def frustum_mask(P: np.ndarray, W: np.ndarray, H: np.ndarray, nodes: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """bool [m, K] frustum test for nodes [m, 3] against projections ``P`` [3, 4, K]; ``floor``:
+    :func:`depth_floor`."""
+    return _frustum_ops(np.asarray(nodes, np.float64), P, W, H, floor)
+
+
+def _frustum_ops(nodes, P, W, H, floor: float = 0.0):
     """The frustum test's operations, for numpy arrays or torch tensors alike (same order)."""
     X, Y, Z = nodes[:, 0:1], nodes[:, 1:2], nodes[:, 2:3]
     z = _affine(X, Y, Z, P[2])
-    vis = z > 0
+    vis = z > DEPTH_TOL * _affine(abs(X), abs(Y), abs(Z), abs(P[2]))
+    vis &= z > floor
     u = _affine(X, Y, Z, P[0])
     vis &= u >= 0
     vis &= u < W * z
@@ -80,14 +98,16 @@ def _frustum_ops(nodes, P, W, H):
 def frustum_visible_reference(cams: Cameras, node) -> list[bool]:
     """Plain-Python frustum test of one node against each camera (reference for tests)."""
     P = projection_rows(cams)
+    floor = depth_floor(cams)
     x, y, zc = (float(c) for c in node)
     out = []
     for k in range(len(cams)):
         r = [[float(P[i, j, k]) for j in range(4)] for i in range(3)]
         z = ((x * r[2][0] + y * r[2][1]) + zc * r[2][2]) + r[2][3]
+        zmag = ((abs(x * r[2][0]) + abs(y * r[2][1])) + abs(zc * r[2][2])) + abs(r[2][3])
         u = ((x * r[0][0] + y * r[0][1]) + zc * r[0][2]) + r[0][3]
         v = ((x * r[1][0] + y * r[1][1]) + zc * r[1][2]) + r[1][3]
-        out.append(z > 0 and 0 <= u < float(cams.width[k]) * z and 0 <= v < float(cams.height[k]) * z)
+        out.append(z > DEPTH_TOL * zmag and z > floor and 0 <= u < float(cams.width[k]) * z and 0 <= v < float(cams.height[k]) * z)
     return out
 
 
@@ -151,11 +171,12 @@ class _TorchFrustum:
         self.P, self.C, self.nodes = to(projection_rows(cams)), to(cams.centres), to(nodes)
         self.W, self.H = to(cams.width.astype(np.float64)), to(cams.height.astype(np.float64))
         self.bins = bins
+        self.floor = depth_floor(cams)
 
     def __call__(self, start: int, stop: int):
         import torch
         nd = self.nodes[start:stop]
-        rows, cols = torch.nonzero(_frustum_ops(nd, self.P, self.W, self.H), as_tuple=True)
+        rows, cols = torch.nonzero(_frustum_ops(nd, self.P, self.W, self.H, self.floor), as_tuple=True)
         d = (self.C[cols] - nd[rows]).cpu().numpy()
         return start, rows.cpu().numpy(), cols.cpu().numpy(), self.bins.assign(d)
 
