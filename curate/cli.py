@@ -427,6 +427,7 @@ def cmd_batch(args) -> int:
     from curate.batch.runner import read_list, run_batch
     from curate.core.executors import RayMissing
     cfg = run_config(args)
+    _check_device(cfg.select.device)
     folders = list(args.folders)
     if args.list:
         try:
@@ -575,7 +576,10 @@ def _crash_log(exc: BaseException) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser(_command_of(argv)).parse_args(argv)
+    try:
+        args = build_parser(_command_of(argv)).parse_args(argv)
+    except SystemExit as e:  # --help, --version (0) or a one-line usage error (2)
+        return e.code if isinstance(e.code, int) else 2
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

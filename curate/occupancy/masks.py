@@ -48,6 +48,12 @@ class OccupancyConfig:
     min_points: int = 10
     """Fewer points (after cleaning) is a ValueError."""
 
+    def __post_init__(self) -> None:
+        if not (isinstance(self.res, (int, np.integer)) and 2 <= self.res <= 512):
+            raise ValueError(f"--res (nodes per axis) must be an integer in [2, 512], got {self.res!r}")
+        if self.dilation < 0 or self.nb_neighbors < 1 or not (0 <= self.percentile < 50) or self.pad < 0:
+            raise ValueError("occupancy: dilation >= 0, nb_neighbors >= 1, 0 <= percentile < 50 and pad >= 0")
+
 
 def _clean(points: np.ndarray, cfg: OccupancyConfig) -> np.ndarray:
     """Statistical outlier removal (open3d). [P, 3] -> [P', 3]."""
