@@ -2,26 +2,51 @@
 
 import base64
 import io
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
 from PIL import Image
 
-from curate.report.plots import bar_chart, camera_map, colormap, jpeg_data_uri, line_chart, png_data_uri
+from curate.report.charts import bar_chart, camera_map, line_chart, text_of
+from curate.report.plots import colormap, jpeg_data_uri, png_data_uri
 
 
-def test_svgs_parse_and_hold_their_data():
+def test_charts_are_inline_svg_holding_their_data():
     s = line_chart({"energy": ([1, 2, 3], [10.0, 12.5, 13.0]), "random": ([1, 2, 3], [9, 9.5, 11])}, "E", "step", "E")
     root = ET.fromstring(s)
-    assert root.tag.endswith("svg") and len(root.findall(".//{http://www.w3.org/2000/svg}polyline")) == 2
+    assert root.tag.endswith("svg") and "http://" not in s.replace("http://www.w3.org", "")
+    assert "energy" in text_of(s) and "random" in text_of(s)             # the legend names both series
+    ET.fromstring(line_chart({"empty": ([], [])}, "t", "x", "y"))          # degenerate inputs still draw
+    ET.fromstring(line_chart({"nan": ([1, 2, 3], [np.nan, 1.0, np.inf])}, "t", "x", "y"))
+
+
+def test_bar_values_sit_above_their_error_bars_and_a_cut_axis_is_said():
+    s = bar_chart(["selection", "random", "fvs"], [25.1, 24.8, np.nan], [0, 0.3, 0], "PSNR", "dB")
+    ET.fromstring(s)
+    t = text_of(s)
+    assert "25.10" in t and "24.80" in t and "n/a" in t and "nan" not in t.lower()
+    assert "starts at" in t                                                # bars near 25 dB: the axis is cut, and says so
+    assert "starts at" not in text_of(bar_chart(["a", "b"], [2.0, 1.0]))  # far apart: from 0, nothing to say
+
+
+def test_camera_map_legend_shows_each_mark_as_drawn():
     s = camera_map(np.random.default_rng(0).normal(size=(20, 2)), np.ones((20, 2)), [1, 5], "cams",
                    extra_xy=np.zeros((2, 2)))
     ET.fromstring(s)
-    assert s.count('r="3.5"') == 2
-    s = bar_chart(["energy", "random", "fvs"], [17.5, 17.2, np.nan], [0, 0.3, 0], "PSNR", "dB")
-    ET.fromstring(s)
-    assert "17.5" in s
-    ET.fromstring(line_chart({"empty": ([], [])}, "t", "x", "y"))  # degenerate inputs still draw
+    assert all(w in text_of(s) for w in ("pool", "chosen", "held out"))
+    # held-out views are hollow squares, in the map and in its legend alike
+    from matplotlib.colors import to_rgba
+    from curate.report.charts import camera_map_figure
+    fig, ax = camera_map_figure(np.zeros((4, 2)) + [[0, 0], [1, 0], [0, 1], [1, 1]], np.ones((4, 2)), [1], "c",
+                                extra_xy=[[0.5, 0.5]])
+    leg = {t.get_text(): h for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)}
+    drawn = [c for c in ax.collections if c.get_label() == "held out"][0]
+    for art in (leg["held out"], drawn):
+        fc = art.get_facecolor()
+        assert len(fc) == 0 or to_rgba(fc[0])[3] == 0.0                    # hollow
+        assert len(art.get_paths()[0].vertices) == 5                       # a square (closed: 4 corners + 1)
+    assert to_rgba(leg["chosen"].get_facecolor()[0])[3] == 1.0           # chosen views: filled dots
 
 
 def test_colormap_and_data_uris():

@@ -23,17 +23,9 @@ def holdout_split(n: int, every: int = 14, offset: int = 0) -> tuple[np.ndarray,
 
 
 def t_quantile(p: float, dof: int) -> float:
-    """Student-t quantile (scipy when present, else a normal approximation with a
-    Cornish-Fisher correction, accurate to ~1e-3 for dof >= 3)."""
-    try:
-        from scipy.stats import t
-        return float(t.ppf(p, dof))
-    except ImportError:  # pragma: no cover - scipy comes with scikit-image
-        from statistics import NormalDist
-        z = NormalDist().inv_cdf(p)
-        g1 = (z ** 3 + z) / 4
-        g2 = (5 * z ** 5 + 16 * z ** 3 + 3 * z) / 96
-        return z + g1 / dof + g2 / dof ** 2
+    """Student-t quantile (scipy)."""
+    from scipy.stats import t
+    return float(t.ppf(p, dof))
 
 
 def mean_ci(x, level: float = 0.95) -> dict:

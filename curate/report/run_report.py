@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from curate.report import plots
+from curate.report import charts, plots
 from curate.report.html_parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
 from curate.report.plots import colorbar, floorplan, heatmap_svg, top_down_axes
 
@@ -126,7 +126,11 @@ def _header(run: _Run) -> str:
              ("pool (candidates)", r.get("n_pool", len(s.get("pool", [])) or "—")),
              ("held out", f"{r.get('n_holdout', len(s.get('holdout', [])) or '—')}"
                           + (f" (every {every}th registered image)" if every else "")),
-             ("selection nodes", s.get("n_nodes", "—")), ("wall time", duration(r.get("wall_seconds")))]
+             ("selection nodes", s.get("n_nodes", "—")),
+             ("compute time", f"{duration(r.get('compute_seconds'))} (every stage, when it ran)"),
+             ("this invocation", duration(r.get("wall_seconds"))
+              + (f" (reused {sum(1 for t in r.get('stages') or [] if t.get('skipped'))} finished stages)"
+                 if any(t.get("skipped") for t in r.get("stages") or []) else ""))]
     exp = read_json(run.dir / "export" / "export.json")
     if exp:
         mode = (exp.get("config") or {}).get("mode", "")
@@ -205,7 +209,7 @@ def _bars(run: _Run) -> str:
     vals = [m[k]["psnr"] for k in keys]
     errs = [m[k].get("psnr_std") or 0.0 for k in keys]
     names = list(keys)
-    return plots.bar_chart(names, vals, errs, title="Held-out PSNR per method (random: ± std over seeds)",
+    return charts.bar_chart(names, vals, errs, title="Held-out PSNR per method (random: ± std over seeds)",
                            ylabel="PSNR (dB)", width=560, height=300)
 
 
@@ -263,7 +267,7 @@ def _camera_layout(run: _Run) -> str:
     pos = {c: j for j, c in enumerate(rest)}
     c, d = cams.centres, cams.view_dirs
     axes = "xyz"
-    svg = plots.camera_map(c[rest][:, [a, b]], d[rest][:, [a, b]], [pos[i] for i in chosen if i in pos],
+    svg = charts.camera_map(c[rest][:, [a, b]], d[rest][:, [a, b]], [pos[i] for i in chosen if i in pos],
                            f"Cameras seen from above ({axes[a]} right, {axes[b]} up)",
                            extra_xy=c[hold][:, [a, b]] if hold else None, width=640, height=520,
                            labels=(f"pool ({len(rest)})", f"chosen ({len(chosen)})", f"held out ({len(hold)})"))
@@ -324,7 +328,7 @@ def _renders(run: _Run) -> str:
                          f"{txt}</td>")
         rows.append("<tr>" + "".join(cells) + "</tr>")
     return (f'<p class="small">{len(pick)} of {len(names)} held-out views.</p>'
-            f'<table class="renders">{head}{"".join(rows)}</table>')
+            f'<div class="scroll"><table class="renders">{head}{"".join(rows)}</table></div>')
 
 
 def _energy_curve(run: _Run) -> str:
@@ -333,12 +337,12 @@ def _energy_curve(run: _Run) -> str:
     if not e:
         return note("No energy trace (the selection method records none).")
     x = np.arange(1, len(e) + 1)
-    charts = [plots.line_chart({"E": (x, np.asarray(e, float))}, "energy E", "photos chosen", "E", 370, 260)]
+    figs = [charts.line_chart({"E": (x, np.asarray(e, float))}, "energy E", "photos chosen", "E", 370, 260)]
     for k, title, lab in (("angular", "angular term Σ (1 − TV)", "Σ (1 − TV)"),
                           ("frequency", "frequency term Σ O^γ", "Σ O^γ")):
         if s.get(k) and len(s[k]) == len(e):
-            charts.append(plots.line_chart({k: (x, np.asarray(s[k], float))}, title, "photos chosen", lab, 370, 260))
-    return ('<div class="row">' + "".join(charts) + '</div><p class="small">After each chosen photo, summed over the '
+            figs.append(charts.line_chart({k: (x, np.asarray(s[k], float))}, title, "photos chosen", lab, 370, 260))
+    return ('<div class="row">' + "".join(figs) + '</div><p class="small">After each chosen photo, summed over the '
             "selection nodes (E = angular + frequency).</p>")
 
 

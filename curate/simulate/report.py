@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from curate.report import plots
+from curate.report import charts
 from curate.report.html_parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
 from curate.report.plots import top_down_axes
 
@@ -80,7 +80,7 @@ def _sim_layouts(rep: dict) -> str:
     figs = []
     for m, c in cams.items():
         both = Cameras.concat([c, test])
-        figs.append(plots.camera_map(both.centres[:, [a, b]], both.view_dirs[:, [a, b]], range(len(c)),
+        figs.append(charts.camera_map(both.centres[:, [a, b]], both.view_dirs[:, [a, b]], range(len(c)),
                                      f"{SIM_LABEL.get(m, m)}", width=268, height=250,
                                      labels=(f"test views ({len(test)})", f"training ({len(c)})", "")))
     return ('<div class="row">' + "".join(figs) + f'</div><p class="small">Seen from above: {axes[a]} to the right, '
@@ -111,7 +111,7 @@ def write_simulate_html(out_dir: str | Path) -> Path:
         if not table:
             return note("No results.")
         ms = list(table)
-        return plots.bar_chart(ms, [table[m].get("average") for m in ms], title="PSNR averaged over the test sets",
+        return charts.bar_chart(ms, [table[m].get("average") for m in ms], title="PSNR averaged over the test sets",
                                ylabel="PSNR (dB)", width=480, height=280)
 
     def curve(_):
@@ -119,7 +119,7 @@ def write_simulate_html(out_dir: str | Path) -> Path:
         if not e:
             return note("No energy curve (progressive placement not run).")
         x = np.arange(1, len(e) + 1)
-        return plots.line_chart({"E": (x, np.asarray(e, float))}, "Energy during progressive placement",
+        return charts.line_chart({"E": (x, np.asarray(e, float))}, "Energy during progressive placement",
                                 "cameras placed", "E", 480, 280)
 
     def timings(_):
