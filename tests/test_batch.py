@@ -93,6 +93,7 @@ def local_run(folders, tmp_path_factory):
     return out, res, time.time() - t0
 
 
+@pytest.mark.slow
 def test_batch_local_isolates_failure_and_resumes(folders, local_run):
     out, res, _ = local_run
     rows = _check(out, res)
@@ -106,6 +107,7 @@ def test_batch_local_isolates_failure_and_resumes(folders, local_run):
     assert time.time() - t0 < 60
 
 
+@pytest.mark.slow
 def test_batch_ray_agrees_with_local(folders, local_run, tmp_path):
     pytest.importorskip("ray", reason="ray is not installed (pip install -e '.[ray]'; scripts/setup.sh does)")
     out_l, res_l, _ = local_run
@@ -120,6 +122,7 @@ def test_batch_ray_agrees_with_local(folders, local_run, tmp_path):
         assert units == ["all", "fvs", "random_s0", "random_s1", "selection"]
 
 
+@pytest.mark.slow
 def test_ray_missing_is_a_clear_error(tmp_path, folders):
     code = ("import sys; sys.modules['ray'] = None; from curate.cli import main; "
             f"sys.exit(main(['batch', {str(folders[0])!r}, '--out', {str(tmp_path / 'r')!r}, '--budget', '5', "

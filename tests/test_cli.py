@@ -34,6 +34,7 @@ def test_help_is_instant_and_imports_nothing_heavy():
     assert "score" in run("--help").stdout
 
 
+@pytest.mark.slow
 def test_score_json_matches_library(pool_json):
     path, cams = pool_json
     out = json.loads(run("score", str(path), "--box=-1,-1,-1,1,1,1", "--res", "8", "--gamma", "0.5",
@@ -48,6 +49,7 @@ def test_score_json_matches_library(pool_json):
     assert "energy" in human and "angular" in human and "coverage" in human
 
 
+@pytest.mark.slow
 def test_select_writes_subset(pool_json, tmp_path):
     path, cams = pool_json
     out = tmp_path / "sel"
@@ -76,6 +78,7 @@ def test_select_writes_subset(pool_json, tmp_path):
     (["score", "{tmp}/noframes.json", "--bins", "5by10"], "THETAxPHI"),
     (["select", "{tmp}/noframes.json", "--budget", "ten", "--out", "{tmp}/o"], "count"),
 ])
+@pytest.mark.slow
 def test_clear_errors(tmp_path, args, msg):
     (tmp_path / "bad.json").write_text("{not json")
     (tmp_path / "noframes.json").write_text(json.dumps({"frames": []}))
@@ -83,6 +86,7 @@ def test_clear_errors(tmp_path, args, msg):
     assert p.returncode == 2 and msg in p.stderr and "Traceback" not in p.stderr
 
 
+@pytest.mark.slow
 def test_score_fox_capture():
     path = shared_data("fox") / "transforms.json"
     out = json.loads(run("score", str(path), "--res", "16", "--json").stdout)
@@ -95,6 +99,7 @@ def test_simulate_rejects_bad_size():
     assert p.returncode == 2 and "WIDTHxHEIGHT" in p.stderr
 
 
+@pytest.mark.slow
 def test_score_accepts_a_colmap_model(tmp_path, pool_json):
     """The same cameras written as a COLMAP model (binary and text) score the same as the transforms.json."""
     from curate.sfm.colmap import reconstruction_from_cameras
@@ -110,6 +115,7 @@ def test_score_accepts_a_colmap_model(tmp_path, pool_json):
         assert out["n_cameras"] == 30 and np.isclose(out["energy"], ref["energy"], rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_sfm_command_imports_poses_and_skips_unchanged(tmp_path):
     src = shared_data("fox") / "transforms.json"
     first = run("sfm", "--poses", str(src), "--out", str(tmp_path / "run"))

@@ -94,6 +94,7 @@ def sphere_scene():
     return cams, _sphere_images(cams)
 
 
+@pytest.mark.slow
 def test_field_trains_on_tiny_scene(sphere_scene):
     cams, imgs = sphere_scene
     cfg = _tiny_cfg()
@@ -106,6 +107,7 @@ def test_field_trains_on_tiny_scene(sphere_scene):
     assert st.rays_per_s > 0 and st.iters == 400
 
 
+@pytest.mark.slow
 def test_determinism(sphere_scene):
     cams, imgs = sphere_scene
     cfg = _tiny_cfg()
@@ -167,6 +169,7 @@ def test_errors_for_degenerate_inputs(sphere_scene):
 
 
 # ---------------------------------------------------------------- resume
+@pytest.mark.slow
 def test_resume_continues_the_schedule(sphere_scene):
     """Two resumed halves of N iterations: finite, improving loss, and the resolution of one 2N run."""
     cams, imgs = sphere_scene

@@ -133,6 +133,7 @@ def test_weighted_voronoi_local_optimum_against_reference(seed):
     assert np.all(np.diff(cost) <= 1e-12 * max(1.0, cost[0]))
 
 
+@pytest.mark.slow
 def test_cli_path_weights_flag(tmp_path):
     """`curate select --path-weights` / `--no-path-weights` choose what the library chooses
     with ``MedoidsConfig(path_weights=True / False)`` (the two differ on this walk), and

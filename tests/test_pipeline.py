@@ -37,6 +37,7 @@ def _mtimes(run: Path) -> dict:
     return {str(p.relative_to(run)): p.stat().st_mtime_ns for p in run.rglob("stage.json")}
 
 
+@pytest.mark.slow
 def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_path):
     """Kill `curate run` while a subset trains; the re-run keeps every finished stage and completes the report."""
     run = tmp_path / "run"
@@ -138,6 +139,7 @@ def test_summarize_random_over_seeds_paired_and_gap():
     assert summarize(res)[2] is None
 
 
+@pytest.mark.slow
 def test_run_refuses_a_run_folder_inside_the_photos(tmp_path):
     res = subprocess.run([sys.executable, "-m", "curate", "run", str(SAMPLE / "images"), "--poses",
                           str(SAMPLE / "transforms.json"), "--out", str(SAMPLE / "images" / "run"), "--budget", "5"],
@@ -159,6 +161,7 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     assert image_paths(tmp_path, list(res.cameras.names), res.records) == paths
 
 
+@pytest.mark.slow
 def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp_path):
     """A changed selection option redoes the select stage only; `curate select RUN --budget N` keeps the
     run's saved options (here --gamma and --method) and saves the new budget; `--box` reaches the
@@ -196,6 +199,7 @@ def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp
     assert split["holdout_every"] == 14 and split["holdout"] == list(range(0, 160, 14))
 
 
+@pytest.mark.slow
 def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     """`--no-evaluate` with view medoids (or FVS) trains no pool field: the selection needs none. The
     energy on a pose import (no sparse points to give its occupancy) still gets one."""

@@ -2,7 +2,6 @@
 
 import base64
 import io
-import re
 import xml.etree.ElementTree as ET
 
 import numpy as np

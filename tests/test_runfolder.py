@@ -115,6 +115,7 @@ def test_non_empty_folder_not_made_by_curate_is_refused_and_adoption_never_write
     assert main(["report", str(out)]) == 2  # a stage command on a folder curate did not make
 
 
+@pytest.mark.slow
 def test_adopted_folder_keeps_every_file_of_the_user(tmp_path, capsys):
     out = tmp_path / "work"
     (out / "photos_backup").mkdir(parents=True)

@@ -71,6 +71,7 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
 
 
 # ------------------------------------------------------------------ mixed folder: bad files, input untouched, skip
+@pytest.mark.slow
 def test_sfm_on_mixed_folder_and_skip_unchanged(tmp_path):
     photos = make_mixed_folder(tmp_path / "photos", n_good=10, size=400)
     before = sha_tree(photos)
@@ -127,6 +128,7 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
 
 
 # ------------------------------------------------------------------ fox: accuracy, import
+@pytest.mark.slow
 def test_fox_sfm_matches_published_poses(fox_run):
     from curate.core.transforms_json import read_transforms
     ref, _ = read_transforms(need("fox") / "transforms.json")
@@ -160,6 +162,7 @@ def test_import_transforms_json(tmp_path):
     assert res2.is_dir()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["binary", "text"])
 def test_import_colmap_model(fox_run, tmp_path, fmt):
     model = fox_run / "sfm" / "sparse" / "0"
@@ -185,6 +188,7 @@ def test_import_colmap_model(fox_run, tmp_path, fmt):
 
 
 # ------------------------------------------------------------------ templering
+@pytest.mark.slow
 def test_templering_sfm_matches_ground_truth(tmp_path):
     from research.datasets import load_templering
     folder = need("templering")

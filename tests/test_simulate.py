@@ -4,6 +4,7 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from curate.simulate.progressive import ProgressiveConfig
 from curate.simulate.experiment import SimulateConfig, TEST_SETS, run_simulation
@@ -42,6 +43,7 @@ def test_simulation_table(tmp_path):
     assert json.loads((tmp_path / "report.json").read_text())["budget"] == 6
 
 
+@pytest.mark.slow
 def test_field_variant_end_to_end(tmp_path):
     """Algorithm 1 with occupancy from the field being trained: runs, keeps cameras out of solids,
     records the occupancy source and the loop's timings."""

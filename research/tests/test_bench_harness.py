@@ -95,6 +95,7 @@ def test_oracle_takes_each_held_out_views_nearest_first(harness):
     assert harness.oracle_subset(d[:0], 3) == []
 
 
+@pytest.mark.slow
 def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monkeypatch):
     """The synthetic room (small here): a walk with its photos, and off-path test views in
     free space, rendered once; real scenes have no off-path views."""
