@@ -132,7 +132,8 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--sift-peak-threshold", "sfm.sift_peak_threshold", parse=float),
        Opt("--guided-matching", "sfm.guided_matching"),
        Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
-       Opt("--on-split", "sfm.on_split", choices=ON_SPLIT)]
+       Opt("--on-split", "sfm.on_split", choices=ON_SPLIT),
+       Opt("--max-frames", "sfm.video.max_frames", parse=int)]
 RUN = BUDGET + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
 
 SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen")),

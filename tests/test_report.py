@@ -149,8 +149,12 @@ def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path
         "unregistered": ["img_07.jpg", "img_08.jpg", "img_09.jpg"]}}))
     (run / "export").mkdir()
     (run / "export" / "stage.json").write_text(json.dumps({"warning": "the 3 exported images form 2 groups"}))
+    rec = json.loads((run / "sfm" / "stage.json").read_text())
+    rec["stats"]["videos"] = [{"video": "walk.mp4", "decoded": 3600, "candidates": 412, "static": 700, "stopped": ""}]
+    (run / "sfm" / "stage.json").write_text(json.dumps(rec))
     page = write_html(run).read_text()
     body = page[page.index("<body"):]
+    assert "walk.mp4: 3600 frames decoded, 412 kept as candidates" in body
     assert body.count('class="warnbox"') == 2
     assert "split into 2 models (6, 3 photos)" in body and "img_07.jpg..img_09.jpg (3)" in body
     assert body.index("warnbox") < body.index("<dl")       # above the figures

@@ -131,6 +131,10 @@ def _header(run: _Run) -> str:
              ("this invocation", duration(r.get("wall_seconds"))
               + (f" (reused {sum(1 for t in r.get('stages') or [] if t.get('skipped'))} finished stages)"
                  if any(t.get("skipped") for t in r.get("stages") or []) else ""))]
+    for v in ((read_json(run.dir / "sfm" / "stage.json") or {}).get("stats") or {}).get("videos") or []:
+        items.append(("video", f"{v.get('video')}: {v.get('decoded')} frames decoded, {v.get('candidates')} kept as "
+                               f"candidates (the sharpest of each window of view change; {v.get('static', 0)} frames "
+                               f"of the walker standing still)" + (f"; {v['stopped']}" if v.get("stopped") else "")))
     exp = read_json(run.dir / "export" / "export.json")
     if exp:
         mode = (exp.get("config") or {}).get("mode", "")

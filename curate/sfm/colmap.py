@@ -322,6 +322,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     started = time.perf_counter()
     timings: dict[str, float] = {}
     records, kept, t_ingest = prepare_photos(cfg, photos, out)
+    videos = t_ingest.pop("videos", [])
     timings.update(t_ingest)
     names = [r.working for r in kept]
     if len(names) < 2:
@@ -331,7 +332,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     matcher = choose_matcher(cfg, kept)
     db, images = out / "database.db", out / "images"
     stats: dict = {"n_input_files": len(records), "n_kept": len(names), "camera_mode": "single" if single else
-                   "per_image", "matcher": matcher}
+                   "per_image", "matcher": matcher, **({"videos": videos} if videos else {})}
     pycolmap.set_random_seed(cfg.seed)
     with colmap_log(out / "colmap.log"):
         logger.info("sfm: extracting SIFT features (%s camera, %s) ...", stats["camera_mode"], cfg.camera_model)

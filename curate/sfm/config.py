@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
@@ -12,6 +12,34 @@ CAMERA_MODES = ("auto", "single", "per_image")
 """``SfmConfig.camera_mode`` choices."""
 ON_SPLIT = ("largest", "stop")
 """``SfmConfig.on_split`` choices."""
+
+
+VIDEO_EXTS = {".mp4", ".mov", ".m4v", ".mkv", ".avi", ".webm"}
+"""File extensions read as videos (:mod:`curate.sfm.video`)."""
+
+
+@dataclass(frozen=True)
+class VideoConfig:
+    """How candidate frames are chosen from a video."""
+
+    max_frames: int = 1000
+    """Most candidate frames per video (keeps SfM bounded: matching and mapping grow with the pool)."""
+    change_step: float = 0.04
+    """A window closes when the view has changed this much since it opened (mean absolute grey
+    difference between consecutive thumbnails, 0..1, summed); raised until ``max_frames`` holds."""
+    static_change: float = 0.004
+    """Consecutive frames that differ less than this count as the same view (the walker stood still)."""
+    analysis_side: int = 160
+    """Longer side of the grey thumbnails the change is measured on (pixels)."""
+    sharpness_side: int = 480
+    """Longer side of the grey image the sharpness is measured on (pixels)."""
+
+    def __post_init__(self) -> None:
+        if self.max_frames < 2 or not (0 < self.change_step <= 1) or not (0 <= self.static_change < 1):
+            raise ValueError("video: max_frames >= 2, 0 < change_step <= 1 and 0 <= static_change < 1")
+        if self.analysis_side < 16 or self.sharpness_side < 16:
+            raise ValueError("video: analysis_side and sharpness_side must be >= 16")
+
 
 
 @dataclass
@@ -50,6 +78,8 @@ class SfmConfig:
     #                                   initial pair got a wrong relative pose, a kink that bent the walk by 17 deg
     seed: int = 0                     # random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary
     #                                   tree's training sample: same photos and config, same matches and model
+    video: VideoConfig = field(default_factory=VideoConfig)
+    """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
     on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):

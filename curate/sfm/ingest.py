@@ -72,6 +72,8 @@ def find_images(folder: str | Path, recursive: bool = False) -> tuple[list[Path]
     when ``recursive``.
     """
     folder = Path(folder)
+    if folder.is_file():   # one video (or photo) given instead of a folder
+        return ([folder], []) if folder.suffix.lower() in IMAGE_EXTS else ([], [folder])
     if not folder.is_dir():
         raise FileNotFoundError(f"photo folder {folder} does not exist")
     it = folder.rglob("*") if recursive else folder.iterdir()
@@ -269,23 +271,57 @@ def ingest_one(path: Path, folder: Path, out_dir: Path, max_size: int) -> tuple[
     return rec, small
 
 
+def source_root(photos: str | Path) -> Path:
+    """The folder a capture's file names are relative to: the photo folder, or a single video's folder."""
+    photos = Path(photos)
+    return photos.parent if photos.is_file() else photos
+
+
 def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recursive: bool = False,
-           num_threads: int = 2, on_image=None, progress: bool = True) -> list[PhotoRecord]:
+           num_threads: int = 2, on_image=None, progress: bool = True, video=None,
+           video_summaries: list | None = None) -> list[PhotoRecord]:
     """Ingest every file of ``folder`` into working copies in ``out_dir``.
 
     Args:
         on_image: optional ``callback(record, rgb [H, W, 3] uint8)`` for every kept image
             (quality metrics are computed through it, so each photo is decoded once).
+        video: :class:`curate.sfm.video.VideoConfig` for the videos among the files (or ``folder``
+            itself, one video): their candidate frames become records of their own, named by video
+            and time (:mod:`curate.sfm.video`); each video's summary goes to ``video_summaries``.
     Returns:
-        One record per file in the folder (kept or skipped), sorted by relative path.
+        One record per file in the folder (kept or skipped) and per candidate video frame, sorted
+        by relative path.
     """
     from tqdm import tqdm
+    from curate.sfm.video import VIDEO_EXTS, VideoConfig, extract
 
-    folder, out_dir = Path(folder), Path(out_dir)
+    path, out_dir = Path(folder), Path(out_dir)
+    folder = source_root(path)
     out_dir.mkdir(parents=True, exist_ok=True)
-    imgs, other = find_images(folder, recursive)
+    imgs, other = find_images(path, recursive)
+    videos = [p for p in other if p.suffix.lower() in VIDEO_EXTS]
+    other = [p for p in other if p.suffix.lower() not in VIDEO_EXTS]
     records = [PhotoRecord(original=str(p.resolve()), rel=p.relative_to(folder).as_posix(), status="skipped",
                            reason=f"unsupported extension {p.suffix!r}") for p in other]
+    for v in videos:
+        rel = v.relative_to(folder).as_posix()
+        try:
+            frames, summary = extract(v, rel, out_dir, max_size, video or VideoConfig())
+        except Exception as e:  # noqa: BLE001 - PyAV's errors: an unreadable video is skipped, like a photo
+            records.append(PhotoRecord(original=str(v.resolve()), rel=rel, status="skipped",
+                                       reason=f"cannot decode the video: {type(e).__name__}: {e}"))
+            continue
+        if video_summaries is not None:
+            video_summaries.append(summary)
+        if not frames:
+            records.append(PhotoRecord(original=str(v.resolve()), rel=rel, status="skipped",
+                                       reason="no decodable frame"))
+        if on_image is not None:
+            from PIL import Image
+            for r in frames:
+                with Image.open(out_dir / r.working) as im:
+                    on_image(r, np.asarray(im.convert("RGB")))
+        records += frames
 
     def work(p: Path) -> PhotoRecord:
         rec, rgb = ingest_one(p, folder, out_dir, max_size)

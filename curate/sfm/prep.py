@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from curate.core.cameras import Cameras
-from curate.sfm.ingest import PhotoRecord, find_images, ingest
+from curate.sfm.ingest import PhotoRecord, find_images, ingest, source_root
 from curate.sfm.quality import assess, phash, sharpness
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import normalization
@@ -31,9 +31,10 @@ def refuse_inside(out: Path, photos: Path) -> None:
 
 def input_key(cfg: SfmConfig, photos: Path) -> str:
     """Stage key: config (execution-only fields excluded) + names and content of every file of ``photos``."""
+    root = source_root(photos)
     imgs, other = find_images(photos, cfg.recursive)
-    files = sorted(imgs + other, key=lambda p: p.relative_to(photos).as_posix())
-    h = hashlib.sha256("\n".join(p.relative_to(photos).as_posix() for p in files).encode())
+    files = sorted(imgs + other, key=lambda p: p.relative_to(root).as_posix())
+    h = hashlib.sha256("\n".join(p.relative_to(root).as_posix() for p in files).encode())
     conf = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in _NOT_IN_KEY}
     return stage_key({"mode": "sfm", **conf}, [hash_files(files, h), str(photos)])
 
@@ -47,7 +48,9 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
         metrics[rec.rel] = (sharpness(rgb), phash(rgb))
 
     threads = cfg.num_threads if cfg.num_threads > 0 else 2
-    records = ingest(photos, out / "images", cfg.max_image_size, cfg.recursive, threads, on_image, cfg.progress)
+    videos: list[dict] = []
+    records = ingest(photos, out / "images", cfg.max_image_size, cfg.recursive, threads, on_image, cfg.progress,
+                     video=cfg.video, video_summaries=videos)
     t_ingest = round(time.perf_counter() - t, 2)
     t = time.perf_counter()
     good = [r for r in records if r.status == "kept"]
@@ -74,7 +77,7 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
     kept = [r for r in records if r.status == "kept"]
     n_blur = sum(bool(r.extra.get("blurry")) for r in records)
     logger.info("quality: %d kept, %d dropped, %d flagged blurry", len(kept), len(good) - len(kept), n_blur)
-    return records, kept, {"ingest": t_ingest, "quality": round(time.perf_counter() - t, 2)}
+    return records, kept, {"ingest": t_ingest, "quality": round(time.perf_counter() - t, 2), "videos": videos}
 
 
 def _trailing_number(name: str) -> tuple[str, int] | None:
@@ -94,7 +97,7 @@ def looks_sequential(names: list[str]) -> bool:
 
 def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     """'auto': exhaustive up to ``exhaustive_max_images``; beyond: spatial with GPS on most photos,
-    sequential for numbered frames, else exhaustive (slow but complete)."""
+    sequential for numbered frames and video frames, else exhaustive (slow but complete)."""
     if cfg.matcher != "auto":
         return cfg.matcher
     n = len(kept)
@@ -102,7 +105,7 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
         return "exhaustive"
     if sum(r.has_gps for r in kept) >= 0.9 * n:
         return "spatial"
-    if looks_sequential([r.rel for r in kept]):
+    if all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]):
         return "sequential"
     logger.warning("sfm: %d unordered photos without GPS: exhaustive matching (quadratic time)", n)
     return "exhaustive"
