@@ -8,6 +8,8 @@ parameters), the median rotation error and centre error after a similarity align
 
     python3 -m curate sfm ../shared/data/office/images --out /tmp/office_sfm
     python3 -m research.sfm_mappers /tmp/office_sfm --truth ../shared/data/office
+    python3 -m curate sfm ../shared/data/office/office.mp4 --out /tmp/office_video   # frame i = pose i
+    python3 -m research.sfm_mappers /tmp/office_video --truth ../shared/data/office
 """
 
 from __future__ import annotations
@@ -43,6 +45,16 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
     return models, time.perf_counter() - t
 
 
+def truth_for(cams, truth, frame_of: dict):
+    """The ground truth paired with ``cams``: by name, or, for the frames of a video (``frame_of``:
+    working name -> frame index), frame i of the video is ground-truth camera i."""
+    if not frame_of:
+        return truth
+    from curate.core.cameras import Cameras
+    ref = truth[[frame_of[n] for n in cams.names]]
+    return Cameras(ref.c2w, ref.fx, ref.fy, ref.cx, ref.cy, ref.width, ref.height, names=tuple(cams.names))
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
@@ -58,6 +70,8 @@ def main(argv=None) -> dict:
         raise SystemExit(f"{db}: no database (run `curate sfm` first)")
     n_kept = json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"]
     truth = load_ground_truth(a.truth) if a.truth else None
+    recs = json.loads((sfm / "images.json").read_text()).get("photos", [])
+    frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
     out = {"run": str(a.run), "n_kept": n_kept}
     with tempfile.TemporaryDirectory() as tmp:
         for kind in a.mappers.split(","):
@@ -72,7 +86,7 @@ def main(argv=None) -> dict:
             if models and truth is not None:
                 best = max(models.values(), key=lambda r: r.num_reg_images())
                 cams = cameras_from_reconstruction(best)[0]
-                e = pose_errors(cams, truth)
+                e = pose_errors(cams, truth_for(cams, truth, frame_of))
                 row.update({k: e[k] for k in ("n_matched", "rotation_deg_median", "rotation_deg_max",
                                               "centre_rel_median")})
             out[kind] = row
