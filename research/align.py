@@ -41,8 +41,9 @@ def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> tuple[
 
 
 def basename_key(name: str) -> str:
-    """Default matching key: the file name without folders and without extension."""
-    return PurePosixPath(name.replace("\\", "/")).name.split(".")[0]
+    """Default matching key: the file name without folders and without its extension (the last
+    suffix only: video frames named by time, ``walk_000012.300.jpg``, keep their milliseconds)."""
+    return PurePosixPath(name.replace("\\", "/")).stem
 
 
 def match_names(est: Cameras, ref: Cameras, key: Callable[[str], str] = basename_key) -> tuple[np.ndarray, np.ndarray]:

@@ -46,13 +46,14 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
 
 
 def truth_for(cams, truth, frame_of: dict):
-    """The ground truth paired with ``cams``: by name, or, for the frames of a video (``frame_of``:
-    working name -> frame index), frame i of the video is ground-truth camera i."""
+    """(``cams``, the ground truth) paired by name; for the frames of a video (``frame_of``: working
+    name -> frame index) frame i of the video is ground-truth camera i, so ``cams`` are renamed to
+    the ground truth's names (names such as ``walk_000012.300.jpg`` would pair by their digits)."""
     if not frame_of:
-        return truth
+        return cams, truth
     from curate.core.cameras import Cameras
-    ref = truth[[frame_of[n] for n in cams.names]]
-    return Cameras(ref.c2w, ref.fx, ref.fy, ref.cx, ref.cy, ref.width, ref.height, names=tuple(cams.names))
+    return Cameras(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height,
+                   names=tuple(truth.names[frame_of[n]] for n in cams.names)), truth
 
 
 def main(argv=None) -> dict:
@@ -86,7 +87,7 @@ def main(argv=None) -> dict:
             if models and truth is not None:
                 best = max(models.values(), key=lambda r: r.num_reg_images())
                 cams = cameras_from_reconstruction(best)[0]
-                e = pose_errors(cams, truth_for(cams, truth, frame_of))
+                e = pose_errors(*truth_for(cams, truth, frame_of))
                 row.update({k: e[k] for k in ("n_matched", "rotation_deg_median", "rotation_deg_max",
                                               "centre_rel_median")})
             out[kind] = row

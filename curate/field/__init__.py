@@ -1,0 +1,1 @@
+"""The CPU grid radiance field: model, training, rendering and metrics."""

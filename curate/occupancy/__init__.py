@@ -1,0 +1,1 @@
+"""The occupancy stage: hold-out split, pool field when needed, occupancy grid and selection nodes."""

@@ -1,0 +1,1 @@
+"""Selection: the paper's energy and its exact greedy, view medoids, baselines, the select stage."""
