@@ -18,7 +18,7 @@ from pathlib import Path
 from curate import __version__
 from curate.core.options import Opt, add_options, apply_options, given
 from curate.select.methods import METHODS
-from curate.sfm.config import CAMERA_MODES, MATCHERS, ON_SPLIT
+from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT
 
 
 class CliError(Exception):
@@ -127,6 +127,7 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--recursive", "sfm.recursive"),
        Opt("--matcher", "sfm.matcher", choices=MATCHERS),
        Opt("--camera-mode", "sfm.camera_mode", choices=CAMERA_MODES),
+       Opt("--mapper", "sfm.mapper", choices=MAPPERS),
        Opt("--drop-blurry", "sfm.drop_blurry"),
        Opt("--keep-duplicates", "sfm.drop_duplicates", const=False, help="keep near-duplicate photos"),
        Opt("--sift-peak-threshold", "sfm.sift_peak_threshold", parse=float),

@@ -37,8 +37,40 @@ def _done(res: StageResult, results: list[StageResult]) -> StageResult:
     return res
 
 
-RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "select", "evaluate", "export")
+RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "select", "evaluate", "export", "parts")
 """Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
+
+
+def split_parts(run_dir: Path) -> list[dict]:
+    """The models of a capture that split (``RUN/sfm`` stats ``parts``: the largest first, then
+    ``sparse/1``, ...) with at least :data:`MIN_PART` photos; [] when it did not split."""
+    from curate.core.stage import read_stage
+    from curate.sfm.config import MIN_PART
+    parts = ((read_stage(Path(run_dir) / "sfm") or {}).get("stats") or {}).get("parts") or []
+    parts = [p for p in parts if p["n_registered"] >= MIN_PART]
+    return parts if len(parts) > 1 else []
+
+
+def part_budget(budget: str, n_part: int, n_all: int) -> str:
+    """A part's share of ``budget``: a percentage stays (it is of each part's pool); a count is
+    shared in proportion to the parts' sizes (``n_part`` of ``n_all``), at least 2."""
+    from curate.core.budget import parse_budget
+    b = parse_budget(budget)
+    return budget if isinstance(b, float) else str(max(2, int(round(b * n_part / max(n_all, 1)))))
+
+
+def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, executor) -> None:
+    """Curate every part but the largest in ``RUN/parts/<k>`` (poses: ``RUN/sfm/sparse/<k>``, photos:
+    the working copies ``RUN/sfm/images``, at SfM's working size), each a run folder of its own."""
+    from dataclasses import replace
+    n_all = sum(p["n_registered"] for p in parts)
+    for p in parts[1:]:
+        k = Path(p["model"]).name
+        sub = run_dir / "parts" / k
+        pcfg = replace(cfg, budget=part_budget(cfg.budget, p["n_registered"], n_all),
+                       sfm=replace(cfg.sfm, on_split="largest"))
+        print(f"part {k}: {p['n_registered']} photos, budget {pcfg.budget} -> {sub}", flush=True)
+        run(pcfg, run_dir / "sfm" / "images", sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
 
 
 def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
@@ -74,6 +106,13 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     save_run_config(cfg, run_dir, photos, poses)
     results: list[StageResult] = []
     last = _done(sfm.run(cfg, run_dir, force, photos=photos, poses=poses), results)
+    parts = split_parts(run_dir) if cfg.sfm.on_split == "each" and until is None else []
+    if parts:  # the largest part takes its share of a count budget; the others follow the export
+        from dataclasses import replace
+        total_budget = cfg.budget
+        cfg = replace(cfg, budget=part_budget(cfg.budget, parts[0]["n_registered"],
+                                              sum(p["n_registered"] for p in parts)))
+        print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {cfg.budget} -> {run_dir}", flush=True)
     steps = [("occupancy", occupancy.run), ("select", select.run)]
     if cfg.run_evaluation:
         steps.append(("evaluate", lambda c, d, f: evaluate.run(c, d, f, executor=executor)))
@@ -84,6 +123,8 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
         last = _done(fn(cfg, run_dir, force), results)
     if until is not None and last.name == until:
         return last.path
+    if parts:
+        _run_parts(replace(cfg, budget=total_budget), run_dir, parts, force, executor)
     out = report.run(cfg, run_dir, str(photos) if photos else None, [r.timing() for r in results],
                      time.perf_counter() - t_start)
     print(out.line(), flush=True)

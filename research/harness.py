@@ -136,19 +136,80 @@ def room_scene(dest: Path) -> Path:
     return d / "transforms.json"
 
 
+WALK_FRAMES = 300
+"""Scenes "walk-...": frames of each hand-held walk (10 a second, 320x240)."""
+WALK_BLUR_EXPOSURE = 0.5
+"""Scene "walk-blur": the shutter is open half of each frame (heavy motion blur when turning)."""
+
+
+def walk_spec(scene: str):
+    """(kind, layout, blur) of a synthetic walk scene ``walk-<kind>[-<layout>]`` (kinds:
+    :data:`curate.simulate.walks.WALK_KINDS` and ``blur``, a loop twice as fast with motion
+    blur; layouts: :data:`curate.simulate.synthetic.LAYOUTS`, default livingroom), or None."""
+    if not scene.startswith("walk-"):
+        return None
+    from curate.simulate.synthetic import LAYOUTS
+    from curate.simulate.walks import WALK_KINDS
+    parts = scene.split("-")[1:]
+    kind, layout = parts[0], (parts[1] if len(parts) > 1 else "livingroom")
+    if kind not in WALK_KINDS + ("blur",) or layout not in LAYOUTS or len(parts) > 2:
+        raise SystemExit(f"unknown walk scene {scene!r}: walk-<{'|'.join(WALK_KINDS)}|blur>[-<{'|'.join(LAYOUTS)}>]")
+    return kind, layout, kind == "blur"
+
+
+def walk_scene(dest: Path, scene: str) -> Path:
+    """Render a synthetic walk scene (:func:`walk_spec`) once into ``dest/<scene>``, as
+    :func:`room_scene` does: the walk's frames (transforms.json) and ``ROOM_OFFPATH``
+    free-space test views off the path (offpath.json). Returns the transforms.json."""
+    d = dest / scene
+    if (d / "transforms.json").is_file() and (d / "offpath.json").is_file():
+        return d / "transforms.json"
+    from PIL import Image
+    from curate.core.transforms_json import write_transforms
+    from curate.simulate.progressive import CameraSpec, ProgressiveConfig, draw_acceptable, scene_oracle
+    from curate.simulate.synthetic import make_scene
+    from curate.simulate.walks import hand_held_walk, motion_blur
+    kind, layout, blur = walk_spec(scene)
+    world = make_scene(layout, seed=0)
+    walk, omega = hand_held_walk(WALK_FRAMES, "loop" if blur else kind, seed=1, width=320, height=240,
+                                 speed=0.7 if blur else 0.35, room=world.interior)
+    lo, hi = world.interior
+    pc = ProgressiveConfig(camera=CameraSpec(320, 240, 60.0))
+    off = draw_acceptable(np.random.default_rng(7), lo + 0.05, hi - 0.05, ROOM_OFFPATH, pc, *scene_oracle(world))
+    (d / "images").mkdir(parents=True, exist_ok=True)
+    for cams, stem, js, om in ((walk, "frame", "transforms.json", omega), (off, "offpath", "offpath.json", None)):
+        rel = [f"images/{stem}_{i:04d}.jpg" for i in range(len(cams))]
+        for i in range(len(cams)):
+            rgb = world.render(cams[i])[0][0]
+            if blur and om is not None:
+                rgb = motion_blur(rgb, om[i], float(cams.fx[i]), WALK_BLUR_EXPOSURE)
+            Image.fromarray(rgb).save(d / rel[i], quality=95)
+        write_transforms(d / js, cams, rel)
+    print(f"rendered {scene}: {len(walk)} walk frames, {len(off)} off-path test views -> {d}")
+    return d / "transforms.json"
+
+
 def offpath_views(scene: str, out: Path, data: Path | None):
     """(cameras, image paths) of the scene's test views off the capture path, or None (real scenes)."""
-    if scene != "room":
+    if scene != "room" and walk_spec(scene) is None:
         return None
     from curate.core.transforms_json import read_transforms
-    return read_transforms((data or out) / "room" / "offpath.json")
+    return read_transforms(synthetic_root(out, data) / scene / "offpath.json")
+
+
+def synthetic_root(out: Path, data: Path | None) -> Path:
+    """Where the synthetic scenes are rendered: ``data`` when packed, else ``out/scenes`` (not
+    ``out/<scene>``: that is the scene's run folder, which must not hold its inputs)."""
+    return data if data is not None else out / "scenes"
 
 
 def scene_poses(scene: str, out: Path, data: Path | None = None) -> Path:
     """A transforms.json for ``scene``: under ``data`` when packed (``--pack``), else written
     under ``out`` with absolute paths to the photos in ``../shared/data``."""
     if scene == "room":
-        return room_scene(data or out)
+        return room_scene(synthetic_root(out, data))
+    if walk_spec(scene) is not None:
+        return walk_scene(synthetic_root(out, data), scene)
     if data is not None:
         p = data / scene / "transforms.json"
         if not p.is_file():
@@ -171,8 +232,8 @@ def pack(scenes: list[str], dest: Path, side: int) -> None:
     from curate.core.transforms_json import write_transforms
     from curate.field.train import load_image
     for scene in scenes:
-        if scene == "room":                       # synthetic: rendered straight into dest
-            room_scene(dest)
+        if scene == "room" or walk_spec(scene) is not None:   # synthetic: rendered straight into dest
+            room_scene(dest) if scene == "room" else walk_scene(dest, scene)
             continue
         cams, files = scene_cameras(scene)
         f = np.minimum(1.0, side / np.maximum(cams.width, cams.height))
@@ -590,8 +651,9 @@ def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", default="office,fox,templering",
-                    help="office, fox, templering, skull (real captures) and room (a synthetic walk, "
-                    "rendered by the harness, with test views off the path too)")
+                    help="office, fox, templering, skull (real captures), room (a synthetic walk, "
+                    "rendered by the harness, with test views off the path too) and walk-<kind>[-<layout>] "
+                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur)")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)

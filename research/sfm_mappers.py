@@ -56,11 +56,46 @@ def truth_for(cams, truth, frame_of: dict):
                    names=tuple(truth.names[frame_of[n]] for n in cams.names)), truth
 
 
+def rematch(db: Path, tmp: Path, overrides: list[str], out: dict) -> Path:
+    """A copy of ``db`` in ``tmp`` matched again by curate's matching step with SfmConfig
+    ``overrides`` (FIELD=VALUE); the matcher and seconds go into ``out``."""
+    import dataclasses
+    import shutil
+
+    import pycolmap
+
+    from curate.sfm.colmap import _match
+    from curate.sfm.config import SfmConfig
+    types = {f.name: f.type for f in dataclasses.fields(SfmConfig)}
+    over = {}
+    for kv in overrides:
+        k, v = kv.split("=", 1)
+        t = str(types[k])
+        over[k] = (v.lower() in ("1", "true")) if t == "bool" else int(v) if t == "int" else \
+            float(v) if t == "float" else v
+    cfg = SfmConfig(**over)
+    new = tmp / "rematched.db"
+    shutil.copy2(db, new)
+    h = pycolmap.Database.open(new)
+    h.clear_matches()
+    h.clear_two_view_geometries()
+    h.close()
+    matcher = out.get("matcher") or "sequential"
+    t = time.perf_counter()
+    _match(cfg, new, matcher)
+    out["rematch"] = {"overrides": over, "matcher": matcher, "match_seconds": round(time.perf_counter() - t, 1)}
+    print(json.dumps(out["rematch"]), flush=True)
+    return new
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
     ap.add_argument("--mappers", default="incremental,global")
+    ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
+                    help="match again first (on a copy of the database), with these SfmConfig overrides, "
+                         "e.g. vocab_tree_descriptors=100000; prints the matching time")
     a = ap.parse_args(argv)
     from curate.sfm.colmap import cameras_from_reconstruction
     from research.align import pose_errors
@@ -75,6 +110,8 @@ def main(argv=None) -> dict:
     frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
     out = {"run": str(a.run), "n_kept": n_kept}
     with tempfile.TemporaryDirectory() as tmp:
+        if a.rematch is not None:
+            db = rematch(db, Path(tmp), a.rematch, out)
         for kind in a.mappers.split(","):
             # each mapper on its own copy of the database (mappers write to it)
             import shutil

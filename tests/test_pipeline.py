@@ -217,3 +217,78 @@ def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     assert res.returncode == 0, res.stderr
     assert (out / "occupancy" / "field.pt").is_file()
     assert "energy" in json.loads((out / "occupancy" / "stage.json").read_text())["field"]
+
+
+def test_part_budget_shares_a_count_and_keeps_a_percentage():
+    from curate.pipeline import part_budget
+    assert part_budget("60", 300, 400) == "45" and part_budget("60", 100, 400) == "15"
+    assert part_budget("4", 10, 400) == "2"          # never fewer than 2
+    assert part_budget("15%", 10, 400) == "15%"      # a percentage is of each part's own pool
+
+
+def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkeypatch):
+    """A capture that split in two (faked: the sample walk's first and second halves as two COLMAP
+    models): `--on-split each` curates the largest in RUN and the other in RUN/parts/1, the budget
+    shared by size; the report lists the part and links its report; the user's photos are untouched."""
+    import hashlib
+    import shutil
+
+    pytest.importorskip("pycolmap")
+    from curate import pipeline
+    from curate.core.stage import read_stage, write_json_atomic
+    from curate.core.transforms_json import read_transforms
+    from curate.sfm import stage as sfm_stage
+    from curate.sfm.colmap import reconstruction_from_cameras
+
+    def sha():
+        return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((SAMPLE / "images").iterdir())}
+
+    before = sha()
+    cams, files = read_transforms(SAMPLE / "transforms.json")
+    real = sfm_stage.run
+
+    def fake_sfm(cfg, run_dir, force=False, photos=None, poses=None):
+        if poses != "SPLIT":
+            return real(cfg, run_dir, force, photos=photos, poses=poses)
+        from curate.core.cameras import Cameras
+        halves = (np.arange(0, 100), np.arange(100, len(cams)))
+        models = tmp_path / "models"
+        for k, idx in enumerate(halves):
+            sub = cams[idx]
+            sub = Cameras(sub.c2w, sub.fx, sub.fy, sub.cx, sub.cy, sub.width, sub.height,
+                          names=tuple(Path(files[i]).name for i in idx))
+            (models / str(k)).mkdir(parents=True)
+            reconstruction_from_cameras(sub).write(models / str(k))
+        res = real(cfg, run_dir, force, photos=SAMPLE / "images", poses=models / "0")
+        d = Path(run_dir) / "sfm"
+        (d / "images").mkdir(exist_ok=True)
+        for i in halves[1]:
+            shutil.copy(files[i], d / "images" / Path(files[i]).name)
+        shutil.copytree(models / "1", d / "sparse" / "1")
+        rec = read_stage(d)
+        rec["stats"].update({"model_sizes": [100, len(cams) - 100], "n_kept": len(cams), "n_registered": 100,
+                             "unregistered": [Path(files[i]).name for i in halves[1]],
+                             "parts": [{"model": "sparse/0", "n_registered": 100},
+                                       {"model": "sparse/1", "n_registered": len(cams) - 100}]})
+        write_json_atomic(d / "stage.json", rec)
+        return res
+
+    monkeypatch.setattr(sfm_stage, "run", fake_sfm)
+    from curate.config import RunConfig
+    from curate.select.select import SelectConfig
+    from curate.sfm.config import SfmConfig
+    cfg = RunConfig(budget="16", run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False),
+                    select=SelectConfig(method="medoids"))
+    out = tmp_path / "run"
+    pipeline.run(cfg, None, out, poses="SPLIT")
+    n1 = len(cams) - 100
+    main_sel = json.loads((out / "select" / "selection.json").read_text())
+    part_sel = json.loads((out / "parts" / "1" / "select" / "selection.json").read_text())
+    assert len(main_sel["chosen"]) == round(16 * 100 / len(cams)) and len(part_sel["chosen"]) == round(16 * n1 / len(cams))
+    assert (out / "parts" / "1" / "export" / "transforms.json").is_file()
+    rep = json.loads((out / "report.json").read_text())
+    assert [p["part"] for p in rep["parts"]] == ["1"] and rep["parts"][0]["n_registered"] == n1
+    html = (out / "report.html").read_text()
+    assert 'href="parts/1/report.html"' in html and "--on-split each" in html
+    assert (out / "parts" / "1" / "report.html").is_file()
+    assert sha() == before

@@ -70,6 +70,72 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
 
+class _Model:
+    def __init__(self, n):
+        self.n = n
+
+    def num_reg_images(self):
+        return self.n
+
+
+@pytest.mark.parametrize("inc, glob, kept, tried", [
+    ([10], [10], "incremental", False),           # one model of every photo: the global mapper never runs
+    ([5, 4], [10], "global", True),               # the capture split: the global mapper kept it whole
+    ([6, 4], [5, 3], "incremental", True),        # the global mapper did worse: the incremental model stays
+    ([], [9], "global", True),                    # the incremental mapper found nothing
+])
+def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path, inc, glob, kept, tried):
+    from curate.sfm import colmap as sfm
+    calls = []
+    monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {i: _Model(n) for i, n in enumerate(inc)})
+    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or
+                        {i: _Model(n) for i, n in enumerate(glob)})
+    (tmp_path / "database.db").write_bytes(b"db")
+    stats: dict = {}
+    models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
+    assert stats["mapper"] == kept and ("glob" in calls) == tried
+    assert sfm._sizes(models) == (glob if kept == "global" else inc)
+    if tried:
+        assert stats["mappers_tried"]["incremental"]["model_sizes"] == inc
+        assert stats["mappers_tried"]["global"]["model_sizes"] == glob
+    assert (tmp_path / "database.db").read_bytes() == b"db"   # the global mapper ran on a copy
+
+
+@pytest.mark.parametrize("mapper, calls_expected", [("incremental", ["inc"]), ("global", ["glob"])])
+def test_a_named_mapper_runs_alone(monkeypatch, tmp_path, mapper, calls_expected):
+    from curate.sfm import colmap as sfm
+    calls = []
+    monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {0: _Model(3)})
+    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or {0: _Model(3)})
+    (tmp_path / "database.db").write_bytes(b"db")
+    stats: dict = {}
+    sfm.map_capture(small_cfg(mapper=mapper), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
+    assert calls == calls_expected and stats["mapper"] == mapper
+
+
+def test_global_mapper_is_seeded(monkeypatch, tmp_path):
+    from curate.sfm import colmap as sfm
+    got: dict = {}
+    monkeypatch.setattr(pycolmap, "global_mapping", lambda *a, **kw: got.update(kw) or {})
+    sfm._map_global(small_cfg(seed=5, min_num_matches=20), tmp_path / "db", tmp_path, tmp_path / "g")
+    o = got["options"]
+    assert o.random_seed == 5 and o.mapper.random_seed == 5 and o.min_num_matches == 20
+
+
+def test_vocabulary_tree_sample_is_bounded_and_even():
+    """The tree trains on a fixed-size sample however large the pool (its time must not grow with it),
+    drawn from every image."""
+    from curate.sfm.colmap import tree_sample
+    rng = np.random.default_rng(0)
+    for n_images in (10, 400, 3000):
+        per = [np.full((300, 4), i, np.float32) for i in range(n_images)]
+        d = tree_sample(iter(per), n_images, 20_000, rng)
+        assert len(d) == min(20_000, n_images * 300)
+        counts = np.bincount(d[:, 0].astype(int), minlength=n_images)
+        assert counts.min() >= 1 and counts.max() <= max(8, 20_000 // n_images)
+    assert tree_sample(iter([]), 0, 1000, rng).shape[0] == 0
+
+
 # ------------------------------------------------------------------ mixed folder: bad files, input untouched, skip
 @pytest.mark.slow
 def test_sfm_on_mixed_folder_and_skip_unchanged(tmp_path):

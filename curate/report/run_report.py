@@ -142,10 +142,17 @@ def _header(run: _Run) -> str:
                                 "transforms.json, images.txt"))
     out = ["<h1>curate: photo selection report</h1>"]
     from curate.sfm.stage import split_warning
-    warns = [w for w in (split_warning(run.dir), ((read_json(run.dir / "export" / "stage.json") or {}).get("warning")))
-             if w]
+    each = ((r.get("config") or {}).get("sfm") or {}).get("on_split") == "each"
+    warns = [w for w in (split_warning(run.dir, each=each),
+                         ((read_json(run.dir / "export" / "stage.json") or {}).get("warning"))) if w]
     for w in warns:   # what the user must know before reading the figures: at the top, in a box
         out.append(f'<div class="warnbox"><b>Warning:</b> {esc(w)}.</div>')
+    if r.get("parts"):  # --on-split each: the other parts, each curated in its own run folder
+        rows = "".join(f'<li>part {esc(p["part"])}: {esc(p["n_registered"])} photos, {esc(p["n_chosen"])} chosen: '
+                       f'<a href="{esc(p["report"])}">report</a>, export in <code>{esc(p["export"])}</code></li>'
+                       for p in r["parts"])
+        out.append(f'<div class="warnbox"><b>The other parts of the capture</b> (this report is part 0, the '
+                   f'largest):<ul>{rows}</ul></div>')
     out.append('<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in items) + "</dl>")
     p = run.paired.get("selection-random")
     if p and "selection" in run.methods and "random" in run.methods:

@@ -66,6 +66,15 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
                    **(read_stage(run_dir / "sfm") or {}).get("stats", {})},
            "selection": {k: v for k, v in sel.items() if k not in ("holdout", "pool")},
            "config": config_dict(cfg)}
+    parts = []
+    for f in sorted((run_dir / "parts").glob("*/report.json"), key=lambda f: int(f.parent.name)
+                    if f.parent.name.isdigit() else 0):  # --on-split each: the other parts' own runs
+        pr = json.loads(f.read_text())
+        parts.append({"part": f.parent.name, "n_registered": pr.get("n_registered"),
+                      "n_chosen": len((pr.get("selection") or {}).get("chosen") or []),
+                      "report": f"parts/{f.parent.name}/report.html", "export": f"parts/{f.parent.name}/export"})
+    if parts:
+        rep["parts"] = parts
     summ = run_dir / "evaluate" / "summary.json"
     if cfg.run_evaluation and summ.is_file():
         rep.update(json.loads(summ.read_text()))

@@ -9,8 +9,9 @@ config) -> SIFT extraction (one shared camera when every photo comes from the sa
 camera model at the same size, else one camera per photo) -> matching (exhaustive for
 small pools, sequential for ordered frames, spatial with GPS; loop detection with a
 vocabulary tree trained on the capture itself, never a download, so it works offline) ->
-incremental mapping (largest model kept; initial pair with >= ``init_min_num_inliers``
-verified inliers) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
+mapping (``map_capture``: incremental, initial pair with >= ``init_min_num_inliers``
+verified inliers; when its largest model leaves more than 5% of the photos out, COLMAP's
+global mapper on the same matches, and the larger model kept) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
 mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
 and config give the same matches and, up to multi-threaded bundle adjustment, the same
 model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
@@ -23,6 +24,8 @@ Run-folder contract, ``RUN/sfm/``:
 * ``images/``: working copies (SfM only), longer side <= ``max_image_size``.
 * ``sparse/0/``: COLMAP binary model of the registered images, COLMAP's world frame
   (for an import: the imported cameras, points when the source had them).
+  ``sparse/1/``, ...: the other models of a capture that split, largest first, each in its
+  own frame (``stats.parts`` lists them; ``--on-split each`` curates them too).
 * ``cameras.json``: the same cameras as ``curate.core.cameras.Cameras`` (OpenCV c2w, same
   world frame), sorted by name; names are the working-copy names (SfM) or the image
   names of the imported model / the ``file_path`` of the imported transforms.json.
@@ -187,25 +190,45 @@ def _extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: b
                               else pycolmap.Device.auto)
 
 
-def _build_vocab_tree(db: Path, path: Path, seed: int, per_image: int = 1000) -> Path:
+def tree_sample(per_image, n_images: int, max_descriptors: int, rng) -> np.ndarray:
+    """[<= max_descriptors, D] float32: an even sample of the descriptors of ``n_images`` images
+    (``per_image`` yields each image's [n_i, D] array): at most ``max_descriptors // n_images``
+    (8 at least) from each, then at most ``max_descriptors`` in all."""
+    cap = max(8, max_descriptors // max(n_images, 1))
+    parts = []
+    for d in per_image:
+        if len(d) > cap:
+            d = d[rng.choice(len(d), cap, replace=False)]
+        parts.append(d)
+    desc = np.concatenate(parts) if parts else np.zeros((0, 128), np.float32)
+    if len(desc) > max_descriptors:
+        desc = desc[rng.choice(len(desc), max_descriptors, replace=False)]
+    return desc
+
+
+def _build_vocab_tree(db: Path, path: Path, seed: int, max_descriptors: int = 100_000) -> Path:
     """A vocabulary tree (COLMAP ``VisualIndex``) trained on this capture's own SIFT descriptors.
 
     COLMAP's published trees are downloads; for loop detection within one capture a small
-    tree trained on up to ``per_image`` descriptors of every image does as well and keeps
-    the stage offline. Visual words: one per ~40 descriptors, between 256 and 65536.
+    tree trained on a sample of the capture's own descriptors does as well and keeps the
+    stage offline. The sample is at most ``max_descriptors``, drawn evenly from every image,
+    and the tree has one visual word per ~40 of them (256 to 2048 for the default), so
+    training takes the same time for any pool size; indexing and querying grow linearly
+    with the pool. (Training on every image's 1,000 descriptors, with words growing with
+    the pool, took 158 s of the office's 210 s of matching, and grows with its square.)
     """
     import pycolmap
     rng = np.random.default_rng(seed)
     dbh = pycolmap.Database.open(db)
-    parts = []
-    for im in dbh.read_all_images():
-        d = dbh.read_descriptors(im.image_id).to_float()
-        d = np.asarray(getattr(d, "data", d), np.float32)
-        if len(d) > per_image:
-            d = d[rng.choice(len(d), per_image, replace=False)]
-        parts.append(d)
+    images = dbh.read_all_images()
+
+    def descriptors():
+        for im in images:
+            d = dbh.read_descriptors(im.image_id).to_float()
+            yield np.asarray(getattr(d, "data", d), np.float32)
+
+    desc = tree_sample(descriptors(), len(images), max_descriptors, rng)
     dbh.close()
-    desc = np.concatenate(parts)
     words = int(np.clip(2 ** np.floor(np.log2(max(len(desc) // 40, 1))), 256, 65536))
     index = pycolmap.VisualIndex.create(128, 64)
     bo = pycolmap.VisualIndex.BuildOptions()
@@ -242,7 +265,8 @@ def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
         po.loop_detection = False
         if cfg.loop_detection:  # with a vocabulary tree built from this capture's own features: offline
             po.loop_detection = True
-            po.vocab_tree_path = str(_build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed))
+            po.vocab_tree_path = str(_build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed,
+                                                         cfg.vocab_tree_descriptors))
             po.loop_detection_period = cfg.loop_detection_period
             po.loop_detection_num_images = cfg.loop_detection_num_images
         pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
@@ -283,6 +307,62 @@ def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progr
     finally:
         bar.close()
     return models
+
+
+def _map_global(cfg: SfmConfig, db: Path, images: Path, out: Path):
+    """{id: Reconstruction} of COLMAP's global mapper (rotation averaging, then global positioning)
+    on the matches of ``db`` (written to: pass a copy to keep the original)."""
+    import pycolmap
+    opts = pycolmap.GlobalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.seed
+    opts.min_num_matches = cfg.min_num_matches
+    opts.mapper.random_seed = cfg.seed
+    out.mkdir(parents=True, exist_ok=True)
+    return pycolmap.global_mapping(db, images, out, options=opts)
+
+
+def _sizes(models: dict) -> list[int]:
+    return sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+
+
+def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
+    """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
+    kept) and, when both ran, ``mappers_tried`` ({mapper: model sizes, seconds}).
+
+    ``auto`` runs the incremental mapper and, when its largest model holds less than
+    ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
+    were left out), the global mapper on a copy of the same matches; the mapper whose largest
+    model registers more photos is kept (the incremental one on a tie).
+    """
+    tried: dict = {}
+    work.mkdir(parents=True, exist_ok=True)
+    if cfg.mapper != "global":
+        t = time.perf_counter()
+        inc = _map(cfg, db, images, work / "incremental", n_images, cfg.progress)
+        tried["incremental"] = {"model_sizes": _sizes(inc), "seconds": round(time.perf_counter() - t, 2)}
+        largest = tried["incremental"]["model_sizes"][:1] or [0]
+        if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
+            stats["mapper"] = "incremental"
+            return inc
+        logger.warning("sfm: the incremental mapper kept %d of %d photos in its largest model (models %s); "
+                       "trying the global mapper on the same matches", largest[0], n_images,
+                       tried["incremental"]["model_sizes"])
+    t = time.perf_counter()
+    gdb = work / "global.db"
+    shutil.copy2(db, gdb)
+    glob = _map_global(cfg, gdb, images, work / "global")
+    tried["global"] = {"model_sizes": _sizes(glob), "seconds": round(time.perf_counter() - t, 2)}
+    if cfg.mapper == "global":
+        stats["mapper"] = "global"
+        return glob
+    stats["mappers_tried"] = tried
+    g, i = (tried[k]["model_sizes"][:1] or [0] for k in ("global", "incremental"))
+    keep = "global" if g[0] > i[0] else "incremental"
+    logger.warning("sfm: the global mapper kept %d photos in its largest model; keeping the %s mapper's", g[0],
+                   keep)
+    stats["mapper"] = keep
+    return glob if keep == "global" else inc
 
 
 def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
@@ -352,15 +432,22 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],
                     len(inliers), timings["match"])
         t = time.perf_counter()
-        models = _map(cfg, db, images, out / "mapper", len(names), cfg.progress)
+        models = map_capture(cfg, db, images, out / "mapper", len(names), stats)
         timings["map"] = round(time.perf_counter() - t, 2)
     if not models:
         raise RuntimeError(f"sfm: COLMAP registered no images (see {out / 'colmap.log'})")
     best = max(models.values(), key=lambda r: r.num_reg_images())
-    stats["model_sizes"] = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+    stats["model_sizes"] = _sizes(models)
     sparse = out / "sparse" / "0"
     sparse.mkdir(parents=True)
     best.write(sparse)
+    others = sorted((r for r in models.values() if r is not best and r.num_reg_images() >= 2),
+                    key=lambda r: -r.num_reg_images())
+    for k, r in enumerate(others, 1):  # the other parts of a split capture, for --on-split each
+        (out / "sparse" / str(k)).mkdir()
+        r.write(out / "sparse" / str(k))
+    stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
+                      for k, r in enumerate([best] + others)]
     shutil.rmtree(out / "mapper", ignore_errors=True)
     stats["mean_reprojection_error_px"] = float(best.compute_mean_reprojection_error())
     stats["mean_track_length"] = float(best.compute_mean_track_length())

@@ -10,8 +10,12 @@ MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
 ``sequential`` finds loops with a tree trained on the capture itself (``loop_detection``)."""
 CAMERA_MODES = ("auto", "single", "per_image")
 """``SfmConfig.camera_mode`` choices."""
-ON_SPLIT = ("largest", "stop")
+ON_SPLIT = ("largest", "each", "stop")
 """``SfmConfig.on_split`` choices."""
+MAPPERS = ("auto", "incremental", "global")
+"""``SfmConfig.mapper`` choices."""
+MIN_PART = 10
+"""``on_split = 'each'``: the fewest registered photos a part needs to be curated on its own."""
 
 
 VIDEO_EXTS = {".mp4", ".mov", ".m4v", ".mkv", ".avi", ".webm"}
@@ -69,9 +73,15 @@ class SfmConfig:
     #                                   (office: without it the walk splits into 6 models at fast turns)
     loop_detection_period: int = 10   # sequential loop detection: query every N-th frame
     loop_detection_num_images: int = 30  # ... against its N most similar frames
+    vocab_tree_descriptors: int = 100_000  # loop detection's vocabulary tree: trained on at most this many of the
+    #                                   capture's descriptors (one word per ~40): its training time stays fixed
     spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
     guided_matching: bool = False     # COLMAP guided matching (more matches, slower)
     # --- mapping
+    mapper: str = "auto"              # 'incremental' (COLMAP), 'global' (COLMAP's global mapper, formerly GLOMAP),
+    #                                   or 'auto': incremental, then global on the same matches when the largest
+    #                                   model holds less than min_registered_fraction of the photos; the larger kept
+    min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     min_num_matches: int = 15         # minimum verified matches for an image pair to count
     init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
     #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar
@@ -83,16 +93,23 @@ class SfmConfig:
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
     on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
-    #                                   'largest' curates the largest part with a loud warning; 'stop' stops
+    #                                   'largest' curates the largest part with a loud warning; 'each' also curates
+    #                                   every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
+    #                                   size; each part is its own scene, in its own frame); 'stop' stops
     normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
     # --- execution (not in the stage key)
     num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
     progress: bool = True             # tqdm bars on the terminal
 
     def __post_init__(self) -> None:
-        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT}
+        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT,
+                   "mapper": MAPPERS}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:
                 raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")
         if self.max_image_size < 64:
             raise ValueError("SfmConfig.max_image_size must be >= 64")
+        if not (0 <= self.min_registered_fraction <= 1):
+            raise ValueError("SfmConfig.min_registered_fraction must be in [0, 1]")
+        if self.vocab_tree_descriptors < 256 * 40:
+            raise ValueError("SfmConfig.vocab_tree_descriptors must be >= 10240 (256 visual words)")

@@ -46,11 +46,21 @@ def name_ranges(names: list[str], limit: int = 6) -> str:
     return ", ".join(parts[:limit]) + (f" and {len(parts) - limit} more" if len(parts) > limit else "")
 
 
-def split_warning(run_dir: Path) -> str | None:
+def split_warning(run_dir: Path, each: bool = False) -> str | None:
     """A warning when SfM left kept photos out of the model curate uses (the capture split, or
-    photos that did not register): the models' sizes and which photos are lost; None when it kept all."""
+    photos that did not register): the models' sizes and which photos are lost; None when it kept all.
+    ``each`` (``--on-split each``): the other parts of >= 10 photos are curated in ``RUN/parts``."""
     from curate.core.stage import read_stage
     st = (read_stage(Path(run_dir) / "sfm") or {}).get("stats", {})
+    if each and len(sizes := st.get("model_sizes") or []) > 1:
+        from curate.sfm.config import MIN_PART
+        own = [n for n in sizes[1:] if n >= MIN_PART]
+        if own:
+            return (f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos), each in "
+                    f"its own frame: the largest is curated here and {len(own)} more in {Path(run_dir) / 'parts'} "
+                    f"(--on-split each), each with its own report and export"
+                    + (f"; {len(sizes) - 1 - len(own)} models under {MIN_PART} photos are left out"
+                       if len(own) < len(sizes) - 1 else ""))
     lost = st.get("unregistered") or []
     if not lost:
         return None
@@ -81,9 +91,10 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
         run_sfm(cfg.sfm, photos, run_dir, force=force)
     ran = _record_stamp(d) != before
     n = len(json.loads((d / "cameras.json").read_text())["cameras"])
-    warn = split_warning(run_dir)
+    warn = split_warning(run_dir, each=cfg.sfm.on_split == "each")
     if warn is not None:
         if cfg.sfm.on_split == "stop":
-            raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part)")
+            raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part, "
+                             "--on-split each curates every part)")
         log.warning("sfm: %s", warn)
     return StageResult("sfm", d, ran, time.perf_counter() - t0, f"{n} cameras registered", warning=warn)
