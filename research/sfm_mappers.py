@@ -22,7 +22,8 @@ from pathlib import Path
 
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
-    """{model id: Reconstruction} of ``kind`` ('incremental' or 'global') on the matches of ``db``, and its seconds."""
+    """{model id: Reconstruction} of ``kind`` ('incremental', 'global' or 'auto': curate's
+    :func:`curate.sfm.colmap.map_capture`) on the matches of ``db``, and its seconds."""
     import pycolmap
     pycolmap.set_random_seed(seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -37,6 +38,13 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
         opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
         opts.ba_refine_principal_point = False
         models = pycolmap.incremental_mapping(db, images, out, options=opts)
+    elif kind == "auto":  # curate's own choice (SfmConfig.mapper = 'auto'), what `curate sfm` keeps
+        from curate.sfm.colmap import map_capture
+        from curate.sfm.config import SfmConfig
+        n = len(pycolmap.Database.open(db).read_all_images())
+        stats: dict = {}
+        models = map_capture(SfmConfig(progress=False, seed=seed), db, images, out, n, stats)
+        print(json.dumps({"auto": {k: stats[k] for k in ("mapper", "mappers_tried") if k in stats}}), flush=True)
     elif kind == "global":
         opts = pycolmap.GlobalPipelineOptions()
         models = pycolmap.global_mapping(db, images, out, options=opts)
@@ -92,7 +100,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
-    ap.add_argument("--mappers", default="incremental,global")
+    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto")
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")
@@ -112,6 +120,7 @@ def main(argv=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         if a.rematch is not None:
             db = rematch(db, Path(tmp), a.rematch, out)
+        kept: dict = {}
         for kind in a.mappers.split(","):
             # each mapper on its own copy of the database (mappers write to it)
             import shutil
@@ -128,7 +137,12 @@ def main(argv=None) -> dict:
                 row.update({k: e[k] for k in ("n_matched", "rotation_deg_median", "rotation_deg_max",
                                               "centre_rel_median")})
             out[kind] = row
+            kept[kind] = models
             print(json.dumps({kind: row}), flush=True)
+        if "global" in kept and "incremental" in kept:  # what curate's --mapper auto checks before it
+            from curate.sfm.colmap import part_agreement  # prefers the global model
+            out["global"]["part_disagreement_deg"] = [d for d, _ in part_agreement(kept["global"],
+                                                                                    kept["incremental"])]
     print(json.dumps(out))
     return out
 

@@ -159,3 +159,24 @@ def test_pose_round_trip_property(v):
     c2w = c2w_from_colmap(np.array([v[:4]]), np.array([v[4:]]))
     q, t = colmap_from_c2w(c2w)
     assert np.allclose(c2w_from_colmap(q, t), c2w, atol=1e-9 * max(1.0, np.abs(v[4:]).max()))
+
+
+def test_rotation_disagreement_ignores_the_frame_and_finds_the_bent_camera():
+    from scipy.spatial.transform import Rotation
+
+    from curate.core.cameras import rotation_disagreement
+    rng = np.random.default_rng(0)
+    Rb = Rotation.random(40, random_state=1).as_matrix()
+    Q = Rotation.random(random_state=2).as_matrix()
+    Ra = Q @ Rb                                              # the same cameras in another world frame
+    assert np.allclose(rotation_disagreement(Ra, Rb), 0, atol=1e-5)
+    bent = Ra.copy()
+    bent[7] = Rotation.from_rotvec([0, 0, np.radians(10)]).as_matrix() @ bent[7]
+    d = rotation_disagreement(bent, Rb)
+    assert 9.0 < d[7] < 10.5 and np.median(d) < 0.5
+    half = Ra.copy()                                         # half the cameras turned 14 deg: a bent model
+    half[20:] = Rotation.from_rotvec([np.radians(14), 0, 0]).as_matrix() @ half[20:]
+    assert np.median(rotation_disagreement(half, Rb)) > 5
+    assert rotation_disagreement(np.zeros((0, 3, 3)), np.zeros((0, 3, 3))).shape == (0,)
+    noisy = Rotation.from_rotvec(rng.normal(0, 1e-3, (40, 3))).as_matrix() @ Ra
+    assert np.isfinite(rotation_disagreement(noisy, Rb)).all()

@@ -70,12 +70,23 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
 
+class _Image:
+    def __init__(self, name, frame_id):
+        self.name, self.frame_id, self.has_pose = name, frame_id, True
+
+
 class _Model:
-    def __init__(self, n):
-        self.n = n
+    """The little of a pycolmap.Reconstruction that map_capture uses."""
+
+    def __init__(self, n, names=None):
+        names = names or [f"x{i}" for i in range(n)]
+        self.images = {k: _Image(nm, k) for k, nm in enumerate(names)}
 
     def num_reg_images(self):
-        return self.n
+        return sum(im.has_pose for im in self.images.values())
+
+    def deregister_frame(self, frame_id):
+        self.images[frame_id].has_pose = False
 
 
 @pytest.mark.parametrize("inc, glob, kept, tried", [
@@ -87,6 +98,7 @@ class _Model:
 def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path, inc, glob, kept, tried):
     from curate.sfm import colmap as sfm
     calls = []
+    monkeypatch.setattr(sfm, "part_agreement", lambda g, p: [(1.0, set())] * len(p))   # the global model agrees
     monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {i: _Model(n) for i, n in enumerate(inc)})
     monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or
                         {i: _Model(n) for i, n in enumerate(glob)})
@@ -94,11 +106,33 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
     stats: dict = {}
     models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
     assert stats["mapper"] == kept and ("glob" in calls) == tried
-    assert sfm._sizes(models) == (glob if kept == "global" else inc)
+    assert sfm._sizes(models) == (glob[:1] if kept == "global" else inc)
     if tried:
         assert stats["mappers_tried"]["incremental"]["model_sizes"] == inc
         assert stats["mappers_tried"]["global"]["model_sizes"] == glob
     assert (tmp_path / "database.db").read_bytes() == b"db"   # the global mapper ran on a copy
+
+
+@pytest.mark.parametrize("dis, kept, n", [
+    ([1.2, 2.9, 0.5], "global", 10),        # agrees with every part: kept whole
+    ([1.2, 2.9, 14.0], "global", 8),        # bent the smallest part: that part leaves, the rest is one model
+    ([14.0, 1.0, 1.0], "incremental", 5),   # bent the largest: what is left is no larger than it
+    ([1.0, None, 1.0], "global", 7),        # a part too small to check: left out too
+])
+def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_path, dis, kept, n):
+    """office.mp4 without loop detection: the global mapper registered all 371 frames but turned two
+    incremental parts (24 and 13 frames) by 16 and 21 deg; each part alone was right. A bent whole
+    is no better than sound parts: only the parts it agrees with stay in it."""
+    from curate.sfm import colmap as sfm
+    a, b, c = [f"a{i}" for i in range(5)], [f"b{i}" for i in range(3)], [f"c{i}" for i in range(2)]
+    monkeypatch.setattr(sfm, "_map", lambda *a_, **k: {0: _Model(5, a), 1: _Model(3, b), 2: _Model(2, c)})
+    monkeypatch.setattr(sfm, "_map_global", lambda *a_, **k: {0: _Model(10, a + b + c)})
+    monkeypatch.setattr(sfm, "part_agreement", lambda g, p: list(zip(dis, (set(a), set(b), set(c)))))
+    (tmp_path / "database.db").write_bytes(b"db")
+    stats: dict = {}
+    models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
+    assert stats["mapper"] == kept and stats["mappers_tried"]["global"]["part_disagreement_deg"] == dis
+    assert sfm._sizes(models) == ([n] if kept == "global" else [5, 3, 2])
 
 
 @pytest.mark.parametrize("mapper, calls_expected", [("incremental", ["inc"]), ("global", ["glob"])])
@@ -294,3 +328,29 @@ def test_a_split_capture_is_said_loudly_and_can_stop(tmp_path):
     with pytest.raises(ValueError, match="stopped: --on-split stop"):
         stage.run(dc_replace(cfg, sfm=dc_replace(cfg.sfm, on_split="stop")), tmp_path, photos=sample,
                   poses=sample / "transforms.json")
+
+
+def test_part_agreement_on_reconstructions():
+    """Parts in their own frames (moved, turned, scaled) agree with a whole model of the same cameras;
+    a part bent against it (its cameras turned by 0, 3, ..., 33 deg in turn) does not; a part with
+    too few common images is None."""
+    from scipy.spatial.transform import Rotation
+
+    from curate.sfm.colmap import part_agreement, reconstruction_from_cameras
+    ang = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(30, 1.0)], 1)
+    whole = Cameras(look_at(c, np.zeros((30, 3))), 500, 500, 320, 240, 640, 480,
+                    names=tuple(f"f{i:02d}.jpg" for i in range(30)))
+    R = Rotation.from_rotvec([0.3, -0.2, 1.0]).as_matrix()
+    sound = whole[np.arange(0, 15)].transformed(2.0, R, [1, 2, 3])
+    bent = whole[np.arange(15, 27)]
+    turn = Rotation.from_rotvec([[0, np.radians(3 * j), 0] for j in range(len(bent))]).as_matrix()
+    c2w = bent.c2w.copy()
+    c2w[:, :3, :3] = turn @ c2w[:, :3, :3]
+    bent = Cameras(c2w, 500, 500, 320, 240, 640, 480, names=bent.names)
+    tiny = whole[np.arange(27, 30)]
+    glob = {0: reconstruction_from_cameras(whole)}
+    parts = {k: reconstruction_from_cameras(p) for k, p in enumerate((sound, bent, tiny))}
+    (d0, n0), (d1, n1), (d2, _) = part_agreement(glob, parts)
+    assert d0 < 1e-3 and d1 > 5 and d2 is None
+    assert n0 == set(sound.names) and n1 == set(bent.names)

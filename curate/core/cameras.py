@@ -360,3 +360,21 @@ def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str) -> None
             x = float(np.asarray(v, np.float64).reshape(-1)[i] if np.ndim(v) else v)
             if not np.isfinite(x) or (k in ("fx", "fy") and x <= 0) or (k in ("width", "height") and x < 1):
                 raise ValueError(f"{what}: {k} = {x} is not a usable value")
+
+
+def rotation_disagreement(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """[n] degrees: how far two reconstructions of the same n cameras disagree on each camera's
+    orientation, once one rotation brings frame b onto frame a.
+
+    Ra, Rb: [n, 3, 3] camera-to-world rotations of the same cameras in two world frames (any
+    similarity apart: scale and translation do not enter). The aligning rotation Q (Ra_i ~ Q Rb_i)
+    is the least-squares one, the projection of sum_i Ra_i Rb_i^T onto SO(3). 0 for n = 0.
+    """
+    Ra, Rb = np.asarray(Ra, np.float64), np.asarray(Rb, np.float64)
+    if len(Ra) == 0:
+        return np.zeros(0)
+    U, _, Vt = np.linalg.svd((Ra @ np.transpose(Rb, (0, 2, 1))).sum(0))
+    Q = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    E = np.transpose(Ra, (0, 2, 1)) @ Q @ Rb                   # identity where they agree
+    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    return np.degrees(np.arccos(cos))

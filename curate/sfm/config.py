@@ -82,6 +82,8 @@ class SfmConfig:
     #                                   or 'auto': incremental, then global on the same matches when the largest
     #                                   model holds less than min_registered_fraction of the photos; the larger kept
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
+    max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
+    #                                   agrees with each (median orientation difference) within this many degrees
     min_num_matches: int = 15         # minimum verified matches for an image pair to count
     init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
     #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar
@@ -109,6 +111,8 @@ class SfmConfig:
                 raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")
         if self.max_image_size < 64:
             raise ValueError("SfmConfig.max_image_size must be >= 64")
+        if not self.max_part_disagreement_deg > 0:
+            raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1):
             raise ValueError("SfmConfig.min_registered_fraction must be in [0, 1]")
         if self.vocab_tree_descriptors < 256 * 40:

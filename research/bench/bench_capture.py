@@ -135,26 +135,22 @@ def measure(video: Path, run: Path, budget_fraction: float, truth=None, force: b
     st = json.loads((run / "sfm" / "stage.json").read_text())
     stats = st["stats"]
     recs = json.loads((run / "sfm" / "images.json").read_text()).get("photos", [])
-    decoded = sum(r.get("extra", {}).get("decoded", 0) for r in recs if r.get("extra", {}).get("video")) or None
     n_kept = stats.get("n_kept")
     rec.update({"n_kept": n_kept, "n_registered": stats.get("n_registered"),
                 "registered_fraction": stats.get("registered_fraction"), "model_sizes": stats.get("model_sizes"),
                 "sfm_timings": st.get("timings"), "sfm_seconds": st.get("seconds")})
-    vids = stats.get("videos") or {}
-    if vids:
-        rec["frames_decoded"] = sum(v.get("decoded", 0) for v in vids.values())
-        rec["frames_candidates"] = sum(v.get("candidates", 0) for v in vids.values())
-    elif decoded:
-        rec["frames_decoded"] = decoded
+    vids = stats.get("videos") or []
+    rec["frames_decoded"] = sum(v.get("decoded", 0) for v in vids) or None
+    rec["frames_candidates"] = sum(v.get("candidates", 0) for v in vids) or None
     budget = max(2, int(round(budget_fraction * (stats.get("n_registered") or 0))))
     rec["budget"] = budget
     rec["after_sfm_process"] = _timed(cur + ["run", str(video), "--out", str(run), "--budget", str(budget),
                                              "--no-evaluate"])
     rec["after_sfm_stages"] = {}
-    for stage in ("occupancy", "select", "export", "report"):
-        f = run / stage / "stage.json"
-        if f.is_file():
-            rec["after_sfm_stages"][stage] = json.loads(f.read_text()).get("seconds")
+    rep = json.loads((run / "report.json").read_text()) if (run / "report.json").is_file() else {}
+    for t in rep.get("stages") or []:       # this invocation's stages (sfm reused), as report.json lists them
+        if t.get("name") != "sfm":
+            rec["after_sfm_stages"][t["name"]] = t.get("seconds")
     if truth is not None:
         frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
         cams = load_sfm(run).cameras
