@@ -104,7 +104,7 @@ def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monk
     from curate.core.transforms_json import read_transforms
     monkeypatch.setattr(harness, "ROOM_WALK", (12, 6))
     monkeypatch.setattr(harness, "ROOM_OFFPATH", 5)
-    tj = harness.room_scene(tmp_path)
+    tj = harness.scene_poses("room", tmp_path)      # rendered where offpath_views looks
     walk, walk_paths = read_transforms(tj)
     off, off_paths = harness.offpath_views("room", tmp_path, None)
     assert len(walk) == 18 and len(off) == 5
@@ -112,7 +112,7 @@ def test_room_scene_has_a_walk_and_free_space_test_views(harness, tmp_path, monk
     occupied, min_depth = scene_oracle(make_scene("livingroom", seed=0))
     assert not np.any(occupied(off.centres)) and np.all(min_depth(off) >= 0.3)
     stamp = tj.stat().st_mtime_ns
-    assert harness.room_scene(tmp_path) == tj and tj.stat().st_mtime_ns == stamp    # not rendered again
+    assert harness.scene_poses("room", tmp_path) == tj and tj.stat().st_mtime_ns == stamp    # not rendered again
     assert harness.offpath_views("fox", tmp_path, None) is None
 
 
