@@ -25,6 +25,10 @@ plus any ``--extra`` method of :data:`curate.select.methods.METHODS`, the varian
 
 Hold-out folds (``--holdout-offsets``): fold o holds out images o, o + every, ...; with
 several folds, a ``<scene>-folds`` table pools their held-out views (:func:`report_folds`).
+``--holdout-blocks N:L:G`` holds out N contiguous blocks of L frames instead, with G frames
+on each side left out of the pool (:func:`holdout_blocks`): a held-out view's nearest pool
+frame is then at least G + 1 frames away, as when a user walks back through a room at
+another time. Its unit folders have the same names: give it its own ``--out``.
 
 Cheap proxies (seconds, no training) for every method: from each held-out view to the
 chosen cameras, the nearest centre distance (``pos``, ``pos90``: mean, 90th percentile),
@@ -195,6 +199,32 @@ def offpath_views(scene: str, out: Path, data: Path | None):
         return None
     from curate.core.transforms_json import read_transforms
     return read_transforms(synthetic_root(out, data) / scene / "offpath.json")
+
+
+def holdout_blocks(n: int, blocks: int, length: int, gap: int, fold: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(pool, held_out) indices of ``n`` frames in capture order: ``blocks`` contiguous blocks of
+    ``length`` frames held out, one in each of ``blocks`` equal stretches of the capture, and
+    ``gap`` frames on each side of a block in neither (not trained on, not scored). Fold o
+    shifts every block by o * length frames within its stretch (fold 0: ``gap`` frames after
+    the stretch's start), so the folds hold out different frames; a fold that does not fit in
+    the stretch is refused."""
+    if blocks < 1 or length < 1 or gap < 0 or fold < 0:
+        raise ValueError(f"hold-out blocks {blocks}:{length}:{gap} fold {fold}: need N >= 1, L >= 1, G >= 0, fold >= 0")
+    stretch = n / blocks
+    folds = int((stretch - 2 * gap) // length)
+    if fold >= folds:
+        raise ValueError(f"hold-out blocks {blocks}:{length}:{gap}: {n} frames give {folds} fold(s) "
+                         f"(0..{folds - 1}), not fold {fold}")
+    hold, drop = [], []
+    for k in range(blocks):
+        s = int(np.floor(k * stretch)) + gap + fold * length
+        hold += range(s, s + length)
+        drop += list(range(s - gap, s)) + list(range(s + length, s + length + gap))
+    held = np.asarray(hold, int)
+    out = np.zeros(n, bool)
+    out[held] = True
+    out[np.asarray(drop, int)] = True
+    return np.flatnonzero(~out), held
 
 
 def synthetic_root(out: Path, data: Path | None) -> Path:
@@ -523,7 +553,9 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     from curate.field.train import default_box
     from curate.select.visibility import build_pair_index
     args, ev, methods = h.args, h.ev, h.methods
-    pool, hold = holdout_split(len(sfm.cameras), ev.holdout_every, fold)
+    blocks = parse_blocks(args.holdout_blocks)
+    pool, hold = (holdout_blocks(len(sfm.cameras), *blocks, fold) if blocks
+                  else holdout_split(len(sfm.cameras), ev.holdout_every, fold))
     pool, hold = pool.tolist(), hold.tolist()
     suffix, name = (f"_o{fold}", f"{scene}@{fold}") if fold else ("", scene)
     pc, hc = sfm.cameras[pool], sfm.cameras[hold]
@@ -591,7 +623,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
                              "did a method's default change? Use another --out or a variant name "
                              "(e.g. --extra medoids_plain), or pass --overwrite to retrain them in place.")
         # the occupancy stage's field was trained on fold 0's pool: the 'all' ceiling of fold 0 only
-        fp = {"all": str(run / "occupancy" / "field.pt")}
+        # (not of a block hold-out: it saw those frames)
+        fp = {} if blocks else {"all": str(run / "occupancy" / "field.pt")}
         results: dict[str, dict] = {}
         for cfg_t, us, keys in plan:
             results.update(run_units(run, us, keys, cfg_t, cams, all_paths, tests, box, fp, progress=False))
@@ -646,6 +679,17 @@ def report_folds(h: Bench, scene: str, folds: list) -> None:
                     h.rows, h.paired, {})
 
 
+def parse_blocks(spec: str) -> tuple[int, int, int] | None:
+    """``--holdout-blocks N:L:G`` -> (N, L, G); '' -> None."""
+    if not spec:
+        return None
+    try:
+        n, length, gap = (int(x) for x in spec.split(":"))
+    except ValueError:
+        raise SystemExit(f"--holdout-blocks {spec!r}: expected N:L:G, e.g. 6:4:3") from None
+    return n, length, gap
+
+
 # ------------------------------------------------------------------ the harness
 def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
@@ -678,6 +722,9 @@ def main(argv=None) -> int:
     ap.add_argument("--holdout-offsets", default="0", help="hold-out folds, comma list ('all': 0..every-1): "
                     "fold o holds out images o, o + every, ... and selects from the rest; with more than one, "
                     "a pooled table (<scene>-folds) pairs the methods over every fold's held-out views")
+    ap.add_argument("--holdout-blocks", default="", metavar="N:L:G", help="hold out N contiguous blocks of L "
+                    "frames (one per N-th of the capture) with G frames each side left out of the pool, "
+                    "instead of every n-th frame; --holdout-offsets shift the blocks by L frames; use its own --out")
     ap.add_argument("--candidate", default="default", help="the method compared (paired, per view) with the others")
     ap.add_argument("--workers", type=int, default=1, help="trainings at once (processes; e.g. 4 on one GPU)")
     ap.add_argument("--out", default=str(ROOT / "runs" / "quality"))
@@ -711,7 +758,7 @@ def main(argv=None) -> int:
     methods = [m for m in args.methods.split(",") if m] + [m for m in args.extra.split(",") if m]
     rows, paired, series = [], [], {}
     settings = {"max_side": ev.max_side, "iters": ev.iters, "holdout_every": ev.holdout_every,
-                "holdout_offsets": args.holdout_offsets,
+                "holdout_offsets": args.holdout_offsets, "holdout_blocks": args.holdout_blocks,
                 "field": "curate.field.model.FieldConfig() defaults", "train_seeds": args.train_seeds,
                 "random_seeds": args.random_seeds,
                 "random_draws": "shared by the folds" if args.shared_seeds else "per fold",
@@ -719,6 +766,9 @@ def main(argv=None) -> int:
                 "auto_rule": auto_rule, "default_config": asdict(default)}
     t_all = time.perf_counter()
     h = Bench(args, ev, methods, default, {"default": f"default-{default_tag}"}, rows, paired, series)
+    if args.holdout_offsets == "all" and args.holdout_blocks:
+        raise SystemExit("--holdout-blocks: give the folds as a list (--holdout-offsets 0,1,...)")
+    parse_blocks(args.holdout_blocks)                    # a malformed spec stops before any work
     offsets = list(range(ev.holdout_every)) if args.holdout_offsets == "all" else \
         [int(x) for x in args.holdout_offsets.split(",") if x]
     from curate.sfm.io import image_paths, load_sfm

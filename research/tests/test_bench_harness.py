@@ -270,3 +270,25 @@ def test_error_weights_degenerate_and_monotone():
     assert up[1] > up[0] and down[1] < down[0]
     assert np.allclose(mod.error_weights(D2, np.array([1e-3, 1e-2]), np.ones(2), 1.0, 99),
                        np.ones(2))                                    # k capped: both see both -> equal
+
+
+def test_holdout_blocks_hold_out_contiguous_blocks_away_from_the_pool(harness):
+    """--holdout-blocks N:L:G: N blocks of L consecutive frames held out, none of the G frames
+    each side in the pool, the rest in it; the folds hold out different frames; a fold that
+    does not fit is refused."""
+    n = 100
+    pool, hold = harness.holdout_blocks(n, 4, 5, 3, fold=0)
+    assert len(hold) == 20 and len(set(hold.tolist()) & set(pool.tolist())) == 0
+    runs = np.split(hold, np.flatnonzero(np.diff(hold) > 1) + 1)
+    assert [len(r) for r in runs] == [5, 5, 5, 5]
+    dist = np.abs(pool[:, None] - hold[None, :]).min(1)
+    assert dist.min() == 4                                       # G + 1 frames to the nearest held-out one
+    assert len(pool) == n - 20 - 4 * 2 * 3
+    _, hold1 = harness.holdout_blocks(n, 4, 5, 3, fold=1)
+    assert not set(hold1.tolist()) & set(hold.tolist())
+    assert hold1.max() < n
+    with pytest.raises(ValueError, match="fold"):
+        harness.holdout_blocks(n, 4, 5, 3, fold=4)               # a 25-frame stretch fits 3 blocks of 5 + 2 x 3
+    assert harness.parse_blocks("") is None and harness.parse_blocks("6:4:3") == (6, 4, 3)
+    with pytest.raises(SystemExit, match="N:L:G"):
+        harness.parse_blocks("6:4")
