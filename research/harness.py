@@ -690,6 +690,27 @@ def parse_blocks(spec: str) -> tuple[int, int, int] | None:
     return n, length, gap
 
 
+def write_psnr_plot(series: dict, out: Path) -> Path:
+    """SVG of held-out PSNR against the budget, one chart per scene (stacked), under ``out``.
+    ``series``: scene -> method -> [(budget, PSNR)]. Returns its path."""
+    from curate.report.charts import line_chart
+    svg = []
+    for scene, ser in series.items():
+        s = {m: ([x for x, _ in sorted(v)], [y for _, y in sorted(v)]) for m, v in ser.items()}
+        svg.append(line_chart(s, f"{scene}: held-out PSNR", "images chosen", "PSNR (dB)"))
+    tag = "_".join(series)
+    if len(tag) > 100:                      # many scenes: a name the file system takes
+        import hashlib
+        tag = f"{next(iter(series))}_and_{len(series) - 1}_more_{hashlib.sha1(tag.encode()).hexdigest()[:8]}"
+    p = out / f"quality_psnr_{tag}.svg"
+    if len(svg) == 1:
+        p.write_text(svg[0])
+    else:  # stack the charts in one SVG
+        body = "".join(f'<g transform="translate(0,{310 * i})">{x}</g>' for i, x in enumerate(svg))
+        p.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="520" height="{310 * len(svg)}">{body}</svg>')
+    return p
+
+
 # ------------------------------------------------------------------ the harness
 def main(argv=None) -> int:
     global SKULL_SFM, VARIANTS
@@ -783,18 +804,7 @@ def main(argv=None) -> int:
             for b in folds[0]:
                 report_folds(h, scene, [f[b] for f in folds])
     if series:
-        from curate.report.plots import line_chart
-        svg = []
-        for scene, ser in series.items():
-            s = {m: ([x for x, _ in sorted(v)], [y for _, y in sorted(v)]) for m, v in ser.items()}
-            svg.append(line_chart(s, f"{scene}: held-out PSNR", "images chosen", "PSNR (dB)"))
-        p = out / f"quality_psnr_{'_'.join(series)}.svg"
-        if len(svg) == 1:
-            p.write_text(svg[0])
-        else:  # stack the charts in one SVG
-            body = "".join(f'<g transform="translate(0,{310 * i})">{x}</g>' for i, x in enumerate(svg))
-            p.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="520" height="{310 * len(svg)}">{body}</svg>')
-        print(f"plot: {p}")
+        print(f"plot: {write_psnr_plot(series, out)}")
     print(json.dumps({"settings": settings, "rows": rows, "paired": paired,
                       "seconds": round(time.perf_counter() - t_all, 1)}))
     return 0

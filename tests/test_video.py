@@ -116,6 +116,38 @@ def test_a_truncated_video_gives_its_good_part(tmp_path):
     assert len(recs) == summary["candidates"] and all((out / r.working).is_file() for r in recs)
 
 
+def test_a_10_bit_hevc_video_gives_8_bit_frames_of_the_same_picture(tmp_path):
+    """Phones record HDR as 10-bit HEVC: the candidate frames are ordinary 8-bit RGB JPEGs with the
+    video's picture (a range conversion; no HDR tone mapping)."""
+    src = walk_frames(6, 10)
+    v = tmp_path / "hdr.mkv"
+    out = av.open(str(v), "w")
+    try:
+        s = out.add_stream("libx265", rate=10)
+    except Exception as e:                                  # pragma: no cover - a PyAV without x265
+        pytest.skip(f"this PyAV has no HEVC encoder: {e}")
+    s.height, s.width = src[0].shape[:2]
+    s.pix_fmt = "yuv420p10le"
+    s.options = {"crf": "12", "x265-params": "log-level=none"}
+    for f in src:
+        for p in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24").reformat(format="yuv420p10le")):
+            out.mux(p)
+    for p in s.encode():
+        out.mux(p)
+    out.close()
+    with av.open(str(v)) as c:
+        assert c.streams.video[0].codec_context.pix_fmt == "yuv420p10le"
+    d = tmp_path / "frames"
+    d.mkdir()
+    recs, summary = extract(v, "hdr.mkv", d, 1600, VideoConfig(change_step=1e-6, static_change=0.0))
+    assert summary["decoded"] == 6 and recs
+    for r in recs:
+        im = Image.open(d / r.working)
+        assert im.mode == "RGB" and im.size == (src[0].shape[1], src[0].shape[0])
+        a = np.asarray(im, np.float32)
+        assert np.abs(a - src[r.extra["frame"]]).mean() < 6.0       # the same picture, 0..255
+
+
 def test_ingest_takes_a_video_among_photos_or_alone(tmp_path):
     from curate.sfm.ingest import ingest
     folder = tmp_path / "cap"

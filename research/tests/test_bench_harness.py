@@ -292,3 +292,15 @@ def test_holdout_blocks_hold_out_contiguous_blocks_away_from_the_pool(harness):
     assert harness.parse_blocks("") is None and harness.parse_blocks("6:4:3") == (6, 4, 3)
     with pytest.raises(SystemExit, match="N:L:G"):
         harness.parse_blocks("6:4")
+
+
+def test_psnr_plot_is_written_for_every_scene(harness, tmp_path):
+    """The harness ends by drawing PSNR against budget (it crashed there on a moved import)."""
+    series = {"walk-loop": {"default": [(42, 24.1), (21, 22.0)], "random": [(21, 21.5), (42, 23.2)]},
+              "walk-turn": {"default": [(42, 23.0)]}}
+    p = harness.write_psnr_plot(series, tmp_path)
+    svg = p.read_text()
+    assert p.parent == tmp_path and svg.startswith("<svg")
+    assert "walk-loop: held-out PSNR" in svg and "walk-turn: held-out PSNR" in svg
+    many = {f"walk-two_sessions-kitchen-offpath-{i}": {"default": [(42, 20.0 + i)]} for i in range(16)}
+    assert harness.write_psnr_plot(many, tmp_path).is_file()          # a name the file system takes
