@@ -11,7 +11,8 @@ small pools, sequential for ordered frames, spatial with GPS; loop detection wit
 vocabulary tree trained on the capture itself, never a download, so it works offline) ->
 mapping (``map_capture``: incremental, initial pair with >= ``init_min_num_inliers``
 verified inliers; when its largest model leaves more than 5% of the photos out, COLMAP's
-global mapper on the same matches, and the larger model kept) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
+global mapper on the same matches, kept where it agrees with the incremental parts and holds
+more photos) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
 mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
 and config give the same matches and, up to multi-threaded bundle adjustment, the same
 model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
