@@ -83,7 +83,7 @@ def _budget(text: str) -> str:
     try:
         parse_budget(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--budget wants a count (200) or a percentage (15%), got {text!r}")
+        raise argparse.ArgumentTypeError(f"--budget wants a count (200), a percentage (15%) or 'auto', got {text!r}")
     return text.strip()
 
 
@@ -103,7 +103,8 @@ def _words(text: str) -> tuple[str, ...]:
 
 
 # ---------------------------------------------------------------------- flag -> field tables (paths in RunConfig)
-BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%")]
+BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto"),
+          Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
 METHOD = [Opt("--method", "select.method", choices=METHODS),
           Opt("--path-weights", "select.medoids.path_weights"),
           Opt("--seed", "select.seed", parse=int)]
@@ -263,7 +264,7 @@ def cmd_select(args) -> int:
 @_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))
 def _select_posed(args) -> int:
     """``curate select POSES --out OUT``."""
-    from curate.core.budget import parse_budget, resolve_budget
+    from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
     from curate.occupancy.stage import check_budget_fits
@@ -277,13 +278,26 @@ def _select_posed(args) -> int:
     cams, files = read_poses(Path(args.input))
     if len(cams) == 0:
         raise CliError(f"{args.input}: the pool has no cameras")
-    budget = resolve_budget(parse_budget(cfg.budget), len(cams))
-    try:
-        check_budget_fits(cfg.budget, budget, len(cams))
-    except ValueError as e:
-        raise CliError(str(e))
     grid = _grid(cfg, cams)
-    sel = select(cams, grid, budget, cfg.select, progress=not args.json)
+    index = auto = None
+    if parse_budget(cfg.budget) == AUTO:
+        from curate.select.auto_budget import choose_for_pool
+        from curate.select.visibility import build_pair_index
+        index = build_pair_index(cams, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device)
+        try:
+            auto = choose_for_pool(cams, grid.nodes(), index, cfg.budget_tolerance)
+        except ValueError as e:
+            raise CliError(f"{args.input}: {e}")
+        budget = auto.budget
+        if not args.json:
+            print(auto.note)
+    else:
+        budget = resolve_budget(parse_budget(cfg.budget), len(cams))
+        try:
+            check_budget_fits(cfg.budget, budget, len(cams))
+        except ValueError as e:
+            raise CliError(str(e))
+    sel = select(cams, grid, budget, cfg.select, progress=not args.json, index=index)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     chosen = sel.chosen
@@ -292,6 +306,7 @@ def _select_posed(args) -> int:
     write_transforms(out / "transforms.json", cams[chosen], rel)
     (out / "selected.txt").write_text("".join(Path(files[k]).name + "\n" for k in chosen))
     rec = {**selection_record(sel, cams, list(range(len(cams))), [], 0, cfg.budget, grid),
+           **({"budget_auto": auto.to_dict()} if auto is not None else {}),
            "config": json.loads(json.dumps(_config_dict(cfg.select), default=str))}
     write_json_atomic(out / "selection.json", rec)
     if args.json:

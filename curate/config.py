@@ -25,7 +25,11 @@ class RunConfig:
     """Every option of ``curate run``."""
 
     budget: str = "15%"
-    """Images to choose: a count (60) or a fraction of the pool (15%)."""
+    """Images to choose: a count (60), a fraction of the pool (15%), or 'auto': the fewest predicted,
+    from the pool's views alone, to come within ``budget_tolerance`` of all frames."""
+    budget_tolerance: float = 0.5
+    """``--budget auto``: the held-out PSNR, in dB, the chosen images may lose against every frame
+    (predicted; its measured error is in docs/selection-evidence.md)."""
     sfm: SfmConfig = field(default_factory=SfmConfig)
     """SfM stage options."""
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
@@ -50,6 +54,8 @@ class RunConfig:
         b = parse_budget(str(self.budget))  # ValueError on a malformed budget
         if isinstance(b, int) and b < 2:
             raise ValueError(f"budget {self.budget}: choose at least 2 images")
+        if not (math.isfinite(self.budget_tolerance) and self.budget_tolerance > 0):
+            raise ValueError(f"--budget-tolerance must be > 0 dB, got {self.budget_tolerance}")
         if self.export_mode not in EXPORT_MODES:
             raise ValueError(f"export mode must be one of {EXPORT_MODES}, got {self.export_mode!r}")
         if self.surface_band < 0:

@@ -52,11 +52,11 @@ def split_parts(run_dir: Path) -> list[dict]:
 
 
 def part_budget(budget: str, n_part: int, n_all: int) -> str:
-    """A part's share of ``budget``: a percentage stays (it is of each part's pool); a count is
-    shared in proportion to the parts' sizes (``n_part`` of ``n_all``), at least 2."""
+    """A part's share of ``budget``: a percentage or 'auto' stays (it is of each part's pool); a
+    count is shared in proportion to the parts' sizes (``n_part`` of ``n_all``), at least 2."""
     from curate.core.budget import parse_budget
     b = parse_budget(budget)
-    return budget if isinstance(b, float) else str(max(2, int(round(b * n_part / max(n_all, 1)))))
+    return budget if isinstance(b, (float, str)) else str(max(2, int(round(b * n_part / max(n_all, 1)))))
 
 
 def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, executor) -> None:

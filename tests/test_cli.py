@@ -70,6 +70,20 @@ def test_select_writes_subset(pool_json, tmp_path):
     assert rnd["energy"] <= res["energy"] + 1e-9
 
 
+@pytest.mark.slow
+def test_select_budget_auto_on_a_pose_file(pool_json, tmp_path):
+    path, cams = pool_json
+    out = tmp_path / "auto"
+    res = json.loads(run("select", str(path), "--budget", "auto", "--res", "8", "--out", str(out), "--json").stdout)
+    sel = json.loads((out / "selection.json").read_text())
+    auto = sel["budget_auto"]
+    assert len(res["chosen"]) == auto["budget"] == sel["budget"] and 2 <= auto["budget"] < 30
+    assert auto["predicted_loss_db"] <= 0.5 or "little to spare" in auto["note"]
+    loose = json.loads(run("select", str(path), "--budget", "auto", "--budget-tolerance", "5", "--res", "8",
+                           "--out", str(tmp_path / "loose"), "--json").stdout)
+    assert len(loose["chosen"]) <= len(res["chosen"])
+
+
 @pytest.mark.parametrize("args, msg", [
     (["score", "/nonexistent/transforms.json"], "no such file"),
     (["score", "{tmp}/bad.json"], "not valid JSON"),
@@ -77,6 +91,8 @@ def test_select_writes_subset(pool_json, tmp_path):
     (["score", "{tmp}/noframes.json", "--box", "1,2,3"], "six numbers"),
     (["score", "{tmp}/noframes.json", "--bins", "5by10"], "THETAxPHI"),
     (["select", "{tmp}/noframes.json", "--budget", "ten", "--out", "{tmp}/o"], "count"),
+    (["select", "{tmp}/noframes.json", "--budget", "auto", "--budget-tolerance", "0", "--out", "{tmp}/o"],
+     "tolerance"),
 ])
 @pytest.mark.slow
 def test_clear_errors(tmp_path, args, msg):

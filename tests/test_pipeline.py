@@ -224,6 +224,7 @@ def test_part_budget_shares_a_count_and_keeps_a_percentage():
     assert part_budget("60", 300, 400) == "45" and part_budget("60", 100, 400) == "15"
     assert part_budget("4", 10, 400) == "2"          # never fewer than 2
     assert part_budget("15%", 10, 400) == "15%"      # a percentage is of each part's own pool
+    assert part_budget("auto", 10, 400) == "auto"    # so is auto
 
 
 def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkeypatch):
@@ -292,3 +293,32 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     assert 'href="parts/1/report.html"' in html and "--on-split each" in html
     assert (out / "parts" / "1" / "report.html").is_file()
     assert sha() == before
+
+
+@pytest.mark.slow
+def test_budget_auto_chooses_from_the_pool_and_says_why(tmp_path):
+    """`--budget auto` on the sample walk: the select stage chooses the count from the pool (2 to
+    pool - 1), records the predicted curve and why, the report draws it; a tighter
+    `--budget-tolerance` reruns only the selection and never chooses fewer photos."""
+    out = tmp_path / "run"
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--budget", "auto"), capture_output=True, text=True,
+                         env=_env(), timeout=600)
+    assert res.returncode == 0, res.stderr
+    sel = json.loads((out / "select" / "selection.json").read_text())
+    auto = sel["budget_auto"]
+    assert sel["budget_text"] == "auto" and len(sel["chosen"]) == auto["budget"] == sel["budget"]
+    assert 2 <= auto["budget"] < len(sel["pool"]) == auto["pool"]
+    assert auto["predicted_loss_db"] <= auto["tolerance_db"] == 0.5 and auto["kind"] == "walk"
+    assert "budget auto" in res.stdout and f"{auto['budget']} of {len(sel['pool'])}" in res.stdout
+    html = (out / "report.html").read_text()
+    assert "How many photos" in html and auto["note"] in html
+    before = _mtimes(out)
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--budget", "auto", "--budget-tolerance", "0.2"),
+                         capture_output=True, text=True, env=_env(), timeout=600)
+    assert res.returncode == 0, res.stderr
+    after = _mtimes(out)
+    assert after["occupancy/stage.json"] == before["occupancy/stage.json"]
+    assert after["select/stage.json"] != before["select/stage.json"]
+    tight = json.loads((out / "select" / "selection.json").read_text())["budget_auto"]
+    assert tight["tolerance_db"] == 0.2 and tight["budget"] >= auto["budget"]
+    assert tight["predicted_loss_db"] <= 0.2

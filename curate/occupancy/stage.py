@@ -105,7 +105,7 @@ def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """Split, pool field (when needed: :func:`needs_field`) and occupancy grid (points, refined,
     node band) -> ``RUN/occupancy``."""
-    from curate.core.budget import parse_budget, resolve_budget
+    from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.core.grid import NodeGrid
     from curate.core.stage import begin_stage, finish_stage, is_fresh, stage_key, write_json_atomic
     from curate.core.stats import holdout_split
@@ -136,8 +136,12 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     if len(pool) < 2:
         raise ValueError(f"only {len(pool)} registered images left for the pool after holding out every "
                          f"{ev.holdout_every}th")
-    n_budget = resolve_budget(parse_budget(cfg.budget), len(pool))
-    check_budget_fits(cfg.budget, n_budget, len(pool))
+    b = parse_budget(cfg.budget)
+    if b == AUTO:                                     # chosen from the pool by the select stage
+        if len(pool) < 3:
+            raise ValueError(f"budget auto: a pool of {len(pool)} images leaves nothing to choose")
+    else:
+        check_budget_fits(cfg.budget, resolve_budget(b, len(pool)), len(pool))
     write_json_atomic(d / "split.json", {"holdout_every": ev.holdout_every, "holdout": hold, "pool": pool})
     box = default_box(sfm.cameras)
     fld = st = None

@@ -121,7 +121,8 @@ def _header(run: _Run) -> str:
     r, s = run.rep, run.sel
     every = r.get("holdout_every", s.get("holdout_every"))
     items = [("photos", r.get("photos") or "— (poses imported)"), ("run folder", r.get("run_dir") or run.dir),
-             ("budget", f"{r.get('budget', s.get('budget', '—'))} images chosen by {s.get('method', '—')}"),
+             ("budget", f"{r.get('budget', s.get('budget', '—'))} images chosen by {s.get('method', '—')}"
+                        + (" (budget auto)" if s.get("budget_auto") else "")),
              ("photos found", r.get("n_photos", "—")), ("registered", r.get("n_registered", "—")),
              ("pool (candidates)", r.get("n_pool", len(s.get("pool", [])) or "—")),
              ("held out", f"{r.get('n_holdout', len(s.get('holdout', [])) or '—')}"
@@ -357,6 +358,23 @@ def _energy_curve(run: _Run) -> str:
             "selection nodes (E = angular + frequency).</p>")
 
 
+def _budget_auto(run: _Run) -> str:
+    b = run.sel.get("budget_auto")
+    if not b:
+        return note(f"Budget given: {esc(run.sel.get('budget_text', '—'))} (`--budget auto` predicts one from the pool).")
+    m = run.methods
+    measured = None
+    if "selection" in m and "all" in m and m["selection"].get("psnr") is not None and m["all"].get("psnr") is not None:
+        measured = float(m["all"]["psnr"]) - float(m["selection"]["psnr"])
+    svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], b["budget"], measured)
+    meas = (f" Measured here: all frames {fmt_num(m['all']['psnr'])} dB, the chosen {b['budget']} "
+            f"{fmt_num(m['selection']['psnr'])} dB, a loss of <b>{measured:.2f} dB</b>." if measured is not None else "")
+    return (f"<p>{esc(b['note'])}.{meas}</p>{svg}<p class=\"small\">Predicted from the pool's views alone: the "
+            "relative spacing of the views (distance to the nearest chosen view over the scene's depth) times a "
+            "constant fitted on the evaluation harness (docs/selection-evidence.md, \"How many photos\"); its "
+            "measured error there is about a third of the budget either way.</p>")
+
+
 def _timings(run: _Run) -> str:
     st = run.rep.get("stages") or []
     if not st:
@@ -395,6 +413,7 @@ def _skipped(run: _Run) -> str:
 SECTIONS: list[tuple[str, Callable[[_Run], str]]] = [
     ("Held-out quality", _method_table),
     ("PSNR per method", _bars),
+    ("How many photos (--budget auto)", _budget_auto),
     ("Energy floor plan (chosen set)", _floorplan),
     ("Camera layout", _camera_layout),
     ("Chosen photos", _thumbnails),

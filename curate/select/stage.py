@@ -5,7 +5,8 @@ and for ``curate select`` on a pose file alike: ``method`` (what ran), ``budget`
 resolved count), ``budget_text`` (as given), ``pool`` and ``holdout`` (camera indices),
 ``holdout_every``, ``chosen`` (camera indices in the order chosen), ``chosen_names``,
 per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``, ``n_nodes``, ``up_axis``,
-``note``, and ``box`` / ``res`` of the node grid. ``nodes.npz``: ``nodes`` [M,3], per-node
+``note``, ``box`` / ``res`` of the node grid, and with ``--budget auto`` ``budget_auto``
+(:class:`curate.select.auto_budget.BudgetChoice`: the predicted loss curve and why). ``nodes.npz``: ``nodes`` [M,3], per-node
 ``angular`` and ``frequency`` of the chosen set, ``flat`` [M] grid indices, ``res``,
 ``box_min``, ``box_max``. Camera indices are into ``RUN/sfm/cameras.json``.
 """
@@ -13,6 +14,7 @@ per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``, ``n_nodes``, ``u
 from __future__ import annotations
 
 import json
+import logging
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from curate.core.stage import StageResult
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
@@ -46,7 +50,7 @@ def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """Selection over the pool -> ``RUN/select``."""
-    from curate.core.budget import parse_budget, resolve_budget
+    from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
     from curate.occupancy.stage import check_budget_fits, key_of, load_node_grid, read_split
     from curate.select.energy import energy_of_subset
@@ -57,19 +61,30 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "select"
-    key = stage_key({"select": cfg.select, "budget": cfg.budget}, [key_of(run_dir / "occupancy")])
+    b = parse_budget(cfg.budget)
+    parts = {"select": cfg.select, "budget": cfg.budget}
+    if b == AUTO:
+        parts["budget_tolerance"] = cfg.budget_tolerance
+    key = stage_key(parts, [key_of(run_dir / "occupancy")])
     if begin_stage(d, key, force):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)
     split = read_split(run_dir)
     pool = split["pool"]
-    budget = resolve_budget(parse_budget(cfg.budget), len(pool))
-    check_budget_fits(cfg.budget, budget, len(pool))
+    if b != AUTO:
+        budget = resolve_budget(b, len(pool))
+        check_budget_fits(cfg.budget, budget, len(pool))
     grid = load_node_grid(run_dir)
     pc = sfm.cameras[pool]
     t_vis = time.perf_counter()
     index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
     t_vis = time.perf_counter() - t_vis
+    auto = None
+    if b == AUTO:
+        from curate.select.auto_budget import choose_for_pool
+        auto = choose_for_pool(pc, grid.nodes(), index, cfg.budget_tolerance)
+        budget = auto.budget
+        log.info("%s", auto.note)
     sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
@@ -77,14 +92,17 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
                         frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
                         res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
     rec = selection_record(sel, sfm.cameras, pool, split["holdout"], split["holdout_every"], cfg.budget, grid)
+    if auto is not None:
+        rec["budget_auto"] = auto.to_dict()
     write_json_atomic(d / "selection.json", rec)
-    finish_stage(d, key, {"select": cfg.select, "budget": cfg.budget}, t0,
+    finish_stage(d, key, parts, t0,
                  outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
     e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
     how = sel.method if sel.method == cfg.select.method else f"{cfg.select.method}: {sel.method}"
+    why = f"; {auto.note}" if auto is not None else ""
     return StageResult("select", d, True, time.perf_counter() - t0,
                        f"{len(rec['chosen'])} of {len(pool)} pool images ({how}{e}), {rec['n_nodes']} nodes, "
-                       f"{sel.seconds:.2f}s")
+                       f"{sel.seconds:.2f}s{why}")
 
 
 def read_selection(run_dir: Path) -> dict:

@@ -1,0 +1,118 @@
+"""``--budget auto``: the smallest budget predicted to come within a tolerance of all frames.
+
+From the pool alone (no training): the spacing curve rho(k) of :mod:`curate.select.spacing`
+(how far, relative to the scene's depth, a pool view is from the nearest of k well-spread
+views) predicts how much held-out PSNR a budget of k loses against every frame::
+
+    loss(k) = alpha * rho(k) ** p        [dB],   (alpha, p) = LOSS_MODEL[kind]
+
+with ``kind`` the capture's kind (walk-through or object capture:
+:func:`curate.select.select.capture_kind`). The constants are fitted (least squares in
+log-log, points losing at least 0.05 dB) by
+``research/budget_fit.py`` on the evaluation harness's trained subsets (every method: the
+loss depends on a subset through its spacing); their validation, leaving each scene out, is
+in docs/selection-evidence.md ("How many photos: --budget auto"). The prediction is of the
+loss on views along the capture (the held-out protocol), at the harness's training
+settings; it is a rule of thumb with a measured error, not a guarantee.
+
+The choice is the smallest k in [2, K - 1] with loss(k) <= tolerance; when none is, K - 1
+with a note that the capture has little to spare.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+LOSS_MODEL = {"walk": (15.0, 1.56), "object": (15.0, 1.56)}
+"""(alpha, p) by capture kind: held-out PSNR lost, in dB, is alpha * rho ** p at relative spacing
+rho (fitted by research/budget_fit.py; docs/evidence/budget_auto.json)."""
+
+CURVE_POINTS = 120
+"""The predicted curve is kept (selection.json, the report) at about this many budgets."""
+
+
+@dataclass
+class BudgetChoice:
+    """What ``--budget auto`` chose, and the curve it chose from."""
+
+    budget: int
+    """Images chosen."""
+    pool: int
+    """Images in the pool."""
+    tolerance_db: float
+    """The allowed predicted loss against all frames, dB."""
+    kind: str
+    """The capture's kind ('walk' or 'object'), which picks the loss constant."""
+    predicted_loss_db: float
+    """The predicted loss at ``budget``, dB."""
+    rho: float
+    """The relative spacing at ``budget``."""
+    curve_k: list[int]
+    """Budgets of the kept curve (ascending)."""
+    curve_loss_db: list[float]
+    """The predicted loss at each of ``curve_k``, dB."""
+    note: str
+    """One sentence: what it chose and why."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def predicted_loss(rho: np.ndarray, kind: str = "walk") -> np.ndarray:
+    """[k] predicted loss in dB against all frames for relative spacings ``rho`` [k] of a capture
+    of ``kind`` ('walk' or 'object')."""
+    alpha, p = LOSS_MODEL[kind]
+    return alpha * np.asarray(rho, np.float64) ** p
+
+
+def curve_budgets(K: int, n: int = CURVE_POINTS) -> np.ndarray:
+    """About ``n`` budgets in [1, K], ascending and distinct: dense at small k (geometric), then even."""
+    if K <= n:
+        return np.arange(1, K + 1)
+    g = np.geomspace(1, K, n // 2)
+    lin = np.linspace(1, K, n - n // 2)
+    return np.unique(np.round(np.concatenate([g, lin])).astype(np.int64))
+
+
+def choose_budget(c: np.ndarray, a: np.ndarray, depths: np.ndarray, tolerance_db: float = 0.5,
+                  kind: str = "walk") -> BudgetChoice:
+    """The smallest budget whose predicted loss is within ``tolerance_db`` of all frames.
+
+    ``c``, ``a`` [K, 3]: the pool's embedded views (:func:`curate.select.medoids.embed`);
+    ``depths`` [K] > 0 their look-at depths; ``kind`` the capture's ('walk' or 'object'). Needs
+    K >= 3 (a budget of 2 to K - 1).
+    """
+    from curate.select.spacing import spacing_curve
+    if not (np.isfinite(tolerance_db) and tolerance_db > 0):
+        raise ValueError(f"the budget tolerance must be > 0 dB, got {tolerance_db}")
+    K = len(c)
+    if K < 3:
+        raise ValueError(f"--budget auto needs a pool of at least 3 images, got {K}")
+    _, rho = spacing_curve(c, a, depths)                                 # [K]
+    loss = predicted_loss(rho, kind)                                     # [K]
+    ok = np.flatnonzero(loss[1:K - 1] <= tolerance_db)                   # budgets 2 .. K-1
+    if len(ok):
+        k = int(ok[0]) + 2
+        note = (f"budget auto: {k} of {K} images ({kind}), the fewest predicted within {tolerance_db:g} dB of all "
+                f"frames (predicted loss {loss[k - 1]:.2f} dB; relative spacing {rho[k - 1]:.3f})")
+    else:
+        k = K - 1
+        note = (f"budget auto: no budget below the whole pool is predicted within {tolerance_db:g} dB of all "
+                f"frames (at {K - 1} of {K}: {loss[K - 2]:.2f} dB): the capture has little to spare; "
+                f"{k} images chosen")
+    ks = curve_budgets(K)
+    return BudgetChoice(k, K, float(tolerance_db), kind, float(loss[k - 1]), float(rho[k - 1]),
+                        ks.tolist(), [round(float(x), 4) for x in loss[ks - 1]], note)
+
+
+def choose_for_pool(cams, nodes: np.ndarray | None, index, tolerance_db: float = 0.5) -> BudgetChoice:
+    """:func:`choose_budget` for the pool ``cams`` with its selection nodes [N, 3] and their pair
+    ``index`` (the look-at depths of view medoids: :func:`curate.select.medoids.view_depths`); the
+    capture's kind from its poses (:func:`curate.select.select.capture_kind`)."""
+    from curate.select.medoids import embed, view_depths
+    from curate.select.select import capture_kind
+    depths = view_depths(cams, nodes, index)
+    c, a = embed(cams, depths)
+    return choose_budget(c, a, depths, tolerance_db, capture_kind(cams)[0])

@@ -1,0 +1,240 @@
+"""Fit and validate the ``--budget auto`` predictor on the harness's measured units (issue 25).
+
+Reads harness output folders (``python3 -m research.harness ... --out OUT``): for every
+scene, the pool's spacing curve (:mod:`curate.select.spacing`) and, for every trained unit
+of fold 0, its held-out PSNR on and off the path against the all-frames unit. Then
+
+* fits the loss model of :mod:`curate.select.auto_budget` (loss = PSNR(all) - PSNR(k) of
+  the default selection, in dB, as a function of the spacing at k), on every scene and
+  leaving each scene out in turn;
+* for each scene and part, compares the budget the left-out fit predicts for a tolerance
+  with the budget the measured curve needs (linear interpolation between measured budgets).
+
+Prints one JSON line (``{"points": ..., "fit": ..., "validation": ...}``); ``--json F`` writes
+it to F too. Example::
+
+    python3 -m research.budget_fit --out /tmp/h25 --blocks /tmp/hb=6:8:4 --json docs/evidence/budget_auto.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def scene_points(run: Path, blocks: tuple[int, int, int] | None = None) -> list[dict]:
+    """Measured points of one harness scene folder: one per trained unit of fold 0 (and 'all')."""
+    from curate.occupancy.stage import load_node_grid, read_split
+    from curate.select.energy import EnergyConfig
+    from curate.select.medoids import embed, view_depths
+    from curate.select.spacing import pool_spacing, spacing_curve, subset_spacing
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import load_sfm
+    sfm = load_sfm(run)
+    if blocks:
+        from research.harness import holdout_blocks
+        pool, hold = (x.tolist() for x in holdout_blocks(len(sfm.cameras), *blocks, 0))
+    else:
+        sp = read_split(run)
+        pool, hold = sp["pool"], sp["holdout"]
+    pc = sfm.cameras[pool]
+    grid = load_node_grid(run)
+    index = build_pair_index(pc, grid.nodes(), EnergyConfig().bins)
+    depths = view_depths(pc, grid.nodes(), index)
+    c, a = embed(pc, depths)
+    _, rho = spacing_curve(c, a, depths)
+    rho_nn = pool_spacing(c, a, depths)
+    from curate.select.select import capture_kind
+    kind = capture_kind(pc)[0]
+    rel = {g: i for i, g in enumerate(pool)}
+    units = {}
+    for m in sorted((run / "evaluate").glob("*/metrics.json")):
+        name = m.parent.name
+        if name.startswith("q_") and "_o" in name.rsplit("_b", 1)[-1]:
+            continue                                          # another fold's unit
+        if name != "all" and not name.startswith("q_"):
+            continue
+        r = json.loads(m.read_text())
+        pv = np.array([v["psnr"] for v in r["per_view"]])
+        units[name] = (r, pv)
+    if "all" not in units:
+        return []
+    all_pv = units["all"][1]
+    nh = len(hold)
+    out = []
+    for name, (r, pv) in units.items():
+        if name == "all" or len(pv) != len(all_pv):
+            continue
+        sub = [rel[g] for g in r["subset"] if g in rel]
+        k = len(sub)
+        method = name[2:].rsplit("_b", 1)[0]
+        row = {"scene": run.name, "kind": kind, "unit": name, "method": method, "k": k, "pool": len(pool),
+               "rho_fp": float(rho[k - 1]), "rho_sel": subset_spacing(c, a, depths, sub), "rho_nn": rho_nn,
+               "loss_on": float(all_pv[:nh].mean() - pv[:nh].mean()),
+               "psnr_on": float(pv[:nh].mean()), "all_on": float(all_pv[:nh].mean())}
+        if len(pv) > nh:
+            row.update(loss_off=float(all_pv[nh:].mean() - pv[nh:].mean()),
+                       psnr_off=float(pv[nh:].mean()), all_off=float(all_pv[nh:].mean()))
+        out.append(row)
+    out.append({"scene": run.name, "kind": kind, "curve": rho.tolist(), "rho_nn": rho_nn, "pool": len(pool)})
+    return out
+
+
+MIN_LOSS = 0.05
+"""Points whose measured loss is below this (dB) carry no information on a log scale (noise): left
+out of the power-law fit."""
+
+
+def fit_alpha(rows: list[dict], part: str = "on") -> float:
+    """Least squares through the origin of loss_<part> on rho_sel over ``rows`` (the linear model)."""
+    x = np.array([r["rho_sel"] for r in rows])
+    y = np.array([r[f"loss_{part}"] for r in rows])
+    return float(x @ y / (x @ x)) if len(x) and x @ x > 0 else float("nan")
+
+
+def fit_power(rows: list[dict], part: str = "on") -> tuple[float, float]:
+    """(alpha, p) of loss = alpha * rho ** p, least squares in log-log over the ``rows`` whose
+    loss is at least MIN_LOSS; (nan, nan) with fewer than 3 such rows."""
+    r = [x for x in rows if x.get(f"loss_{part}", 0.0) >= MIN_LOSS and x["rho_sel"] > 0]
+    if len(r) < 3:
+        return float("nan"), float("nan")
+    lx = np.log([x["rho_sel"] for x in r])
+    ly = np.log([x[f"loss_{part}"] for x in r])
+    p, la = np.polyfit(lx, ly, 1)
+    return float(np.exp(la)), float(p)
+
+
+def measured_budget(rows: list[dict], tol: float, part: str = "on") -> tuple[float | None, str]:
+    """The smallest budget (images) at which the measured loss of ``rows`` (one method, one scene,
+    several budgets) is within ``tol`` dB, interpolated linearly between measured budgets; (None,
+    '> K') when no measured budget reaches it, (k_min, '<= k_min') when the smallest does."""
+    pts = sorted((r["k"], r[f"loss_{part}"]) for r in rows if f"loss_{part}" in r)
+    if not pts:
+        return None, "-"
+    if pts[0][1] <= tol:
+        return float(pts[0][0]), f"<= {pts[0][0]}"
+    for (k0, l0), (k1, l1) in zip(pts, pts[1:]):
+        if l1 <= tol:
+            k = k0 + (l0 - tol) / (l0 - l1) * (k1 - k0)
+            return float(k), f"{k:.0f}"
+    return None, f"> {pts[-1][0]}"
+
+
+def predicted_budget(curve: list[float], alpha: float, tol: float, power: float = 1.0) -> int:
+    """The smallest k in [2, K - 1] with alpha * rho(k) ** power <= tol (K - 1 when none)."""
+    rho = np.asarray(curve)
+    K = len(rho)
+    ok = np.flatnonzero(alpha * rho[1:K - 1] ** power <= tol)
+    return int(ok[0]) + 2 if len(ok) else K - 1
+
+
+def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
+    """Both loss models (linear: alpha * rho; power: alpha * rho ** p) fitted per capture kind on
+    every scene and leaving each scene out; the validation table (predicted and measured budgets)
+    and the left-out error of the predicted loss of every measured subset."""
+    units = [r for r in pts if "unit" in r]
+    curves = {r["scene"]: r for r in pts if "curve" in r}
+    fit = {}
+    for kind in ("walk", "object"):
+        rows = [r for r in units if r["kind"] == kind]
+        if rows:
+            fit[kind] = {"linear": fit_alpha(rows), "power": fit_power(rows)}
+    val, loso, err = [], {}, {"linear": [], "power": []}
+    for scene, cv in sorted(curves.items()):
+        kind = cv["kind"]
+        rows = [r for r in units if r["kind"] == kind and r["scene"] != scene]
+        models = {"linear": (fit_alpha(rows), 1.0) if rows else (float("nan"), 1.0),
+                  "power": fit_power(rows) if rows else (float("nan"), float("nan"))}
+        loso[scene] = models
+        mine = [r for r in units if r["scene"] == scene]
+        default = [r for r in mine if r["method"].startswith("default")]
+        for name, (a, p) in models.items():
+            if np.isfinite(a):
+                for r in mine:
+                    r[f"pred_{name}"] = a * r["rho_sel"] ** p
+                    err[name].append({"scene": scene, "loss": r["loss_on"], "pred": r[f"pred_{name}"]})
+        for tol in tols:
+            for part in ("on", "off"):
+                if not any(f"loss_{part}" in r for r in default):
+                    continue
+                kb, txt = measured_budget(default, tol, part)
+                row = {"scene": scene, "kind": kind, "part": part, "tol": tol, "pool": cv["pool"],
+                       "measured": kb, "measured_text": txt, "measured_ks": sorted(r["k"] for r in default)}
+                for name, (a, p) in models.items():
+                    row[f"predicted_{name}"] = predicted_budget(cv["curve"], a, tol, p) if np.isfinite(a) else None
+                val.append(row)
+
+    def summary(e, lo=0.0, hi=np.inf):
+        d = [x["pred"] - x["loss"] for x in e if lo <= x["loss"] < hi]
+        return {"n": len(d), "rmse": float(np.sqrt(np.mean(np.square(d)))) if d else None,
+                "mean": float(np.mean(d)) if d else None}
+    return {"fit": fit, "loso": loso, "validation": val,
+            "loss_error_on": {m: {"all": summary(e), "loss < 2 dB": summary(e, hi=2.0)} for m, e in err.items()}}
+
+
+def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:
+    """What ``--budget auto`` predicts for the pool of run folder ``run`` (its split.json)."""
+    from curate.occupancy.stage import load_node_grid, read_split
+    from curate.select.auto_budget import choose_for_pool, predicted_loss
+    from curate.select.energy import EnergyConfig
+    from curate.select.medoids import embed, view_depths
+    from curate.select.select import capture_kind
+    from curate.select.spacing import spacing_curve
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import load_sfm
+    pc = load_sfm(run).cameras[read_split(run)["pool"]]
+    nodes = load_node_grid(run).nodes()
+    index = build_pair_index(pc, nodes, EnergyConfig().bins)
+    depths = view_depths(pc, nodes, index)
+    c, a = embed(pc, depths)
+    kind = capture_kind(pc)[0]
+    _, rho = spacing_curve(c, a, depths)
+    loss = predicted_loss(rho, kind)
+    return {"run": str(run), "pool": len(pc), "kind": kind,
+            "loss_at": {k: round(float(loss[k - 1]), 3) for k in at if 1 <= k <= len(pc)},
+            "budget_at": {t: choose_for_pool(pc, nodes, index, t).budget for t in tols}}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", action="append", default=[], help="a harness --out folder (repeatable)")
+    ap.add_argument("--blocks", action="append", default=[],
+                    help="OUT=N:L:G: a harness folder run with --holdout-blocks N:L:G")
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--predict", type=Path, action="append", default=[],
+                    help="a run folder: print the product's prediction for its pool (loss at --at budgets, "
+                         "budget at each tolerance) and stop")
+    ap.add_argument("--at", default="", help="--predict: budgets (counts, comma separated)")
+    args = ap.parse_args(argv)
+    if args.predict:
+        for run in args.predict:
+            print(json.dumps(predict_run(run, [int(x) for x in args.at.split(",") if x])))
+        return 0
+    pts = []
+    folders = [(Path(o), None) for o in args.out]
+    for b in args.blocks:
+        o, spec = b.split("=")
+        folders.append((Path(o), tuple(int(x) for x in spec.split(":"))))
+    for o, blk in folders:
+        for run in sorted(p for p in o.iterdir() if (p / "sfm").is_dir() and (p / "evaluate").is_dir()):
+            got = scene_points(run, blk)
+            for r in got:
+                if blk:
+                    r["scene"] = f"{r['scene']}-blocks"
+            pts += got
+            print(f"{run}: {sum('unit' in r for r in got)} units", file=sys.stderr)
+    res = {"points": pts, **analyse(pts)}
+    line = json.dumps(res)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(line + "\n")
+    print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
