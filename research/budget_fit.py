@@ -124,6 +124,15 @@ def measured_budget(rows: list[dict], tol: float, part: str = "on") -> tuple[flo
     return None, f"> {pts[-1][0]}"
 
 
+def measured_loss_at(rows: list[dict], k: int | None, part: str = "on") -> float | None:
+    """The measured loss of ``rows`` (one method, one scene) at budget ``k``, interpolated linearly
+    between measured budgets; None outside the measured range."""
+    pts = sorted((r["k"], r[f"loss_{part}"]) for r in rows if f"loss_{part}" in r)
+    if k is None or not pts or not pts[0][0] <= k <= pts[-1][0]:
+        return None
+    return float(np.interp(k, [x for x, _ in pts], [y for _, y in pts]))
+
+
 def predicted_budget(curve: list[float], alpha: float, tol: float, power: float = 1.0) -> int:
     """The smallest k in [2, K - 1] with alpha * rho(k) ** power <= tol (K - 1 when none)."""
     rho = np.asarray(curve)
@@ -156,7 +165,7 @@ def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
             if np.isfinite(a):
                 for r in mine:
                     r[f"pred_{name}"] = a * r["rho_sel"] ** p
-                    err[name].append({"scene": scene, "loss": r["loss_on"], "pred": r[f"pred_{name}"]})
+                    err[name].append({"scene": scene, "kind": kind, "loss": r["loss_on"], "pred": r[f"pred_{name}"]})
         for tol in tols:
             for part in ("on", "off"):
                 if not any(f"loss_{part}" in r for r in default):
@@ -165,15 +174,26 @@ def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
                 row = {"scene": scene, "kind": kind, "part": part, "tol": tol, "pool": cv["pool"],
                        "measured": kb, "measured_text": txt, "measured_ks": sorted(r["k"] for r in default)}
                 for name, (a, p) in models.items():
-                    row[f"predicted_{name}"] = predicted_budget(cv["curve"], a, tol, p) if np.isfinite(a) else None
+                    kp = predicted_budget(cv["curve"], a, tol, p) if np.isfinite(a) else None
+                    row[f"predicted_{name}"] = kp
+                    row[f"loss_at_predicted_{name}"] = measured_loss_at(default, kp, part)
                 val.append(row)
 
-    def summary(e, lo=0.0, hi=np.inf):
-        d = [x["pred"] - x["loss"] for x in e if lo <= x["loss"] < hi]
+    def summary(e, kind, hi=np.inf):
+        d = [x["pred"] - x["loss"] for x in e if x["kind"] == kind and x["loss"] < hi]
         return {"n": len(d), "rmse": float(np.sqrt(np.mean(np.square(d)))) if d else None,
                 "mean": float(np.mean(d)) if d else None}
-    return {"fit": fit, "loso": loso, "validation": val,
-            "loss_error_on": {m: {"all": summary(e), "loss < 2 dB": summary(e, hi=2.0)} for m, e in err.items()}}
+    errs = {m: {k: {"all": summary(e, k), "loss < 2 dB": summary(e, k, 2.0)} for k in fit} for m, e in err.items()}
+    # the rule: per kind, the model whose left-out error on losses below 2 dB (the range a tolerance
+    # lives in) is smaller; its constants fitted on every scene of that kind go to the product
+    product = {}
+    for k in fit:
+        r = {m: (errs[m][k]["loss < 2 dB"]["rmse"] or np.inf) for m in ("linear", "power")}
+        m = min(r, key=r.get)
+        a, p = (fit[k]["linear"], 1.0) if m == "linear" else fit[k]["power"]
+        product[k] = {"model": m, "alpha": round(a, 2), "p": round(p, 2)}
+    return {"fit": fit, "product": product, "loso": loso, "validation": val,
+            "loss_error_on": errs}
 
 
 def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:

@@ -36,7 +36,7 @@ def tables(d: dict, cand: str = "default", within: float = 0.3) -> str:
     psnr = {(r["scene"], r["budget"], r["method"]): r for r in rows}
     pr = {(p["scene"], p["budget"], p["pair"]): p for p in paired}
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
-    out = ["| walk (test views) | budget of pool | all | `auto` | FVS | stride | random | `auto` - random | "
+    out = ["| scene (test views) | budget of pool | all | `auto` | FVS | stride | random | `auto` - random | "
            "`auto` - FVS | `auto` - stride | gap closed |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     saved = {}
     for s in scenes:
@@ -57,8 +57,8 @@ def tables(d: dict, cand: str = "default", within: float = 0.3) -> str:
                 if v is not None and all_ is not None:
                     saved.setdefault((s, m), []).append((b, all_ - v, pool))
     out += ["", f"Frames saved: the smallest measured budget within {within} dB of all frames "
-            "(budgets measured in brackets; '>' where none was).", "",
-            "| walk (test views) | `auto` | FVS | stride | random |", "|---|---|---|---|---|"]
+            "('> k': none of the measured budgets, the largest being k).", "",
+            "| scene (test views) | `auto` | FVS | stride | random |", "|---|---|---|---|---|"]
     for s in scenes:
         cells = []
         for m in (cand, "fvs", "stride", "random"):

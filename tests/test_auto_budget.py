@@ -124,3 +124,16 @@ def test_parse_auto():
         resolve_budget(AUTO, 100)
     with pytest.raises(ValueError, match="'auto'"):
         parse_budget("automatic")
+
+
+def test_constants_are_the_fit_in_the_evidence():
+    """The loss law in the product is the one research/budget_fit.py fitted and wrote to
+    docs/evidence/budget_auto.json (the model its rule chose for each capture kind)."""
+    import json
+    from pathlib import Path
+
+    from curate.select.auto_budget import LOSS_MODEL
+    ev = json.loads((Path(__file__).resolve().parents[1] / "docs" / "evidence" / "budget_auto.json").read_text())
+    assert set(ev["product"]) == set(LOSS_MODEL)
+    for kind, fit in ev["product"].items():
+        assert LOSS_MODEL[kind] == pytest.approx((fit["alpha"], fit["p"]), abs=0.005)

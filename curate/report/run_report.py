@@ -369,10 +369,11 @@ def _budget_auto(run: _Run) -> str:
     svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], b["budget"], measured)
     meas = (f" Measured here: all frames {fmt_num(m['all']['psnr'])} dB, the chosen {b['budget']} "
             f"{fmt_num(m['selection']['psnr'])} dB, a loss of <b>{measured:.2f} dB</b>." if measured is not None else "")
-    return (f"<p>{esc(b['note'])}.{meas}</p>{svg}<p class=\"small\">Predicted from the pool's views alone: the "
-            "relative spacing of the views (distance to the nearest chosen view over the scene's depth) times a "
-            "constant fitted on the evaluation harness (docs/selection-evidence.md, \"How many photos\"); its "
-            "measured error there is about a third of the budget either way.</p>")
+    return (f"<p>{esc(b['note'])}.{meas}</p>{svg}<p class=\"small\">Predicted from the pool's views alone, by the "
+            "relative spacing of the views (distance to the nearest chosen view over the scene's depth) and a "
+            "law fitted on the evaluation harness (docs/selection-evidence.md, \"How many photos\"). Validated with "
+            "each scene left out: on eight synthetic walks the predicted budget for 0.5 dB was within a quarter of "
+            "the measured one, and lost 0.38-0.74 dB; object captures of 40-60 photos need most of them.</p>")
 
 
 def _timings(run: _Run) -> str:

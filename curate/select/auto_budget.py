@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-LOSS_MODEL = {"walk": (15.0, 1.56), "object": (15.0, 1.56)}
+LOSS_MODEL = {"walk": (13.19, 1.47), "object": (18.55, 1.0)}
 """(alpha, p) by capture kind: held-out PSNR lost, in dB, is alpha * rho ** p at relative spacing
 rho (fitted by research/budget_fit.py; docs/evidence/budget_auto.json)."""
 

@@ -35,3 +35,11 @@ def test_ci_marks_intervals_that_exclude_zero():
     assert ci({"mean": 0.5, "lo": 0.1, "hi": 0.9}).startswith("**")
     assert not ci({"mean": 0.1, "lo": -0.1, "hi": 0.3}).startswith("**")
     assert ci(None) == "-"
+
+
+def test_measured_loss_at_interpolates_inside_the_measured_range_only():
+    from research.budget_fit import measured_loss_at
+    rows = [{"k": 28, "loss_on": 2.0}, {"k": 42, "loss_on": 1.0}]
+    assert measured_loss_at(rows, 35) == pytest.approx(1.5)
+    assert measured_loss_at(rows, 20) is None and measured_loss_at(rows, 50) is None
+    assert measured_loss_at(rows, None) is None
