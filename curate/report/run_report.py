@@ -361,7 +361,7 @@ def _energy_curve(run: _Run) -> str:
 def _budget_auto(run: _Run) -> str:
     b = run.sel.get("budget_auto")
     if not b:
-        return note(f"Budget given: {esc(run.sel.get('budget_text', '—'))} (`--budget auto` predicts one from the pool).")
+        return note(f"Budget given: {esc(run.sel.get('budget_text', '—'))} (--budget auto predicts one from the pool's views).")
     m = run.methods
     measured = None
     if "selection" in m and "all" in m and m["selection"].get("psnr") is not None and m["all"].get("psnr") is not None:
