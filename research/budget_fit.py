@@ -26,13 +26,56 @@ from pathlib import Path
 import numpy as np
 
 
+def pool_spacing(c: np.ndarray, a: np.ndarray, depths: np.ndarray, chunk: int = 1024) -> float:
+    """rho_nn: the mean over the views ``c``, ``a`` [K, 3] of the view distance to their nearest
+    other view, divided by their ``depths`` [K] (how far an unseen view on the same path is from
+    the pool when every frame is kept). 0 for fewer than 2 views. Memory [chunk, K]."""
+    from curate.select.medoids import view_distance
+    K = len(c)
+    if K < 2:
+        return 0.0
+    allk = np.arange(K)
+    out = np.empty(K)
+    for s in range(0, K, chunk):
+        rows = allk[s:s + chunk]
+        d = view_distance(c, a, rows, allk)                              # [r, K]
+        d[np.arange(len(rows)), rows] = np.inf
+        out[rows] = d.min(axis=1)
+    return float(np.mean(out / np.asarray(depths, np.float64)))
+
+
+def subset_spacing(c: np.ndarray, a: np.ndarray, depths: np.ndarray, subset, chunk: int = 2048) -> float:
+    """rho(S) (:mod:`curate.select.spacing`) for the pool views ``c``, ``a`` [K, 3] and the pool
+    indices ``subset``; memory [chunk, |S|]."""
+    from curate.select.medoids import view_distance
+    K = len(c)
+    S = np.asarray(list(subset), np.int64)
+    if K == 0 or len(S) == 0:
+        return float("inf") if K else 0.0
+    allk = np.arange(K)
+    near = np.empty(K)
+    for s in range(0, K, chunk):
+        near[s:s + chunk] = view_distance(c, a, allk[s:s + chunk], S).min(axis=1)
+    return float(np.mean(near / np.asarray(depths, np.float64)))
+
+
+def pool_of(run: Path, pool: list[int]):
+    """(pool cameras, kind, c, a, depths) of a run folder's ``pool``, as ``--budget auto`` sees it."""
+    from curate.occupancy.stage import load_node_grid
+    from curate.select.auto_budget import pool_views
+    from curate.select.energy import EnergyConfig
+    from curate.select.select import capture_kind
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import load_sfm
+    pc = load_sfm(run).cameras[pool]
+    nodes = load_node_grid(run).nodes()
+    return (pc, capture_kind(pc)[0], *pool_views(pc, nodes, build_pair_index(pc, nodes, EnergyConfig().bins)))
+
+
 def scene_points(run: Path, blocks: tuple[int, int, int] | None = None) -> list[dict]:
     """Measured points of one harness scene folder: one per trained unit of fold 0 (and 'all')."""
-    from curate.occupancy.stage import load_node_grid, read_split
-    from curate.select.energy import EnergyConfig
-    from curate.select.medoids import embed, view_depths
-    from curate.select.spacing import pool_spacing, spacing_curve, subset_spacing
-    from curate.select.visibility import build_pair_index
+    from curate.occupancy.stage import read_split
+    from curate.select.spacing import spacing_curve
     from curate.sfm.io import load_sfm
     sfm = load_sfm(run)
     if blocks:
@@ -41,15 +84,9 @@ def scene_points(run: Path, blocks: tuple[int, int, int] | None = None) -> list[
     else:
         sp = read_split(run)
         pool, hold = sp["pool"], sp["holdout"]
-    pc = sfm.cameras[pool]
-    grid = load_node_grid(run)
-    index = build_pair_index(pc, grid.nodes(), EnergyConfig().bins)
-    depths = view_depths(pc, grid.nodes(), index)
-    c, a = embed(pc, depths)
+    _, kind, c, a, depths = pool_of(run, pool)
     _, rho = spacing_curve(c, a, depths)
     rho_nn = pool_spacing(c, a, depths)
-    from curate.select.select import capture_kind
-    kind = capture_kind(pc)[0]
     rel = {g: i for i, g in enumerate(pool)}
     units = {}
     for m in sorted((run / "evaluate").glob("*/metrics.json")):
@@ -134,11 +171,12 @@ def measured_loss_at(rows: list[dict], k: int | None, part: str = "on") -> float
 
 
 def predicted_budget(curve: list[float], alpha: float, tol: float, power: float = 1.0) -> int:
-    """The smallest k in [2, K - 1] with alpha * rho(k) ** power <= tol (K - 1 when none)."""
+    """The smallest k in [2, K - 1] with alpha * rho(k) ** power <= tol (K - 1 when none), chosen as
+    ``--budget auto`` chooses (:func:`curate.select.auto_budget.fewest_within`)."""
+    from curate.select.auto_budget import fewest_within
     rho = np.asarray(curve)
-    K = len(rho)
-    ok = np.flatnonzero(alpha * rho[1:K - 1] ** power <= tol)
-    return int(ok[0]) + 2 if len(ok) else K - 1
+    k = fewest_within(alpha * rho ** power, tol)
+    return len(rho) - 1 if k is None else k
 
 
 def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
@@ -198,25 +236,15 @@ def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
 
 def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:
     """What ``--budget auto`` predicts for the pool of run folder ``run`` (its split.json)."""
-    from curate.occupancy.stage import load_node_grid, read_split
-    from curate.select.auto_budget import choose_for_pool, predicted_loss
-    from curate.select.energy import EnergyConfig
-    from curate.select.medoids import embed, view_depths
-    from curate.select.select import capture_kind
+    from curate.occupancy.stage import read_split
+    from curate.select.auto_budget import choose_budget, predicted_loss
     from curate.select.spacing import spacing_curve
-    from curate.select.visibility import build_pair_index
-    from curate.sfm.io import load_sfm
-    pc = load_sfm(run).cameras[read_split(run)["pool"]]
-    nodes = load_node_grid(run).nodes()
-    index = build_pair_index(pc, nodes, EnergyConfig().bins)
-    depths = view_depths(pc, nodes, index)
-    c, a = embed(pc, depths)
-    kind = capture_kind(pc)[0]
+    pc, kind, c, a, depths = pool_of(run, read_split(run)["pool"])
     _, rho = spacing_curve(c, a, depths)
     loss = predicted_loss(rho, kind)
     return {"run": str(run), "pool": len(pc), "kind": kind,
             "loss_at": {k: round(float(loss[k - 1]), 3) for k in at if 1 <= k <= len(pc)},
-            "budget_at": {t: choose_for_pool(pc, nodes, index, t).budget for t in tols}}
+            "budget_at": {t: choose_budget(c, a, depths, t, kind).budget for t in tols}}
 
 
 def main(argv=None) -> int:

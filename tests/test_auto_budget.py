@@ -9,7 +9,7 @@ import pytest
 from curate.core.budget import AUTO, budget_text, parse_budget, resolve_budget
 from curate.select.auto_budget import choose_budget, curve_budgets, predicted_loss
 from curate.select.medoids import view_distance
-from curate.select.spacing import pool_spacing, spacing_curve, subset_spacing
+from curate.select.spacing import spacing_curve
 
 
 def circle_walk(n: int, turns: float = 1.0, radius: float = 2.0, depth: float = 3.0, seed: int = 0):
@@ -40,17 +40,8 @@ def test_spacing_curve_matches_brute_force_and_is_farthest_point():
         near = D[:, order[:k]].min(axis=1)
         assert near[order[k]] == pytest.approx(near.max())
     assert np.all(np.diff(rho) <= 1e-15) and rho[-1] == 0.0
-    assert subset_spacing(c, a, depths, order[:7]) == pytest.approx(rho[6])
     _, part = spacing_curve(c, a, depths, max_k=5)
     np.testing.assert_array_equal(part, rho[:5])
-
-
-def test_pool_spacing_matches_brute_force():
-    c, a, d = circle_walk(50)
-    D = view_distance(c, a, np.arange(50), np.arange(50))
-    np.fill_diagonal(D, np.inf)
-    assert pool_spacing(c, a, d, chunk=7) == pytest.approx(np.mean(D.min(axis=1) / d))
-    assert pool_spacing(c[:1], a[:1], d[:1]) == 0.0
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1.0, 1e4])

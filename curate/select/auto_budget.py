@@ -76,6 +76,14 @@ def curve_budgets(K: int, n: int = CURVE_POINTS) -> np.ndarray:
     return np.unique(np.round(np.concatenate([g, lin])).astype(np.int64))
 
 
+def fewest_within(loss: np.ndarray, tolerance_db: float) -> int | None:
+    """The smallest budget k in [2, K - 1] with ``loss[k - 1] <= tolerance_db`` for the predicted
+    loss [K] at budgets 1..K; None when there is none."""
+    K = len(loss)
+    ok = np.flatnonzero(np.asarray(loss)[1:K - 1] <= tolerance_db)       # budgets 2 .. K-1
+    return int(ok[0]) + 2 if len(ok) else None
+
+
 def choose_budget(c: np.ndarray, a: np.ndarray, depths: np.ndarray, tolerance_db: float = 0.5,
                   kind: str = "walk") -> BudgetChoice:
     """The smallest budget whose predicted loss is within ``tolerance_db`` of all frames.
@@ -92,9 +100,8 @@ def choose_budget(c: np.ndarray, a: np.ndarray, depths: np.ndarray, tolerance_db
         raise ValueError(f"--budget auto needs a pool of at least 3 images, got {K}")
     _, rho = spacing_curve(c, a, depths)                                 # [K]
     loss = predicted_loss(rho, kind)                                     # [K]
-    ok = np.flatnonzero(loss[1:K - 1] <= tolerance_db)                   # budgets 2 .. K-1
-    if len(ok):
-        k = int(ok[0]) + 2
+    k = fewest_within(loss, tolerance_db)
+    if k is not None:
         note = (f"budget auto: {k} of {K} images ({kind}), the fewest predicted within {tolerance_db:g} dB of all "
                 f"frames (predicted loss {loss[k - 1]:.2f} dB; relative spacing {rho[k - 1]:.3f})")
     else:
@@ -111,8 +118,14 @@ def choose_for_pool(cams, nodes: np.ndarray | None, index, tolerance_db: float =
     """:func:`choose_budget` for the pool ``cams`` with its selection nodes [N, 3] and their pair
     ``index`` (the look-at depths of view medoids: :func:`curate.select.medoids.view_depths`); the
     capture's kind from its poses (:func:`curate.select.select.capture_kind`)."""
-    from curate.select.medoids import embed, view_depths
     from curate.select.select import capture_kind
+    return choose_budget(*pool_views(cams, nodes, index), tolerance_db, capture_kind(cams)[0])
+
+
+def pool_views(cams, nodes: np.ndarray | None, index) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(c [K, 3], a [K, 3], depths [K]): the pool's views embedded as view medoids embed them, with
+    the look-at depths of the nodes each camera sees (:func:`curate.select.medoids.view_depths`)."""
+    from curate.select.medoids import embed, view_depths
     depths = view_depths(cams, nodes, index)
     c, a = embed(cams, depths)
-    return choose_budget(c, a, depths, tolerance_db, capture_kind(cams)[0])
+    return c, a, depths

@@ -103,6 +103,13 @@ def view_distance(c: np.ndarray, a: np.ndarray, rows, cols) -> np.ndarray:
     return dc + da
 
 
+def central_view(c: np.ndarray, a: np.ndarray) -> int:
+    """The view nearest the mean of the (c, a) embedding [K, 6] (K >= 1): where farthest-point
+    orders in the view distance start."""
+    x = np.concatenate([c, a], axis=1)
+    return int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))
+
+
 class PathOrderWarning(UserWarning):
     """Path weights were asked for, but the views are not in capture order: plain weights."""
 
@@ -176,9 +183,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsConfig = MedoidsConfi
     allk = np.arange(K)
 
     # farthest-point initialisation in the view distance, from the view nearest the mean (c, a)
-    x = np.concatenate([c, a], axis=1)
-    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0],
-                            int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1))), initial)
+    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0], central_view(c, a), initial)
 
     w = np.ones(K)                                                # [K] weight of each view's distance
     if cfg.path_weights:

@@ -43,3 +43,18 @@ def test_measured_loss_at_interpolates_inside_the_measured_range_only():
     assert measured_loss_at(rows, 35) == pytest.approx(1.5)
     assert measured_loss_at(rows, 20) is None and measured_loss_at(rows, 50) is None
     assert measured_loss_at(rows, None) is None
+
+
+def test_pool_and_subset_spacing_match_brute_force():
+    from curate.select.medoids import view_distance
+    from curate.select.spacing import spacing_curve
+    from research.budget_fit import pool_spacing, subset_spacing
+    rng = np.random.default_rng(3)
+    c, a = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    d = rng.uniform(0.5, 3.0, 50)
+    D = view_distance(c, a, np.arange(50), np.arange(50))
+    np.fill_diagonal(D, np.inf)
+    assert pool_spacing(c, a, d, chunk=7) == pytest.approx(np.mean(D.min(axis=1) / d))
+    assert pool_spacing(c[:1], a[:1], d[:1]) == 0.0
+    order, rho = spacing_curve(c, a, d)
+    assert subset_spacing(c, a, d, order[:7], chunk=11) == pytest.approx(rho[6])
