@@ -149,3 +149,23 @@ def test_plan_names_poses_and_list(tmp_path):
     assert find_poses(tmp_path / "colmap_cap") == (str(tmp_path / "colmap_cap" / "images"),
                                                    str(tmp_path / "colmap_cap" / "sparse" / "0"), "colmap")
     assert all(Path(it.run_dir).parent == (tmp_path / "runs").resolve() for it in items)
+
+
+@pytest.mark.slow
+def test_batch_budget_auto_chooses_per_folder(folders, tmp_path):
+    """`curate batch --budget auto --budget-tolerance 1`: every folder chooses its own count from
+    its own pool (recorded in its selection and in the summary row), the failed folder stays a row."""
+    out = tmp_path / "runs_auto"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    res = subprocess.run([sys.executable, "-m", "curate", "batch", *map(str, folders), "--out", str(out),
+                          "--budget", "auto", "--budget-tolerance", "1", "--no-evaluate", "--res", "16", "--iters", "10",
+                          "--executor", "local", "--jobs", "1"], env=env, capture_output=True, text=True, timeout=900)
+    assert res.returncode == 1, res.stdout + res.stderr      # the broken folder fails, the others go on
+    rows = {r["name"]: r for r in json.loads((out / "summary.json").read_text())["rows"]}
+    assert rows["broken"]["status"] == "failed"
+    for name in ("pool_a", "pool_b"):
+        sel = json.loads((out / name / "select" / "selection.json").read_text())
+        auto = sel["budget_auto"]
+        assert sel["budget_text"] == "auto" and auto["tolerance_db"] == 1.0
+        assert auto["pool"] == len(sel["pool"]) > 30             # its own pool (40 less the held-out views)
+        assert 2 <= auto["budget"] < auto["pool"] and rows[name]["chosen"] == auto["budget"] == len(sel["chosen"])

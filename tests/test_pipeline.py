@@ -227,10 +227,12 @@ def test_part_budget_shares_a_count_and_keeps_a_percentage():
     assert part_budget("auto", 10, 400) == "auto"    # so is auto
 
 
-def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkeypatch):
+@pytest.mark.parametrize("budget", ["16", "auto"])
+def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkeypatch, budget):
     """A capture that split in two (faked: the sample walk's first and second halves as two COLMAP
-    models): `--on-split each` curates the largest in RUN and the other in RUN/parts/1, the budget
-    shared by size; the report lists the part and links its report; the user's photos are untouched."""
+    models): `--on-split each` curates the largest in RUN and the other in RUN/parts/1, a count
+    shared by size, `auto` chosen by each part from its own pool; the report lists the part and
+    links its report; the user's photos are untouched."""
     import hashlib
     import shutil
 
@@ -278,14 +280,20 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     from curate.config import RunConfig
     from curate.select.select import SelectConfig
     from curate.sfm.config import SfmConfig
-    cfg = RunConfig(budget="16", run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False),
+    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False),
                     select=SelectConfig(method="medoids"))
     out = tmp_path / "run"
     pipeline.run(cfg, None, out, poses="SPLIT")
     n1 = len(cams) - 100
     main_sel = json.loads((out / "select" / "selection.json").read_text())
     part_sel = json.loads((out / "parts" / "1" / "select" / "selection.json").read_text())
-    assert len(main_sel["chosen"]) == round(16 * 100 / len(cams)) and len(part_sel["chosen"]) == round(16 * n1 / len(cams))
+    if budget == "16":
+        assert len(main_sel["chosen"]) == round(16 * 100 / len(cams)) and len(part_sel["chosen"]) == round(16 * n1 / len(cams))
+    else:
+        for sel, n_part in ((main_sel, 100), (part_sel, n1)):     # each from its own part, not the capture
+            auto = sel["budget_auto"]
+            assert sel["budget_text"] == "auto" and auto["pool"] == len(sel["pool"])
+            assert 0.9 * n_part <= auto["pool"] < n_part and 2 <= auto["budget"] == len(sel["chosen"]) < auto["pool"]
     assert (out / "parts" / "1" / "export" / "transforms.json").is_file()
     rep = json.loads((out / "report.json").read_text())
     assert [p["part"] for p in rep["parts"]] == ["1"] and rep["parts"][0]["n_registered"] == n1
