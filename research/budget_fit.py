@@ -235,16 +235,31 @@ def analyse(pts: list[dict], tols=(0.3, 0.5, 1.0)) -> dict:
 
 
 def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:
-    """What ``--budget auto`` predicts for the pool of run folder ``run`` (its split.json)."""
+    """What ``--budget auto`` predicts for the pool of run folder ``run`` (its split.json), with the
+    product's constants (a scene that took no part in the fit is a confirmation). Where ``run`` is a
+    harness scene folder with trained units of the default method and 'all', the measured figures
+    stand beside it (on-path views): ``measured_loss_at`` the budgets measured, and per tolerance
+    the measured budget and the measured loss at the predicted one."""
     from curate.occupancy.stage import read_split
     from curate.select.auto_budget import choose_budget, predicted_loss
     from curate.select.spacing import spacing_curve
     pc, kind, c, a, depths = pool_of(run, read_split(run)["pool"])
     _, rho = spacing_curve(c, a, depths)
     loss = predicted_loss(rho, kind)
-    return {"run": str(run), "pool": len(pc), "kind": kind,
-            "loss_at": {k: round(float(loss[k - 1]), 3) for k in at if 1 <= k <= len(pc)},
-            "budget_at": {t: choose_budget(c, a, depths, t, kind).budget for t in tols}}
+    budgets = {t: choose_budget(c, a, depths, t, kind).budget for t in tols}
+    default = ([r for r in scene_points(run) if "unit" in r and r["method"].startswith("default")]
+               if (run / "evaluate").is_dir() else [])
+    ks = sorted({r["k"] for r in default}) + list(at)
+    out = {"run": str(run), "pool": len(pc), "kind": kind,
+           "loss_at": {k: round(float(loss[k - 1]), 3) for k in ks if 1 <= k <= len(pc)},
+           "budget_at": budgets}
+    if default:
+        out["measured_loss_at"] = {r["k"]: round(r["loss_on"], 3) for r in sorted(default, key=lambda r: r["k"])}
+        out["measured"] = {t: {"predicted": kp, "measured": measured_budget(default, t)[1],
+                               "loss_at_predicted": (None if (x := measured_loss_at(default, kp)) is None
+                                                     else round(x, 3))}
+                           for t, kp in budgets.items()}
+    return out
 
 
 def main(argv=None) -> int:

@@ -36,8 +36,9 @@ def tables(d: dict, cand: str = "default", within: float = 0.3) -> str:
     psnr = {(r["scene"], r["budget"], r["method"]): r for r in rows}
     pr = {(p["scene"], p["budget"], p["pair"]): p for p in paired}
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
-    out = ["| scene (test views) | budget of pool | all | `auto` | FVS | stride | random | `auto` - random | "
-           "`auto` - FVS | `auto` - stride | gap closed |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    c = "`auto`" if cand == "default" else f"`{cand}`"                  # the candidate's column name
+    out = [f"| scene (test views) | budget of pool | all | {c} | FVS | stride | random | {c} - random | "
+           f"{c} - FVS | {c} - stride | gap closed |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     saved = {}
     for s in scenes:
         budgets = sorted({r["budget"] for r in rows if r["scene"] == s and r["method"] != "all"})
@@ -58,7 +59,7 @@ def tables(d: dict, cand: str = "default", within: float = 0.3) -> str:
                     saved.setdefault((s, m), []).append((b, all_ - v, pool))
     out += ["", f"Frames saved: the smallest measured budget within {within} dB of all frames "
             "('> k': none of the measured budgets, the largest being k).", "",
-            "| scene (test views) | `auto` | FVS | stride | random |", "|---|---|---|---|---|"]
+            f"| scene (test views) | {c} | FVS | stride | random |", "|---|---|---|---|---|"]
     for s in scenes:
         cells = []
         for m in (cand, "fvs", "stride", "random"):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from research.budget_fit import fit_alpha, measured_budget, predicted_budget
-from research.harness_tables import ci
+from research.harness_tables import ci, tables
 
 
 def test_measured_budget_interpolates_between_measured_budgets():
@@ -35,6 +35,22 @@ def test_ci_marks_intervals_that_exclude_zero():
     assert ci({"mean": 0.5, "lo": 0.1, "hi": 0.9}).startswith("**")
     assert not ci({"mean": 0.1, "lo": -0.1, "hi": 0.3}).startswith("**")
     assert ci(None) == "-"
+
+
+def test_tables_name_the_candidate_and_count_gap_and_frames_saved():
+    """One scene at two budgets: the candidate's column is named, the gap closed is (cand - random) /
+    (all - random), frames saved is the first budget within 0.3 dB of all frames."""
+    rows = [{"scene": "w", "budget": b, "pool": 100, "method": m, "psnr": v}
+            for b, vals in ((10, {"medoids_plain": 29.0, "fvs": 28.0, "stride": 28.5, "random": 27.0}),
+                            (20, {"medoids_plain": 29.8, "fvs": 29.0, "stride": 29.9, "random": 28.0}))
+            for m, v in vals.items()] + [{"scene": "w", "budget": 10, "pool": 100, "method": "all", "psnr": 30.0}]
+    paired = [{"scene": "w", "budget": 10, "pair": "medoids_plain-random", "mean": 2.0, "lo": 1.0, "hi": 3.0}]
+    md = tables({"rows": rows, "paired": paired}, "medoids_plain")
+    lines = md.splitlines()
+    assert "| `medoids_plain` | FVS |" in lines[0] and "`auto`" not in md
+    assert lines[2].startswith("| w | 10 of 100 | 30.00 | 29.00 | 28.00 | 28.50 | 27.00 | **+2.00 (+1.00 to +3.00)** |")
+    assert lines[2].endswith("| 67% |") and lines[3].endswith("| 90% |")     # 2 / 3 and 1.8 / 2
+    assert lines[-1] == "| w | 20 | > 20 | 20 | > 20 |"
 
 
 def test_measured_loss_at_interpolates_inside_the_measured_range_only():
