@@ -158,3 +158,16 @@ def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path
     assert body.count('class="warnbox"') == 2
     assert "split into 2 models (6, 3 photos)" in body and "img_07.jpg..img_09.jpg (3)" in body
     assert body.index("warnbox") < body.index("<dl")       # above the figures
+
+
+@pytest.mark.parametrize("kind, says, not_says", [("walk", "eight synthetic walks", "skull"),
+                                                   ("object", "the skull", "eight synthetic walks")])
+def test_budget_auto_section_states_the_check_for_its_kind(kind, says, not_says):
+    """The "How many photos" section says how the law was checked for the capture's kind (a walk's
+    left-out walks, an object's unseen object), the chosen point and the note."""
+    from types import SimpleNamespace
+    from curate.report.run_report import _budget_auto
+    auto = {"budget": 12, "pool": 40, "tolerance_db": 0.5, "kind": kind, "predicted_loss_db": 0.45,
+            "curve_k": [2, 12, 39], "curve_loss_db": [4.0, 0.45, 0.01], "note": f"auto chose 12 of 40 ({kind})"}
+    html = _budget_auto(SimpleNamespace(sel={"budget_auto": auto}, methods={}))
+    assert says in html and not_says not in html and auto["note"] in html and "<svg" in html
