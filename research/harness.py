@@ -146,18 +146,24 @@ WALK_BLUR_EXPOSURE = 0.5
 """Scene "walk-blur": the shutter is open half of each frame (heavy motion blur when turning)."""
 
 
+FAST_KINDS = ("blur", "fast")
+"""Walk kinds beyond ``WALK_KINDS``: the loop twice as fast (walked twice in ``WALK_FRAMES``),
+with motion blur (``blur``) or without (``fast``, the control that separates the two)."""
+
+
 def walk_spec(scene: str):
     """(kind, layout, blur) of a synthetic walk scene ``walk-<kind>[-<layout>]`` (kinds:
-    :data:`curate.simulate.walks.WALK_KINDS` and ``blur``, a loop twice as fast with motion
-    blur; layouts: :data:`curate.simulate.synthetic.LAYOUTS`, default livingroom), or None."""
+    :data:`curate.simulate.walks.WALK_KINDS` and :data:`FAST_KINDS`; layouts:
+    :data:`curate.simulate.synthetic.LAYOUTS`, default livingroom), or None."""
     if not scene.startswith("walk-"):
         return None
     from curate.simulate.synthetic import LAYOUTS
     from curate.simulate.walks import WALK_KINDS
     parts = scene.split("-")[1:]
     kind, layout = parts[0], (parts[1] if len(parts) > 1 else "livingroom")
-    if kind not in WALK_KINDS + ("blur",) or layout not in LAYOUTS or len(parts) > 2:
-        raise SystemExit(f"unknown walk scene {scene!r}: walk-<{'|'.join(WALK_KINDS)}|blur>[-<{'|'.join(LAYOUTS)}>]")
+    if kind not in WALK_KINDS + FAST_KINDS or layout not in LAYOUTS or len(parts) > 2:
+        raise SystemExit(f"unknown walk scene {scene!r}: "
+                         f"walk-<{'|'.join(WALK_KINDS + FAST_KINDS)}>[-<{'|'.join(LAYOUTS)}>]")
     return kind, layout, kind == "blur"
 
 
@@ -175,8 +181,9 @@ def walk_scene(dest: Path, scene: str) -> Path:
     from curate.simulate.walks import hand_held_walk, motion_blur
     kind, layout, blur = walk_spec(scene)
     world = make_scene(layout, seed=0)
-    walk, omega = hand_held_walk(WALK_FRAMES, "loop" if blur else kind, seed=1, width=320, height=240,
-                                 speed=0.7 if blur else 0.35, room=world.interior)
+    fast = kind in FAST_KINDS
+    walk, omega = hand_held_walk(WALK_FRAMES, "loop" if fast else kind, seed=1, width=320, height=240,
+                                 speed=0.7 if fast else 0.35, room=world.interior)
     lo, hi = world.interior
     pc = ProgressiveConfig(camera=CameraSpec(320, 240, 60.0))
     off = draw_acceptable(np.random.default_rng(7), lo + 0.05, hi - 0.05, ROOM_OFFPATH, pc, *scene_oracle(world))
@@ -718,7 +725,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="office,fox,templering",
                     help="office, fox, templering, skull (real captures), room (a synthetic walk, "
                     "rendered by the harness, with test views off the path too) and walk-<kind>[-<layout>] "
-                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur)")
+                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur, walk-fast)")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)

@@ -304,3 +304,14 @@ def test_psnr_plot_is_written_for_every_scene(harness, tmp_path):
     assert "walk-loop: held-out PSNR" in svg and "walk-turn: held-out PSNR" in svg
     many = {f"walk-two_sessions-kitchen-offpath-{i}": {"default": [(42, 20.0 + i)]} for i in range(16)}
     assert harness.write_psnr_plot(many, tmp_path).is_file()          # a name the file system takes
+
+
+def test_walk_spec_parses_kinds_and_rooms(harness):
+    """walk-<kind>[-<room>]: the fast loop with blur and its control without."""
+    assert harness.walk_spec("walk-blur") == ("blur", "livingroom", True)
+    assert harness.walk_spec("walk-fast-kitchen") == ("fast", "kitchen", False)
+    assert harness.walk_spec("walk-turn") == ("turn", "livingroom", False)
+    assert harness.walk_spec("office") is None
+    for bad in ("walk-jog", "walk-loop-garage", "walk-loop-kitchen-x"):
+        with pytest.raises(SystemExit, match="unknown walk scene"):
+            harness.walk_spec(bad)
