@@ -18,20 +18,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+
+from curate.core.stats import paired_difference
 
 
 def per_view(metrics: Path) -> dict[str, float]:
     """{view name: PSNR} of one unit's metrics.json."""
     return {v["name"]: v["psnr"] for v in json.loads(metrics.read_text())["per_view"]}
-
-
-def paired_ci(d) -> tuple[float, float, float]:
-    """(mean, lo, hi): 95% t interval of the mean of the paired differences ``d`` [n >= 2]."""
-    d = np.asarray(d, np.float64)
-    m = float(d.mean())
-    h = float(stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d)))
-    return m, m - h, m + h
 
 
 def scene_cells(run: Path, candidate: str = "default") -> list[dict]:
@@ -51,7 +44,8 @@ def scene_cells(run: Path, candidate: str = "default") -> list[dict]:
             keys = [k for k in a if ("offpath" in k) == (part == "off")]
             if len(keys) < 2:
                 continue
-            m, lo, hi = paired_ci([a[k] - r[k] for k in keys])
+            pd = paired_difference([a[k] for k in keys], [r[k] for k in keys])
+            m, lo, hi = pd["mean"], pd["lo"], pd["hi"]
             gain = float(np.mean([c[k] - r[k] for k in keys]))
             out.append({"scene": run.name, "budget": b, "part": part, "views": len(keys),
                         "all_minus_random": round(m, 3), "lo": round(lo, 3), "hi": round(hi, 3),
