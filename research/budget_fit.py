@@ -241,12 +241,13 @@ def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:
     stand beside it (on-path views): ``measured_loss_at`` the budgets measured, and per tolerance
     the measured budget and the measured loss at the predicted one."""
     from curate.occupancy.stage import read_split
-    from curate.select.auto_budget import choose_budget, predicted_loss
+    from curate.select.auto_budget import LOSS_MODEL, predicted_loss
     from curate.select.spacing import spacing_curve
     pc, kind, c, a, depths = pool_of(run, read_split(run)["pool"])
     _, rho = spacing_curve(c, a, depths)
     loss = predicted_loss(rho, kind)
-    budgets = {t: choose_budget(c, a, depths, t, kind).budget for t in tols}
+    alpha, power = LOSS_MODEL[kind]
+    budgets = {t: predicted_budget(rho, alpha, t, power) for t in tols}      # as choose_budget, one curve
     default = ([r for r in scene_points(run) if "unit" in r and r["method"].startswith("default")]
                if (run / "evaluate").is_dir() else [])
     ks = sorted({r["k"] for r in default}) + list(at)

@@ -17,7 +17,8 @@ import numpy as np
 
 from curate.core.cameras import Cameras
 from curate.select.baselines import farthest_point
-from curate.select.medoids import PathOrderWarning, embed, path_weights, view_depths, view_distance
+from curate.select.medoids import (PathOrderWarning, central_view, embed, path_weights, view_depths,
+                                  view_distance)
 
 
 @dataclass(frozen=True)
@@ -128,9 +129,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsVariantConfig = Medoi
     allk = np.arange(K)
 
     # farthest-point initialisation in the view distance, from the view nearest the mean (c, a)
-    x = np.concatenate([c, a], axis=1)
-    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0],
-                            int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1))), initial)
+    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0], central_view(c, a), initial)
 
     off, nbrs = np.zeros(K), None                                 # [K] per-medoid cost offset
     if cfg.sharpness_weight > 0 and sharpness is not None:

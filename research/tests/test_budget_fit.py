@@ -74,3 +74,20 @@ def test_pool_and_subset_spacing_match_brute_force():
     assert pool_spacing(c[:1], a[:1], d[:1]) == 0.0
     order, rho = spacing_curve(c, a, d)
     assert subset_spacing(c, a, d, order[:7], chunk=11) == pytest.approx(rho[6])
+
+
+@pytest.mark.parametrize("kind", ["walk", "object"])
+def test_predicted_budget_with_the_products_constants_is_choose_budget(kind):
+    """predict_run chooses from one spacing curve with predicted_budget: the same budget as the
+    product's choose_budget at every tolerance (argument order included)."""
+    from curate.select.auto_budget import LOSS_MODEL, choose_budget
+    from curate.select.spacing import spacing_curve
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 2 * np.pi, 120, endpoint=False)
+    c = np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], 1) + rng.normal(0, 0.01, (120, 3))
+    a = c + np.stack([np.cos(t + 1), np.sin(t + 1), rng.normal(0, 0.1, 120)], 1)
+    depths = np.full(120, 1.5)
+    _, rho = spacing_curve(c, a, depths)
+    alpha, power = LOSS_MODEL[kind]
+    for tol in (0.05, 0.3, 0.5, 1.0, 3.0):
+        assert predicted_budget(rho, alpha, tol, power) == choose_budget(c, a, depths, tol, kind).budget
