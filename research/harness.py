@@ -151,20 +151,28 @@ FAST_KINDS = ("blur", "fast")
 with motion blur (``blur``) or without (``fast``, the control that separates the two)."""
 
 
+WALK_SEED = 1
+"""Seed of a walk scene's trajectory unless its name gives one (``-s<seed>``)."""
+
+
 def walk_spec(scene: str):
-    """(kind, layout, blur) of a synthetic walk scene ``walk-<kind>[-<layout>]`` (kinds:
-    :data:`curate.simulate.walks.WALK_KINDS` and :data:`FAST_KINDS`; layouts:
-    :data:`curate.simulate.synthetic.LAYOUTS`, default livingroom), or None."""
+    """(kind, layout, blur, seed) of a synthetic walk scene ``walk-<kind>[-<layout>][-s<seed>]``
+    (kinds: :data:`curate.simulate.walks.WALK_KINDS` and :data:`FAST_KINDS`; layouts:
+    :data:`curate.simulate.synthetic.LAYOUTS`, default livingroom; seed: of the walk's
+    trajectory, default :data:`WALK_SEED`), or None."""
     if not scene.startswith("walk-"):
         return None
     from curate.simulate.synthetic import LAYOUTS
     from curate.simulate.walks import WALK_KINDS
     parts = scene.split("-")[1:]
+    seed = WALK_SEED
+    if len(parts) > 1 and re.fullmatch(r"s\d+", parts[-1]):
+        seed = int(parts.pop()[1:])
     kind, layout = parts[0], (parts[1] if len(parts) > 1 else "livingroom")
     if kind not in WALK_KINDS + FAST_KINDS or layout not in LAYOUTS or len(parts) > 2:
         raise SystemExit(f"unknown walk scene {scene!r}: "
-                         f"walk-<{'|'.join(WALK_KINDS + FAST_KINDS)}>[-<{'|'.join(LAYOUTS)}>]")
-    return kind, layout, kind == "blur"
+                         f"walk-<{'|'.join(WALK_KINDS + FAST_KINDS)}>[-<{'|'.join(LAYOUTS)}>][-s<seed>]")
+    return kind, layout, kind == "blur", seed
 
 
 def walk_scene(dest: Path, scene: str) -> Path:
@@ -179,10 +187,10 @@ def walk_scene(dest: Path, scene: str) -> Path:
     from curate.simulate.progressive import CameraSpec, ProgressiveConfig, draw_acceptable, scene_oracle
     from curate.simulate.synthetic import make_scene
     from curate.simulate.walks import hand_held_walk, motion_blur
-    kind, layout, blur = walk_spec(scene)
+    kind, layout, blur, seed = walk_spec(scene)
     world = make_scene(layout, seed=0)
     fast = kind in FAST_KINDS
-    walk, omega = hand_held_walk(WALK_FRAMES, "loop" if fast else kind, seed=1, width=320, height=240,
+    walk, omega = hand_held_walk(WALK_FRAMES, "loop" if fast else kind, seed=seed, width=320, height=240,
                                  speed=0.7 if fast else 0.35, room=world.interior)
     lo, hi = world.interior
     pc = ProgressiveConfig(camera=CameraSpec(320, 240, 60.0))
@@ -323,6 +331,8 @@ def _variants():
             "medoids_p05": Variant("medoids", medoids=M(power=0.5)),
             "medoids_e25": Variant("medoids", medoids=M(energy_share=0.25)),
             "medoids_sharp": Variant("medoids", medoids=M(sharpness_weight=1.0)),
+            "medoids_half": Variant("medoids", medoids=M(stride_share=0.5)),
+            "medoids_sinit": Variant("medoids", medoids=M(init="stride")),
             "medoids_path": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=True)),
             "medoids_plain": SelectConfig("medoids", medoids=MedoidsConfig(path_weights=False)),
             "medoids_p025": Variant("medoids", medoids=M(power=0.25)),
@@ -725,7 +735,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="office,fox,templering",
                     help="office, fox, templering, skull (real captures), room (a synthetic walk, "
                     "rendered by the harness, with test views off the path too) and walk-<kind>[-<layout>] "
-                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur, walk-fast)")
+                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur, walk-fast; "
+                    "-s<seed> at the end: another trajectory of the same kind, e.g. walk-loop-office-s2)")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
     ap.add_argument("--random-seeds", type=int, default=3)

@@ -37,12 +37,22 @@ class MedoidsVariantConfig:
     """How much a view blurrier than its nearest views is avoided as a medoid (0: ignored)."""
     path_weights: bool = True
     """Weigh each view by the stretch of the capture path it stands for."""
+    init: str = "fps"
+    """Where the Voronoi iteration starts: "fps" (farthest-point order in the view distance, the
+    product's) or "stride" (every n-th frame in capture order)."""
+    stride_share: float = 0.0
+    """Share of the budget taken first as every n-th frame (``stride``), the rest by the medoids
+    with those frames fixed: a hedge between covering the capture by time and by view."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.sharpness_weight) and self.sharpness_weight >= 0):
             raise ValueError(f"sharpness_weight must be finite and >= 0, got {self.sharpness_weight}")
         if not (0.0 <= self.energy_share <= 1.0):
             raise ValueError(f"energy_share must be in [0, 1], got {self.energy_share}")
+        if self.init not in ("fps", "stride"):
+            raise ValueError(f"init must be 'fps' or 'stride', got {self.init!r}")
+        if not (0.0 <= self.stride_share <= 1.0):
+            raise ValueError(f"stride_share must be in [0, 1], got {self.stride_share}")
         if not (np.isfinite(self.power) and self.power > 0):
             raise ValueError(f"power must be finite and > 0, got {self.power}")
 
@@ -129,7 +139,11 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsVariantConfig = Medoi
     allk = np.arange(K)
 
     # farthest-point initialisation in the view distance, from the view nearest the mean (c, a)
-    chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0], central_view(c, a), initial)
+    if cfg.init == "stride":
+        from curate.select.baselines import stride_subset
+        chosen = stride_subset(K, budget, initial)
+    else:
+        chosen = farthest_point(K, budget, lambda k: view_distance(c, a, [k], allk)[0], central_view(c, a), initial)
 
     off, nbrs = np.zeros(K), None                                 # [K] per-medoid cost offset
     if cfg.sharpness_weight > 0 and sharpness is not None:

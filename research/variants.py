@@ -53,8 +53,12 @@ def select_variant(v: Variant, cams, grid, budget: int, index=None, sharpness=No
     objective = None
     if v.method == "medoids":
         from research.medoids_variants import medoids_select
+        from curate.select.baselines import stride_subset
         n_med = budget - int(round(v.medoids.energy_share * max(0, budget)))
-        chosen, objective = medoids_select(cams, n_med, v.medoids, (), grid.nodes(), index, sharpness)
+        first = stride_subset(len(cams), int(round(v.medoids.stride_share * max(0, n_med))))
+        chosen, objective = medoids_select(cams, n_med - len(first), v.medoids, first, grid.nodes(), index,
+                                           sharpness)
+        chosen = list(first) + list(chosen)
         if n_med < budget:                   # the rest by the paper's energy, on top of the medoids
             chosen += greedy_select(index, budget - n_med, v.energy, chosen).chosen
     elif v.method == "fvs":

@@ -307,11 +307,23 @@ def test_psnr_plot_is_written_for_every_scene(harness, tmp_path):
 
 
 def test_walk_spec_parses_kinds_and_rooms(harness):
-    """walk-<kind>[-<room>]: the fast loop with blur and its control without."""
-    assert harness.walk_spec("walk-blur") == ("blur", "livingroom", True)
-    assert harness.walk_spec("walk-fast-kitchen") == ("fast", "kitchen", False)
-    assert harness.walk_spec("walk-turn") == ("turn", "livingroom", False)
+    """walk-<kind>[-<room>][-s<seed>]: the fast loop with blur and its control without; another
+    trajectory of a kind by its seed (default WALK_SEED, what every earlier figure used)."""
+    assert harness.walk_spec("walk-blur") == ("blur", "livingroom", True, harness.WALK_SEED)
+    assert harness.walk_spec("walk-fast-kitchen") == ("fast", "kitchen", False, 1)
+    assert harness.walk_spec("walk-turn") == ("turn", "livingroom", False, 1)
+    assert harness.walk_spec("walk-loop-office-s2") == ("loop", "office", False, 2)
+    assert harness.walk_spec("walk-linger-s7") == ("linger", "livingroom", False, 7)
     assert harness.walk_spec("office") is None
-    for bad in ("walk-jog", "walk-loop-garage", "walk-loop-kitchen-x"):
+    for bad in ("walk-jog", "walk-loop-garage", "walk-loop-kitchen-x", "walk-loop-kitchen-s2-s3", "walk-s2"):
         with pytest.raises(SystemExit, match="unknown walk scene"):
             harness.walk_spec(bad)
+
+
+def test_variant_names_read_back_as_their_own_units(harness):
+    """A variant's unit folders must parse back to that variant: a name ending in _s<digits>
+    would read as a random draw of another method (and its PSNR would be lost)."""
+    for name in harness._variants():
+        key = harness.unit_key(name, 42, 0, 0)
+        assert harness.is_unit(key, name, 42, 0), name
+    assert not harness.is_unit(harness.unit_key("medoids_s50", 42, 0, 0), "medoids_s50", 42, 0)
