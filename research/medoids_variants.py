@@ -37,6 +37,8 @@ class MedoidsVariantConfig:
     """How much a view blurrier than its nearest views is avoided as a medoid (0: ignored)."""
     path_weights: bool = True
     """Weigh each view by the stretch of the capture path it stands for."""
+    look_scale: float = 1.0
+    """Scale of every camera's look-at depth (below 1: turning counts for less than walking)."""
     init: str = "fps"
     """Where the Voronoi iteration starts: "fps" (farthest-point order in the view distance, the
     product's) or "stride" (every n-th frame in capture order)."""
@@ -49,6 +51,8 @@ class MedoidsVariantConfig:
             raise ValueError(f"sharpness_weight must be finite and >= 0, got {self.sharpness_weight}")
         if not (0.0 <= self.energy_share <= 1.0):
             raise ValueError(f"energy_share must be in [0, 1], got {self.energy_share}")
+        if not (np.isfinite(self.look_scale) and self.look_scale > 0):
+            raise ValueError(f"look_scale must be finite and > 0, got {self.look_scale}")
         if self.init not in ("fps", "stride"):
             raise ValueError(f"init must be 'fps' or 'stride', got {self.init!r}")
         if not (0.0 <= self.stride_share <= 1.0):
@@ -135,7 +139,7 @@ def medoids_select(cams: Cameras, budget: int, cfg: MedoidsVariantConfig = Medoi
     if budget <= 0:
         return [], []
     depths = (np.full(K, cfg.depth) if cfg.depth is not None else view_depths(cams, nodes, index))
-    c, a = embed(cams, depths)
+    c, a = embed(cams, cfg.look_scale * depths)
     allk = np.arange(K)
 
     # farthest-point initialisation in the view distance, from the view nearest the mean (c, a)

@@ -21,7 +21,7 @@ class Variant:
     """A measured, not adopted selection."""
 
     method: str
-    """'medoids', 'fvs', 'coverage' or 'coverage+energy'."""
+    """'medoids', 'fvs', 'path_stride', 'coverage' or 'coverage+energy'."""
     base: SelectConfig = field(default_factory=SelectConfig)
     """The product's options it shares (energy bins, device, seed)."""
     medoids: MedoidsVariantConfig = field(default_factory=MedoidsVariantConfig)
@@ -32,6 +32,10 @@ class Variant:
     """'coverage*': the similarity between pool views."""
     energy_weight: float = 0.5
     """'coverage+energy': weight of the energy's relative gain."""
+    look_scale: float = 1.0
+    """'path_stride': scale of the look-at depths (below 1: turning counts for less than walking)."""
+    arc_power: float = 1.0
+    """'path_stride': power of each step (in median steps) in the arc length (0: every n-th frame)."""
 
     @property
     def energy(self):
@@ -63,6 +67,12 @@ def select_variant(v: Variant, cams, grid, budget: int, index=None, sharpness=No
             chosen += greedy_select(index, budget - n_med, v.energy, chosen).chosen
     elif v.method == "fvs":
         chosen = farthest_view(cams, budget, (), v.fvs_rot_weight)
+    elif v.method == "path_stride":
+        from research.path_stride import path_stride
+        chosen = path_stride(cams, budget, grid.nodes(), index, look_scale=v.look_scale, power=v.arc_power)
+        if chosen is None:                   # not in capture order: the product's view medoids
+            from curate.select.medoids import medoids_select as product_medoids
+            chosen, objective = product_medoids(cams, budget, nodes=grid.nodes(), index=index)
     elif v.method in ("coverage", "coverage+energy"):
         from research.coverage import coverage_select
         chosen, objective = coverage_select(cams, index, budget, v.coverage, (),

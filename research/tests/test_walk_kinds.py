@@ -1,0 +1,46 @@
+"""research.walk_kinds: per kind of walk, pooled over its scenes, with Holm's correction."""
+
+import json
+
+import numpy as np
+
+from research.walk_kinds import holm, kind_table, cells, main
+
+
+def _unit(ev, name, path, off):
+    d = ev / name
+    d.mkdir(parents=True)
+    views = [{"name": f"images/frame_{i:04d}.jpg", "psnr": v} for i, v in enumerate(path)]
+    views += [{"name": f"images/offpath_{i:04d}.jpg", "psnr": v} for i, v in enumerate(off)]
+    (d / "metrics.json").write_text(json.dumps({"per_view": views}))
+
+
+def test_holm_rejects_in_step_down_order():
+    assert holm([0.001, 0.04, 0.2]) == [True, False, False]        # 0.04 > 0.05 / 2
+    assert holm([0.01, 0.02, 0.03]) == [True, True, True]          # 0.01 < .05/3, 0.02 < .05/2, 0.03 < .05
+    assert holm([0.5, 0.001]) == [False, True]
+    assert holm([]) == []
+
+
+def test_kinds_pool_their_rooms_and_report_the_worst(tmp_path):
+    rng = np.random.default_rng(0)
+    for scene, shift in (("walk-loop", -0.4), ("walk-loop-kitchen", 0.0), ("walk-turn", 0.3)):
+        ev = tmp_path / scene / "evaluate"
+        base = 30 + rng.normal(0, 1, 20)
+        off = 20 + rng.normal(0, 1, 10)
+        _unit(ev, "all", base + 1, off + 0.5)
+        _unit(ev, "q_random_s0_b42_t0", base - 1, off - 0.5)
+        _unit(ev, "q_stride_b42_t0", base, off)
+        _unit(ev, "q_default-abc123_b42_t0", base + shift + rng.normal(0, 0.01, 20), off + shift)
+    _unit(tmp_path / "office" / "evaluate", "all", [1, 2], [])     # not a walk: ignored
+    recs = cells(sorted(tmp_path.iterdir()), "default", ["stride", "random"])
+    assert {r["scene"] for r in recs} == {"walk-loop", "walk-loop-kitchen", "walk-turn"}
+    rows = {(r["kind"], r["part"]): r for r in kind_table(recs, "default", ["stride", "random"])}
+    loop = rows[("loop", "path")]
+    assert loop["views"] == 40 and len(loop["scenes"]) == 2
+    assert abs(loop["vs_stride"]["mean"] + 0.2) < 0.01                 # the two rooms pooled
+    assert abs(loop["vs_stride"]["worst_scene"] + 0.4) < 0.01          # the worse room
+    assert loop["vs_stride"]["hi"] < 0 and loop["vs_stride"]["holm"]
+    assert rows[("turn", "off")]["vs_stride"]["lo"] > 0
+    assert abs(rows[("loop", "path")]["gap_closed"] - 0.4) < 0.01      # (-0.2 + 1) / 2
+    assert main(["--out", str(tmp_path), "--rivals", "stride,random"]) == 0
