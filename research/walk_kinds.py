@@ -137,6 +137,8 @@ def main(argv=None) -> int:
     ap.add_argument("--rivals", default="stride,fvs,random")
     ap.add_argument("--scenes", default="", help="only these scene folders (comma list)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--all-kinds", action="store_true",
+                    help="one more row per budget and part: every kind pooled (not in the Holm family)")
     args = ap.parse_args(argv)
     rivals = [r for r in args.rivals.split(",") if r and r != args.candidate]
     only = {s for s in args.scenes.split(",") if s}
@@ -147,11 +149,15 @@ def main(argv=None) -> int:
         print(f"no walk scene with trained 'all', {args.candidate} and {', '.join(rivals)} units", file=sys.stderr)
         return 1
     rows = kind_table(recs, args.candidate, rivals)
+    pooled = kind_table([dict(r, kind="all kinds") for r in recs], args.candidate, rivals) if args.all_kinds else []
+    for r in pooled:                                     # not part of the family Holm corrects
+        for o in rivals:
+            r[f"vs_{o}"].pop("holm", None)
     c = "`auto`" if args.candidate == "default" else f"`{args.candidate}`"
     print(f"| kind | budget | part | scenes (views) | {c} | " + " | ".join(f"{c} - {o}" for o in rivals)
           + " | worst scene vs " + ", ".join(o for o in rivals if o != "random") + " | gap closed |")
     print("|---" * (6 + len(rivals)) + "|")
-    for r in rows:
+    for r in rows + pooled:
         worst = ", ".join(f"{r[f'vs_{o}']['worst_scene']:+.2f}" for o in rivals if o != "random")
         gap = "-" if r.get("gap_closed") is None else f"{100 * r['gap_closed']:.0f}%"
         print(f"| {r['kind']} | {r['budget']} | {r['part']} | {len(r['scenes'])} ({r['views']}) | "
@@ -167,7 +173,7 @@ def main(argv=None) -> int:
           f"{len(held)} († in the table)")
     if args.json:
         args.json.write_text(json.dumps({"candidate": args.candidate, "rivals": rivals, "rows": rows,
-                                         "behind": behind, "behind_holm": held}, indent=1))
+                                         "behind": behind, "behind_holm": held, "all_kinds": pooled}, indent=1))
     return 0
 
 

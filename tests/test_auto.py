@@ -1,4 +1,4 @@
-"""Method "auto": the kind of capture decides between view medoids and farthest-view sampling;
+"""Method "auto": the kind of capture decides between the walk rule and the paper's energy;
 equal evaluation units train once."""
 
 import json
@@ -44,7 +44,7 @@ def test_capture_kind_degenerate():
     assert capture_kind(par)[0] == "walk"
 
 
-def test_auto_runs_the_energy_on_an_object_and_medoids_on_a_walk():
+def test_auto_runs_the_energy_on_an_object_and_view_medoids_on_walk_photos_in_no_order():
     grid = NodeGrid([-1, -1, -1], [1, 1, 1], 8)
     obj = orbit(40)
     a = select(obj, grid, 8, SelectConfig("auto"))
@@ -54,6 +54,7 @@ def test_auto_runs_the_energy_on_an_object_and_medoids_on_a_walk():
     walk = random_pool(60, seed=2)
     b = select(walk, grid, 8, SelectConfig("auto"))
     assert b.method == "medoids" and "walk" in b.note and b.to_dict()["note"] == b.note
+    assert "-> path" in b.note and "not in capture order" in b.note      # the walk rule, and why it fell back
     assert b.chosen == select(walk, grid, 8, SelectConfig("medoids")).chosen
     assert SelectConfig().method == "auto"
 

@@ -317,6 +317,8 @@ def test_budget_auto_chooses_from_the_pool_and_says_why(tmp_path):
     assert sel["budget_text"] == "auto" and len(sel["chosen"]) == auto["budget"] == sel["budget"]
     assert 2 <= auto["budget"] < len(sel["pool"]) == auto["pool"]
     assert auto["predicted_loss_db"] <= auto["tolerance_db"] == 0.5 and auto["kind"] == "walk"
+    assert sel["method"] == "path" and "-> path" in sel["note"]        # the walk rule: frames in capture order
+    assert "images chosen by path" in (out / "report.html").read_text()
     assert "budget auto" in res.stdout and f"{auto['budget']} of {len(sel['pool'])}" in res.stdout
     html = (out / "report.html").read_text()
     assert "How many photos" in html and auto["note"] in html

@@ -90,7 +90,7 @@ def train_settings(cfg: "RunConfig") -> dict:
 
 def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
     """(train the pool field?, why). The field serves the evaluation (its all-images ceiling) and
-    refines the occupancy the paper's energy scores; view medoids, FVS, every n-th frame and
+    refines the occupancy the paper's energy scores; path spacing, view medoids, FVS, every n-th frame and
     random need neither. So with the evaluation off, the field is trained only for the energy
     on a capture whose SfM points cannot give its occupancy (a pose import without points)."""
     from curate.select.select import resolve_method

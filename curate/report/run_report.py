@@ -33,7 +33,7 @@ __all__ = ["write_html", "floorplan", "top_down_axes"]
 METHOD_ORDER = ("selection", "random", "fvs", "all")
 METHOD_LABEL = {"selection": "selection", "random": "random", "fvs": "farthest-view (FVS)", "all": "all pool images"}
 SELECTION_NAME = {"energy": "the paper's energy", "medoids": "view medoids", "fvs": "farthest-view sampling",
-                  "stride": "every n-th frame", "random": "random"}
+                  "stride": "every n-th frame", "random": "random", "path": "even spacing along the capture path"}
 
 
 def _selection_label(run) -> str:

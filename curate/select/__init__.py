@@ -1,1 +1,1 @@
-"""Selection: the paper's energy and its exact greedy, view medoids, baselines, the select stage."""
+"""Selection: the paper's energy and its exact greedy, path spacing, view medoids, baselines, the select stage."""

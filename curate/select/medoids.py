@@ -140,14 +140,13 @@ def path_order_share(c: np.ndarray, a: np.ndarray) -> float:
     return float(np.mean(np.minimum(prev, nxt) <= d2))
 
 
-def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
-    """[K] weights, mean 1, of embedded views ``c``, ``a`` [K, 3] in capture order: half the
-    view distance to the previous plus to the next view (a path end: its one step), each
-    step capped at ``PATH_CAP`` median steps. None when the views do not form a path: fewer
-    than 3, every step 0, or less than ``PATH_ORDER_MIN`` of the views with a neighbour in
-    capture order among their two nearest views (:func:`path_order_share`). Memory [512, K]."""
-    K = len(c)
-    if K < 3:
+def path_steps(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
+    """[K-1] view distance between consecutive embedded views ``c``, ``a`` [K, 3] in capture
+    order, in median steps, each capped at ``PATH_CAP``. None when the views do not form a
+    path: fewer than 3, every step 0, or less than ``PATH_ORDER_MIN`` of the views with a
+    neighbour in capture order among their two nearest views (:func:`path_order_share`).
+    Memory [512, K]."""
+    if len(c) < 3:
         return None
     step = np.linalg.norm(c[1:] - c[:-1], axis=1) + np.linalg.norm(a[1:] - a[:-1], axis=1)   # [K-1]
     med = float(np.median(step))
@@ -155,7 +154,18 @@ def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
         return None
     if path_order_share(c, a) < PATH_ORDER_MIN:
         return None
-    step = np.minimum(step, PATH_CAP * med)
+    return np.minimum(step / med, PATH_CAP)
+
+
+def path_weights(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:
+    """[K] weights, mean 1, of embedded views ``c``, ``a`` [K, 3] in capture order: half the
+    view distance to the previous plus to the next view (a path end: its one step), each
+    step capped at ``PATH_CAP`` median steps (:func:`path_steps`). None when the views do
+    not form a path. Memory [512, K]."""
+    step = path_steps(c, a)
+    if step is None:
+        return None
+    K = len(c)
     w = np.empty(K)
     w[1:-1] = 0.5 * (step[:-1] + step[1:])
     w[0], w[-1] = step[0], step[-1]

@@ -1,7 +1,8 @@
 """Names of the selection methods (no heavy imports: the CLI reads them for ``--help``).
 
 "energy" is the paper's greedy on its energy, unchanged; "medoids" is k-medoids of the pool's
-views in a centre + look-at distance (:mod:`curate.select.medoids`); "fvs" is farthest-view
+views in a centre + look-at distance (:mod:`curate.select.medoids`); "path" spaces frames
+evenly along the capture path in that distance (:mod:`curate.select.path`); "fvs" is farthest-view
 sampling; "stride" takes every n-th camera in name order (every n-th frame of a video);
 "random" is a baseline. Variants that were measured and not adopted (pool coverage, medoid
 cost powers, a sharpness prior, an energy share) live in ``research/``. "auto" picks by the kind of capture
@@ -10,14 +11,15 @@ meet nowhere, or near-parallel ones), ``OBJECT_METHOD`` for an object capture (c
 a point, looking at it).
 """
 
-METHODS = ("auto", "energy", "random", "fvs", "stride", "medoids")
+METHODS = ("auto", "energy", "random", "fvs", "stride", "medoids", "path")
 """Every selection method :func:`curate.select.select.select` knows."""
 
 DEFAULT_METHOD = "auto"
 """The method ``curate`` uses unless told otherwise (chosen by the harness, README)."""
 
-WALK_METHOD = "medoids"
-""""auto" on a walk-through: view medoids (README, 'Which selection method, and why')."""
+WALK_METHOD = "path"
+""""auto" on a walk-through: frames evenly spaced along the capture path (view medoids when the
+photos are not in capture order; docs/selection-evidence.md, "A walk rule chosen on 21 walks")."""
 
 OBJECT_METHOD = "energy"
 """"auto" on an object capture: the paper's energy, unchanged (README, 'Which selection

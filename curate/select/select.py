@@ -16,6 +16,7 @@ from curate.core.cameras import Cameras
 from curate.select.energy import EnergyConfig, EnergyTerms
 from curate.core.grid import NodeGrid
 from curate.select.medoids import MedoidsConfig
+from curate.select.path import PathConfig, path_select
 from curate.select.methods import DEFAULT_METHOD, METHODS, OBJECT_METHOD, WALK_METHOD  # noqa: F401  (METHODS re-exported)
 
 log = logging.getLogger(__name__)
@@ -26,8 +27,10 @@ class SelectConfig:
     """How to choose a subset."""
 
     method: str = DEFAULT_METHOD
-    """One of "auto" (the default, chosen by the harness: "medoids" for a walk-through,
-    "energy" for an object capture, see :func:`capture_kind`), "medoids" (k-medoids of the
+    """One of "auto" (the default, chosen by the harness: ``WALK_METHOD`` for a walk-through,
+    ``OBJECT_METHOD`` for an object capture, see :func:`capture_kind`), "path" (frames evenly
+    spaced along the capture path by view change, :mod:`curate.select.path`; view medoids when
+    the photos are not in capture order), "medoids" (k-medoids of the
     pool's views, :mod:`curate.select.medoids`), "energy" (the paper: greedy on its energy),
     "random", "fvs" (farthest-view sampling), "stride" (every n-th camera in name order: every
     n-th frame of a video)."""
@@ -39,6 +42,8 @@ class SelectConfig:
     """Torch device for the visibility test (None: CUDA when available, else CPU)."""
     medoids: MedoidsConfig = field(default_factory=MedoidsConfig)
     """Method "medoids": its look-at depth and iterations."""
+    path: PathConfig = field(default_factory=PathConfig)
+    """Method "path": the scale of its look-at depths."""
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -155,8 +160,17 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
     if cfg.method == "energy":
         tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
         sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
-    elif cfg.method == "medoids":
+    elif cfg.method == "path" and (chosen := path_select(cams, budget, cfg.path, initial, grid.nodes(), index)) is not None:
+        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
+        sel = Selection("path", chosen, initial, e, a, f)
+    elif cfg.method in ("medoids", "path"):
         from curate.select.medoids import PathOrderWarning, medoids_select
+        if cfg.method == "path":                                      # not in capture order: no path
+            fallback = ("path: the photos are not in capture order (or too few), so there is no path to "
+                        "space frames along: fell back to view medoids")
+            log.info("select %s", fallback)
+            note = "; ".join(x for x in (note, fallback) if x)
+            cfg = replace(cfg, method="medoids")
         with warnings.catch_warnings(record=True) as caught:          # path weights ignored: a note
             warnings.simplefilter("always")
             chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)

@@ -45,6 +45,17 @@ def pool(n: int, seed: int):
     return Cameras(look_at(c, c + d), 277.0, 277.0, 160.0, 120.0, 320, 240)
 
 
+def walk(n: int, seed: int):
+    """``n`` cameras in capture order on a loop through the box (0.7 m radius, a little jitter),
+    each looking along its way and turning slowly: a pool where method "path" finds its path."""
+    from curate.core.cameras import Cameras, look_at
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    c = np.stack([0.7 * np.cos(t), 0.7 * np.sin(t), 0.1 * np.sin(3 * t)], 1) + rng.normal(scale=1e-3, size=(n, 3))
+    d = np.stack([-np.sin(t + 0.5 * np.sin(5 * t)), np.cos(t + 0.5 * np.sin(5 * t)), np.zeros(n)], 1)
+    return Cameras(look_at(c, c + d), 277.0, 277.0, 160.0, 120.0, 320, 240)
+
+
 def nodes(res: int):
     from curate.core.grid import NodeGrid
     return NodeGrid([-1, -1, -1], [1, 1, 1], res).nodes()
@@ -131,6 +142,7 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     from curate.select.medoids import MedoidsConfig, embed, path_weights, view_depths
     from curate.select.select import SelectConfig, select
     from curate.select.visibility import build_pair_index
+    from research.variants import Variant, select_variant
     cams = pool(n, 2)
     grid = NodeGrid(np.full(3, -1.0), np.full(3, 1.0), 32)
     cfg = SelectConfig()
@@ -142,7 +154,10 @@ def case_methods(n: int, budget: int, key: str) -> dict:
         best = np.inf
         for _ in range(2):                                   # the faster of two runs (the first warms caches)
             t = time.perf_counter()
-            sel = select(cams, grid, budget, plain if m == "medoids_plain" else SelectConfig(m), index=idx)
+            if m == "coverage":                                # a research variant (not adopted)
+                sel = select_variant(Variant("coverage"), cams, grid, budget, index=idx)
+            else:
+                sel = select(cams, grid, budget, plain if m == "medoids_plain" else SelectConfig(m), index=idx)
             best = min(best, time.perf_counter() - t)
         assert len(sel.chosen) == budget
         out[f"{key}_{m}_s"] = best
@@ -150,8 +165,20 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     t = time.perf_counter()
     path_weights(c, a)                                       # the capture-order test (this pool: no path)
     out[f"{key}_path_order_test_s"] = time.perf_counter() - t
+    walk_cams = walk(n, 3)                                   # method "path" needs a pool in capture order
+    widx = build_pair_index(walk_cams, grid.nodes(), cfg.energy.bins)
+    for m in ("path", "medoids", "energy"):
+        best = np.inf
+        for _ in range(2):
+            t = time.perf_counter()
+            sel = select(walk_cams, grid, budget, SelectConfig(m), index=widx)
+            best = min(best, time.perf_counter() - t)
+        assert len(sel.chosen) == budget and sel.method == m
+        out[f"{key}_walk_{m}_s"] = best
+        out[f"{key}_walk_{m}_ms_per_step"] = 1000 * best / budget
     for m in ("coverage", "medoids", "medoids_plain", "fvs"):
         out[f"{key}_{m}_over_energy"] = out[f"{key}_{m}_s"] / out[f"{key}_energy_s"]
+    out[f"{key}_walk_path_over_energy"] = out[f"{key}_walk_path_s"] / out[f"{key}_walk_energy_s"]
     return out
 
 
