@@ -81,7 +81,7 @@ def test_a_steady_walk_gives_every_nth_frame_and_a_lingering_one_fewer_frames_wh
 
 
 def test_a_second_pass_over_the_same_place_gets_its_own_frames():
-    """Walking a stretch and back: view medoids may merge the two passes; the path spaces both."""
+    """Walking a stretch and back (0.3 m aside): each pass gets half the frames, as its half of the path."""
     there = line_walk(np.full(49, 0.1))
     back = Cameras(there.c2w[::-1].copy(), 100.0, 100.0, 50.0, 40.0, 100, 80)
     back.c2w[:, 1, 3] += 0.3                                       # back along the other side of the corridor
