@@ -1,23 +1,14 @@
 """research.gap_closed: the gap counts only where all frames are significantly above random."""
 
-import json
-
 from research.gap_closed import scene_cells
-
-
-def _unit(ev, name, path, off):
-    d = ev / name
-    d.mkdir(parents=True)
-    views = [{"name": f"images/frame_{i:04d}.jpg", "psnr": v} for i, v in enumerate(path)]
-    views += [{"name": f"images/offpath_{i:04d}.jpg", "psnr": v} for i, v in enumerate(off)]
-    (d / "metrics.json").write_text(json.dumps({"per_view": views}))
+from research.tests.conftest import harness_unit
 
 
 def test_gap_closed_only_where_all_frames_beat_random(tmp_path):
     ev = tmp_path / "walk-x" / "evaluate"
-    _unit(ev, "all", [30, 31, 32, 33], [20.0, 20.1, 19.9, 20.0])
-    _unit(ev, "q_random_s0_b10_t0", [28, 29, 30, 31], [20.0, 19.9, 20.1, 20.0])   # path: 2 dB below all
-    _unit(ev, "q_default-abc_b10_t0", [29.5, 30.5, 31.5, 32.5], [20.0, 20.0, 20.0, 20.0])
+    harness_unit(ev, "all", [30, 31, 32, 33], [20.0, 20.1, 19.9, 20.0])
+    harness_unit(ev, "q_random_s0_b10_t0", [28, 29, 30, 31], [20.0, 19.9, 20.1, 20.0])   # path: 2 dB below all
+    harness_unit(ev, "q_default-abc_b10_t0", [29.5, 30.5, 31.5, 32.5], [20.0, 20.0, 20.0, 20.0])
     rows = {r["part"]: r for r in scene_cells(tmp_path / "walk-x")}
     assert rows["path"]["significant"] and rows["path"]["all_minus_random"] == 2.0
     assert rows["path"]["closed"] == 0.75                       # 1.5 of 2 dB

@@ -1,18 +1,10 @@
 """research.paired_units: two labels of one harness scene folder, paired per view over folds."""
 
-import json
-
 import numpy as np
 import pytest
 
 from research.paired_units import main, paired
-
-
-def _unit(ev, name, psnr):
-    d = ev / name
-    d.mkdir(parents=True)
-    (d / "metrics.json").write_text(json.dumps(
-        {"per_view": [{"name": f"images/{i:04d}.jpg", "psnr": float(v)} for i, v in enumerate(psnr)]}))
+from research.tests.conftest import harness_unit
 
 
 def test_folds_pair_by_view_and_pool(tmp_path):
@@ -21,10 +13,10 @@ def test_folds_pair_by_view_and_pool(tmp_path):
     for fold, shift in ((0, 0.2), (3, -0.1)):
         base = 20 + rng.normal(0, 1, 27)
         sfx = f"_o{fold}" if fold else ""
-        _unit(ev, f"q_new_b59_t0{sfx}", base + shift)
-        _unit(ev, f"q_default-abc_b59_t0{sfx}", base)
-        _unit(ev, f"q_random_s0_b59_t0{sfx}", base - 1)              # a random draw: another label
-    _unit(ev, "q_new_b35_t0", np.zeros(27))                        # no partner at this budget
+        harness_unit(ev, f"q_new_b59_t0{sfx}", base + shift)
+        harness_unit(ev, f"q_default-abc_b59_t0{sfx}", base)
+        harness_unit(ev, f"q_random_s0_b59_t0{sfx}", base - 1)              # a random draw: another label
+    harness_unit(ev, "q_new_b35_t0", np.zeros(27))                        # no partner at this budget
     rows = paired(tmp_path / "office", "new", "default-abc")
     assert len(rows) == 1 and rows[0]["budget"] == 59 and rows[0]["views"] == 54
     assert [f["fold"] for f in rows[0]["folds"]] == [0, 3]

@@ -1,18 +1,9 @@
 """research.walk_kinds: per kind of walk, pooled over its scenes, with Holm's correction."""
 
-import json
-
 import numpy as np
 
 from research.walk_kinds import holm, kind_table, cells, main
-
-
-def _unit(ev, name, path, off):
-    d = ev / name
-    d.mkdir(parents=True)
-    views = [{"name": f"images/frame_{i:04d}.jpg", "psnr": v} for i, v in enumerate(path)]
-    views += [{"name": f"images/offpath_{i:04d}.jpg", "psnr": v} for i, v in enumerate(off)]
-    (d / "metrics.json").write_text(json.dumps({"per_view": views}))
+from research.tests.conftest import harness_unit
 
 
 def test_holm_rejects_in_step_down_order():
@@ -28,11 +19,11 @@ def test_kinds_pool_their_rooms_and_report_the_worst(tmp_path):
         ev = tmp_path / scene / "evaluate"
         base = 30 + rng.normal(0, 1, 20)
         off = 20 + rng.normal(0, 1, 10)
-        _unit(ev, "all", base + 1, off + 0.5)
-        _unit(ev, "q_random_s0_b42_t0", base - 1, off - 0.5)
-        _unit(ev, "q_stride_b42_t0", base, off)
-        _unit(ev, "q_default-abc123_b42_t0", base + shift + rng.normal(0, 0.01, 20), off + shift)
-    _unit(tmp_path / "office" / "evaluate", "all", [1, 2], [])     # not a walk: ignored
+        harness_unit(ev, "all", base + 1, off + 0.5)
+        harness_unit(ev, "q_random_s0_b42_t0", base - 1, off - 0.5)
+        harness_unit(ev, "q_stride_b42_t0", base, off)
+        harness_unit(ev, "q_default-abc123_b42_t0", base + shift + rng.normal(0, 0.01, 20), off + shift)
+    harness_unit(tmp_path / "office" / "evaluate", "all", [1, 2], [])     # not a walk: ignored
     recs = cells(sorted(tmp_path.iterdir()), "default", ["stride", "random"])
     assert {r["scene"] for r in recs} == {"walk-loop", "walk-loop-kitchen", "walk-turn"}
     rows = {(r["kind"], r["part"]): r for r in kind_table(recs, "default", ["stride", "random"])}
@@ -55,13 +46,13 @@ def test_the_walk_rule_choice_ranks_by_cells_behind_then_worst_case(tmp_path):
         ev = tmp_path / scene / "evaluate"
         base = 30 + rng.normal(0, 1, 20)
         off = 20 + rng.normal(0, 1, 10)
-        _unit(ev, "all", base + 1, off + 0.5)
-        _unit(ev, "q_fvs_b42_t0", base - 0.5, off - 0.3)
-        _unit(ev, "q_stride_b42_t0", base, off)
-        _unit(ev, "q_default-abc123_b42_t0", base - 0.2 + rng.normal(0, 0.01, 20), off - 0.2)   # behind stride
+        harness_unit(ev, "all", base + 1, off + 0.5)
+        harness_unit(ev, "q_fvs_b42_t0", base - 0.5, off - 0.3)
+        harness_unit(ev, "q_stride_b42_t0", base, off)
+        harness_unit(ev, "q_default-abc123_b42_t0", base - 0.2 + rng.normal(0, 0.01, 20), off - 0.2)   # behind stride
         lose = -0.5 if "turn" in scene else 0.1                     # ahead on loops, far behind on turns
-        _unit(ev, "q_bold_b42_t0", base + lose + rng.normal(0, 0.01, 20), off + lose)
-        _unit(ev, "q_even_b42_t0", base + 0.05 + rng.normal(0, 0.01, 20), off + 0.05)   # a little ahead
+        harness_unit(ev, "q_bold_b42_t0", base + lose + rng.normal(0, 0.01, 20), off + lose)
+        harness_unit(ev, "q_even_b42_t0", base + 0.05 + rng.normal(0, 0.01, 20), off + 0.05)   # a little ahead
     runs = sorted(tmp_path.iterdir())
     s = {c: score(runs, c, ["default", "stride", "fvs"]) for c in ("default", "stride", "bold", "even")}
     assert s["default"]["cells_behind"] == 4 and s["default"]["worst"] < -0.15
