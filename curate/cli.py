@@ -345,21 +345,25 @@ def _select_run_folder(args) -> int:
                        f"`curate occupancy {args.input} {bad[0]} ...` first")
     if args.out is not None:
         raise CliError("--out is for a pose file; a run folder's selection goes to RUN/select/")
-    return _stage(args, stage.run, Path(args.input))
+    return _stage(args, stage.run, Path(args.input), "select")
 
 
-def _stage(args, fn, run_dir: Path) -> int:
-    """Run one stage of a run folder with its saved options (overridden by the flags given, which are saved)."""
-    from curate.pipeline import save_run_config
+def _stage(args, fn, run_dir: Path, name: str | None = None) -> int:
+    """Run one stage of a run folder with its saved options (overridden by the flags given, which are
+    saved); then redo the cheap stages after it and the report, and name the evaluation when it is
+    now out of date (:func:`curate.pipeline.refresh_after`)."""
+    from curate.pipeline import refresh_after, save_run_config
     base, rec = saved_config(run_dir)
     cfg = run_config(args, base)
     if cfg != base:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
     try:
         res = fn(cfg, run_dir, args.force)
+        print(res.line(), flush=True)
+        if name is not None:
+            refresh_after(cfg, run_dir, name, rec.get("photos"))
     except (FileNotFoundError, ValueError, RuntimeError) as e:
         raise CliError(str(e))
-    print(res.line(), flush=True)
     return 0
 
 
@@ -377,7 +381,8 @@ def cmd_stage(args) -> int:
         from curate.report.stage import run as report
         _, rec = saved_config(run_dir)
         fn = lambda cfg, d, force: report(cfg, d, rec.get("photos"))  # noqa: E731
-    return _stage(args, fn, run_dir)
+        return _stage(args, fn, run_dir)
+    return _stage(args, fn, run_dir, args.command)
 
 
 @_claims("out", ("photos", "poses"), writes=("sfm",))
@@ -428,16 +433,21 @@ def cmd_run(args) -> int:
         out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force, adopt=args.adopt)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
-    rep = json.loads(Path(out).read_text())
-    m = rep.get("methods", {})
-    if m:
-        sel = f"selection ({(rep.get('selection') or {}).get('method', cfg.select.method)})"
-        print("held-out PSNR (dB): " + ", ".join(f"{sel if k == 'selection' else k} {v['psnr']:.2f}"
-                                                 for k, v in m.items())
-              + (f"; {sel} - random {rep['paired']['selection-random']['mean']:+.2f} dB"
-                 if "selection-random" in rep.get("paired", {}) else ""))
-    print(f"report: {Path(args.out) / 'report.html'} ({rep['wall_seconds']:.0f}s)")
+    print_verdict(json.loads(Path(out).read_text()), Path(args.out))
     return 0
+
+
+def print_verdict(rep: dict, run_dir: Path) -> None:
+    """The last lines of ``curate run``: what was exported, what it sees, how it compares (the
+    report's own verdict, :func:`curate.report.verdict.verdict`), and where the report is."""
+    from curate.report.verdict import verdict
+    v = rep.get("verdict") or verdict(rep)
+    print(f"{v['exported']} -> {run_dir / 'export'}")
+    if v.get("coverage"):
+        print(v["coverage"])
+    print(f"verdict: {v['short']}")
+    secs = rep.get("wall_seconds")
+    print(f"report: {run_dir / 'report.html'}" + (f" ({secs:.0f} s)" if secs is not None else ""))
 
 
 def cmd_batch(args) -> int:

@@ -73,6 +73,46 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
         run(pcfg, run_dir / "sfm" / "images", sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
 
 
+CHEAP_AFTER = {"occupancy": ("select", "export"), "select": ("export",), "evaluate": (), "export": ()}
+"""The stages a stage command redoes after its own (seconds: the run folder stays consistent); the
+evaluation (minutes of training) is never redone this way, only said to be out of date."""
+
+
+def check_budget(budget: str, run_dir: Path) -> None:
+    """ValueError unless ``budget`` leaves something to choose among the run's registered photos
+    (checked before the occupancy stage, which may train)."""
+    import json
+    from curate.core.budget import AUTO, parse_budget, resolve_budget
+    from curate.occupancy.stage import check_budget_fits
+    n = len(json.loads((Path(run_dir) / "sfm" / "cameras.json").read_text())["cameras"])
+    b = parse_budget(budget)
+    if b == AUTO:
+        if n < 3:
+            raise ValueError(f"budget auto: {n} registered photos leave nothing to choose")
+    else:
+        check_budget_fits(budget, resolve_budget(b, n), n)
+
+
+def refresh_after(cfg: RunConfig, run_dir: Path, stage: str, photos: str | None = None) -> list[StageResult]:
+    """After ``stage`` ran on its own (``curate select RUN``, ...): redo the cheap stages after it
+    (:data:`CHEAP_AFTER`) and the report, printing a line for each, and a line naming the evaluation
+    when it is now out of date (with the command that refreshes it). Returns the stages' results."""
+    from curate.core.stage import stale_stages
+    from curate.export import stage as export
+    from curate.report import stage as report
+    from curate.select import stage as select
+    run_dir = Path(run_dir)
+    fns = {"select": select.run, "export": export.run}
+    results = [_done(fns[s](cfg, run_dir, False), []) for s in CHEAP_AFTER.get(stage, ())]
+    stale = stale_stages(run_dir)
+    if "evaluate" in stale:
+        print(f"{'evaluate':10s} out of date ({stale['evaluate']}): `curate evaluate {run_dir}` estimates the "
+              "current selection", flush=True)
+    out = report.run(cfg, run_dir, photos)
+    print(out.line(), flush=True)
+    return results + [out]
+
+
 def run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: str | Path | None = None,
         force: bool = False, executor=None, until: str | None = None, adopt: bool = False) -> Path:
     """:func:`_run` inside the claimed and locked run folder (:mod:`curate.core.runfolder`: refused
@@ -113,6 +153,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
         cfg = replace(cfg, budget=part_budget(cfg.budget, parts[0]["n_registered"],
                                               sum(p["n_registered"] for p in parts)))
         print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {cfg.budget} -> {run_dir}", flush=True)
+    check_budget(cfg.budget, run_dir)   # before any training
     steps = [("occupancy", occupancy.run), ("select", select.run)]
     if cfg.run_evaluation:
         steps.append(("evaluate", lambda c, d, f: evaluate.run(c, d, f, executor=executor)))

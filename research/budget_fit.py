@@ -72,9 +72,20 @@ def pool_of(run: Path, pool: list[int]):
     return (pc, capture_kind(pc)[0], *pool_views(pc, nodes, build_pair_index(pc, nodes, EnergyConfig().bins)))
 
 
+def harness_split(run: Path, every: int = 14):
+    """(pool [n], held out [t]) of fold 0 of a harness scene folder (every ``every``-th camera held out,
+    as the harness's default protocol; earlier harness folders recorded it in occupancy/split.json)."""
+    from curate.core.stats import holdout_split
+    from curate.sfm.io import load_sfm
+    old = run / "occupancy" / "split.json"
+    if old.is_file():
+        sp = json.loads(old.read_text())
+        return np.asarray(sp["pool"]), np.asarray(sp["holdout"])
+    return holdout_split(len(load_sfm(run).cameras), every)
+
+
 def scene_points(run: Path, blocks: tuple[int, int, int] | None = None) -> list[dict]:
     """Measured points of one harness scene folder: one per trained unit of fold 0 (and 'all')."""
-    from curate.occupancy.stage import read_split
     from curate.select.spacing import spacing_curve
     from curate.sfm.io import load_sfm
     sfm = load_sfm(run)
@@ -82,8 +93,7 @@ def scene_points(run: Path, blocks: tuple[int, int, int] | None = None) -> list[
         from research.harness import holdout_blocks
         pool, hold = (x.tolist() for x in holdout_blocks(len(sfm.cameras), *blocks, 0))
     else:
-        sp = read_split(run)
-        pool, hold = sp["pool"], sp["holdout"]
+        pool, hold = (x.tolist() for x in harness_split(run))
     _, kind, c, a, depths = pool_of(run, pool)
     _, rho = spacing_curve(c, a, depths)
     rho_nn = pool_spacing(c, a, depths)
@@ -240,10 +250,9 @@ def predict_run(run: Path, at: list[int], tols=(0.3, 0.5, 1.0)) -> dict:
     harness scene folder with trained units of the default method and 'all', the measured figures
     stand beside it (on-path views): ``measured_loss_at`` the budgets measured, and per tolerance
     the measured budget and the measured loss at the predicted one."""
-    from curate.occupancy.stage import read_split
     from curate.select.auto_budget import LOSS_MODEL, predicted_loss
     from curate.select.spacing import spacing_curve
-    pc, kind, c, a, depths = pool_of(run, read_split(run)["pool"])
+    pc, kind, c, a, depths = pool_of(run, harness_split(run)[0].tolist())
     _, rho = spacing_curve(c, a, depths)
     loss = predicted_loss(rho, kind)
     alpha, power = LOSS_MODEL[kind]

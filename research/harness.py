@@ -295,15 +295,21 @@ def pack(scenes: list[str], dest: Path, side: int) -> None:
 
 
 def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = None) -> Path:
-    """Run folder with imported poses and (``train``) the occupancy stage (pool field) done."""
+    """Run folder with imported poses and (``train``) the occupancy stage done with a field trained
+    on fold 0's pool (``refine.field`` 'always'): it refines the occupancy and is fold 0's 'all' ceiling."""
+    from dataclasses import replace as _replace
     from curate.config import RunConfig
+    from curate.core.stats import holdout_split
     from curate.occupancy.stage import run as stage_occupancy
     from curate.sfm.colmap import import_poses
+    from curate.sfm.io import load_sfm
     run = out / scene
     cfg = RunConfig(evaluate=ev)
+    cfg = _replace(cfg, refine=_replace(cfg.refine, field="always"))
     import_poses(cfg.sfm, scene_poses(scene, out, data), run)
     if train:
-        stage_occupancy(cfg, run)
+        pool = holdout_split(len(load_sfm(run).cameras), ev.holdout_every)[0].tolist()
+        stage_occupancy(cfg, run, train_on=pool)
     return run
 
 

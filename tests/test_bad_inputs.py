@@ -154,7 +154,8 @@ def test_bad_poses_are_one_line_errors_naming_the_file(good, tmp_path, capsys, c
 OPTIONS = [
     (["--budget", "0"], "at least 2"), (["--budget", "1"], "at least 2"), (["--budget", "-3"], "--budget"),
     (["--budget", "ten"], "--budget"), (["--budget", "0%"], "--budget"), (["--budget", "150%"], "--budget"),
-    (["--budget", "15"], "whole pool"), (["--budget", "400"], "whole pool"), (["--budget", "100%"], "whole pool"),
+    (["--budget", "16"], "all 16 registered photos"), (["--budget", "400"], "all 16 registered photos"),
+    (["--budget", "100%"], "all 16 registered photos"),
     (["--iters", "0"], "--iters"), (["--iters", "-5"], "--iters"), (["--iters", "many"], "--iters"),
     (["--holdout-every", "0"], "--holdout-every"), (["--holdout-every", "1"], "--holdout-every"),
     (["--eval-size", "0"], "--eval-size"), (["--random-seeds", "-1"], "--random-seeds"),

@@ -29,8 +29,8 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
         Image.fromarray(rng.integers(0, 255, (48, 64, 3), np.uint8)).save(run / "sfm" / "images" / nm)
     (run / "sfm" / "images.json").write_text(json.dumps({"photos": [
         {"original": f"/photos/{nm}", "rel": nm, "working": nm, "status": "kept", "registered": True} for nm in names]}))
-    hold, pool, chosen = [0, 5], [i for i in range(n) if i not in (0, 5)], [3, 7, 1]
-    sel = {"method": "energy", "budget": 3, "holdout_every": 5, "holdout": hold, "pool": pool, "chosen": chosen,
+    hold, chosen = [0, 5], [3, 7, 1]
+    sel = {"method": "energy", "budget": 3, "holdout_every": 0, "holdout": [], "pool": list(range(n)), "chosen": chosen,
            "chosen_names": [names[i] for i in chosen], "energy": [10.5, 17.25, 20.125], "angular": [0.5, 1.25, 2.125],
            "frequency": [10.0, 16.0, 18.0], "seconds": 0.12, "n_nodes": 40, "up_axis": 2}
     (run / "select").mkdir()
@@ -38,10 +38,10 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
     flat = rng.choice(res ** 3, 40, replace=False)
     np.savez(run / "select" / "nodes.npz", nodes=rng.uniform(-1, 1, (40, 3)), angular=rng.uniform(0, 0.3, 40),
              frequency=rng.uniform(0.5, 1, 40), flat=flat, res=res, box_min=-np.ones(3), box_max=np.ones(3))
-    rep = {"photos": "/photos", "run_dir": str(run), "budget": 3, "n_photos": 12, "n_registered": n, "n_pool": 8,
-           "n_holdout": 2, "holdout_every": 5, "wall_seconds": 123.4,
-           "stages": [{"name": "sfm", "seconds": 1.5, "skipped": True}, {"name": "select", "seconds": 0.25,
-                                                                          "skipped": False}],
+    rep = {"photos": "/photos", "run_dir": str(run), "budget": 3, "n_photos": 12, "n_registered": n,
+           "n_candidates": n, "wall_seconds": 123.4,
+           "stages": [{"name": "sfm", "seconds": 1.5, "skipped": True, "compute_seconds": 61.5},
+                      {"name": "select", "seconds": 0.25, "skipped": False, "compute_seconds": 0.25}],
            "sfm": {"skipped": [{"file": "/photos/notes.txt", "reason": "not an image <txt>"}],
                    "dropped": [{"file": "/photos/dup.jpg", "reason": "near-duplicate"}]},
            "selection": {k: v for k, v in sel.items() if k not in ("holdout", "pool")}}
@@ -68,6 +68,9 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
         rep["paired"] = {"selection-random": {"mean": 2.75, "lo": 1.125, "hi": 4.375, "n": 2},
                          "selection-fvs": {"mean": 1.625, "lo": -0.5, "hi": 3.75, "n": 2}}
         rep["gap_closed"] = 0.6286
+        rep["evaluation"] = {"status": "current", "refresh": f"curate evaluate {run}"}
+        rep["estimate"] = {"budget": 3, "n_pool": 8, "n_holdout": 2, "holdout_every": 5, "method": "energy"}
+        (run / "evaluate" / "summary.json").write_text(json.dumps({"protocol": {"holdout": hold, "holdout_every": 5}}))
     (run / "report.json").write_text(json.dumps(rep))
     return run
 
@@ -81,11 +84,15 @@ def test_report_with_evaluation(tmp_path):
     out = write_html(run)
     assert out == run / "report.html"
     page = out.read_text()
-    for v in ("25.12", "22.38 ± 0.62", "23.50", "26.75", "+2.75", "+1.12 .. +4.38", "+1.62", "63%", "123.4",
-              "skipped (unchanged)", "near-duplicate", "not an image &lt;txt&gt;", "img_03.jpg", "random (seed 0)"):
+    for v in ("25.12", "22.38 ± 0.62", "23.50", "26.75", "+2.75", "+1.12 .. +4.38", "+1.62", "63%", "2.1 min",
+              "near-duplicate", "not an image &lt;txt&gt;", "img_03.jpg", "this method, 3 of 8", "all 8 photos",
+              "<b>ahead of</b> random subsets", "<b>level with</b> farthest-view sampling"):
         assert v in page, v
+    body = page[page.index("<body"):]
+    # the first screen: the verdict, then the chosen photos, before any table
+    assert body.index('class="verdict"') < body.index("The chosen photos") < body.index("<table")
     srcs = image_sources(page)
-    # 3 thumbnails + 2 held-out views x (gt + energy, random, fvs, all) + 2 floor plans
+    # 3 thumbnails + 2 held-out views x (gt + selection, random, fvs, all) + 2 floor plans
     assert len(srcs) == 3 + 2 * 5 + 2
     assert all(s.startswith("data:image/") for s in srcs)
     assert "http://" not in re.sub(r"http://www\.w3\.org/[\w/.]+", "", page) and "https://" not in page  # namespaces only
@@ -97,7 +104,8 @@ def test_report_without_evaluation_and_missing_files(tmp_path):
     run = make_run(tmp_path, evaluated=False)
     (run / "select" / "nodes.npz").unlink()
     page = write_html(run).read_text()
-    assert "Not evaluated" in page and "nodes.npz missing" in page
+    assert page.count("Not evaluated") == 1 and "nodes.npz missing" in page   # said once, in the verdict
+    assert "Held-out photos side by side" not in page and "How the selection compares" not in page
     assert all(s.startswith("data:image/") for s in image_sources(page))
     assert "Not available" not in page
     # an almost empty run folder still gives a page
@@ -154,10 +162,10 @@ def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path
     (run / "sfm" / "stage.json").write_text(json.dumps(rec))
     page = write_html(run).read_text()
     body = page[page.index("<body"):]
-    assert "walk.mp4: 3600 frames decoded, 412 kept as candidates" in body
+    assert "video walk.mp4" in body and "3600 frames decoded, 412 kept as candidates" in body
     assert body.count('class="warnbox"') == 2
     assert "split into 2 models (6, 3 photos)" in body and "img_07.jpg..img_09.jpg (3)" in body
-    assert body.index("warnbox") < body.index("<dl")       # above the figures
+    assert body.index("warnbox") < body.index('class="verdict"') < body.index("<dl")   # above the figures
 
 
 @pytest.mark.parametrize("kind, says, not_says", [("walk", "eight synthetic walks", "skull"),
@@ -171,3 +179,30 @@ def test_budget_auto_section_states_the_check_for_its_kind(kind, says, not_says)
             "curve_k": [2, 12, 39], "curve_loss_db": [4.0, 0.45, 0.01], "note": f"auto chose 12 of 40 ({kind})"}
     html = _budget_auto(SimpleNamespace(sel={"budget_auto": auto}, methods={}))
     assert says in html and not_says not in html and auto["note"] in html and "<svg" in html
+
+
+def test_an_out_of_date_evaluation_is_never_shown_as_this_selections(tmp_path):
+    """A report whose evaluation estimates an earlier selection says so and shows none of its figures."""
+    run = make_run(tmp_path)
+    rep = json.loads((run / "report.json").read_text())
+    for k in ("methods", "paired", "gap_closed", "estimate"):
+        rep.pop(k)
+    rep["evaluation"] = {"status": "out of date", "why": "select was redone since", "refresh": "curate evaluate R",
+                         "of": {"exported_budget": 22, "method": "path"}}
+    (run / "report.json").write_text(json.dumps(rep))
+    page = write_html(run).read_text()
+    assert "earlier selection (22 photos, path)" in page and "curate evaluate R" in page
+    assert "25.12" not in page and "How the selection compares" not in page
+
+
+def test_the_camera_map_labels_the_axes_it_plots():
+    """The top-down map's axis labels are the world axes it draws (z up: x right, y up; y up: z, x)."""
+    from curate.report.charts import camera_map, text_of
+    from curate.report.plots import top_down_axes
+    c = np.array([[0.0, 0, 1], [1, 0, 1], [0, 1, 1]])
+    for up, target in ((2, np.array([0.5, 0.5, 0.0])), (1, np.array([0.5, 2.0, 0.5]))):
+        cams = Cameras(look_at(c if up == 2 else c[:, [0, 2, 1]], np.zeros((3, 3)) + target), 50, 50, 32, 24, 64, 48)
+        k, a, b, _ = top_down_axes(cams.c2w, up)
+        svg = camera_map(cams.centres[:, [a, b]], cams.view_dirs[:, [a, b]], [0], "t", axis_labels=("xyz"[a], "xyz"[b]))
+        labels = text_of(svg).split()
+        assert "xyz"[a] in labels and "xyz"[b] in labels and "xyz"[k] not in labels

@@ -24,8 +24,11 @@ window.addEventListener('load', () => {
   const bad = imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.alt || i.src.slice(0, 40));
   const wide = [...document.body.querySelectorAll('*')].filter(e => e.getBoundingClientRect().right > window.innerWidth + 1
       && !e.closest('.scroll')).map(e => e.tagName + '.' + e.className);
+  const row = document.querySelector('table.renders tr:nth-child(2)');
+  const cols = row ? [...row.querySelectorAll('td')].map(td => {
+      const im = td.querySelector('img'); return [td.getBoundingClientRect().width, im ? im.getBoundingClientRect().width : 0]; }) : [];
   const r = {scroll: document.documentElement.scrollWidth, inner: window.innerWidth, images: imgs.length,
-             bad: bad, errors: window.__errs, wide: wide.slice(0, 5)};
+             bad: bad, errors: window.__errs, wide: wide.slice(0, 5), render_cols: cols};
   document.body.setAttribute('data-check', JSON.stringify(r));
 });
 </script>"""
@@ -62,3 +65,7 @@ def test_report_fits_the_window_loads_every_image_and_logs_no_error(tmp_path, wi
     assert r["errors"] == [], r
     assert r["scroll"] <= r["inner"], r        # no horizontal scrolling of the page
     assert r["wide"] == [], r                  # nothing sticks out (the renders table scrolls in its own box)
+    cells = [c for c, _ in r["render_cols"]]
+    imgs = [i for _, i in r["render_cols"]]
+    assert len(cells) == 5, r                   # held-out photo, selection, random, FVS, all
+    assert max(cells) - min(cells) <= 2 and max(imgs) - min(imgs) <= 2, r   # no column looks favoured

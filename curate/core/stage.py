@@ -27,6 +27,9 @@ STAGE_FILE = "stage.json"
 STAGES = ("sfm", "occupancy", "select", "evaluate", "export", "report")
 """The stages of ``curate run``, in order; each but ``report`` writes ``RUN/<stage>/``."""
 
+READS = {"occupancy": ("sfm",), "select": ("occupancy",), "evaluate": ("select",), "export": ("select",)}
+"""The stages each stage's result is computed from (its record's ``inputs``: their keys when it ran)."""
+
 
 @dataclasses.dataclass
 class StageResult:
@@ -146,6 +149,55 @@ def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
     return False
 
 
+def current_key(run_dir: str | Path, stage: str) -> str | None:
+    """The key of ``stage``'s finished result in ``run_dir`` (None: not finished). The evaluation
+    has no stage record of its own: its key is the one its summary records."""
+    run_dir = Path(run_dir)
+    if stage == "evaluate":
+        try:
+            return json.loads((run_dir / "evaluate" / "summary.json").read_text()).get("key")
+        except (OSError, ValueError):
+            return None
+    return (read_stage(run_dir / stage) or {}).get("key")
+
+
+def inputs_of(run_dir: str | Path, stage: str) -> dict[str, str | None]:
+    """{input stage: its current key} for ``stage`` (:data:`READS`): what a record names as its inputs."""
+    return {s: current_key(run_dir, s) for s in READS.get(stage, ())}
+
+
+def stale_stages(run_dir: str | Path) -> dict[str, str]:
+    """{stage: why} for every finished stage of ``run_dir`` computed from inputs that have changed
+    since (a stage it reads was redone, or is itself stale), in :data:`STAGES` order. A record
+    without ``inputs`` (an earlier curate) counts as stale: nothing says what it was computed from."""
+    run_dir = Path(run_dir)
+    out: dict[str, str] = {}
+    for stage in STAGES:
+        if stage not in READS:
+            continue
+        if stage == "evaluate":
+            try:
+                rec = json.loads((run_dir / "evaluate" / "summary.json").read_text())
+            except (OSError, ValueError):
+                continue
+        else:
+            rec = read_stage(run_dir / stage)
+            if rec is None:
+                continue
+        recorded = rec.get("inputs")
+        if not isinstance(recorded, dict):
+            out[stage] = "made by an earlier curate: its inputs are not recorded"
+            continue
+        for s in READS[stage]:
+            if s in out:
+                out[stage] = f"it reads {s}, which is out of date"
+                break
+            if recorded.get(s) != current_key(run_dir, s):
+                out[stage] = f"{s} was redone since"
+                break
+    return out
+
+
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename: a reader
     never sees half a file."""
@@ -164,7 +216,9 @@ def write_json_atomic(path: str | Path, obj: Any) -> Path:
 def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outputs: dict | None = None,
                  seed: int | None = None, **extra: Any) -> dict:
     """Write the stage record; call last, once every output file is in place."""
-    rec = {"key": key, "config": _record(cfg), "versions": versions(), "seed": seed,
+    stage_dir = Path(stage_dir)
+    rec = {"key": key, "inputs": inputs_of(stage_dir.parent, stage_dir.name) if stage_dir.name in READS else {},
+           "config": _record(cfg), "versions": versions(), "seed": seed,
            "seconds": round(time.perf_counter() - started, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
            "outputs": outputs or {}, **extra}
     from curate.core.runfolder import manifest

@@ -127,7 +127,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     from curate.core.runfolder import check_holder
     import torch
     from curate.field.metrics import psnr, render_image, save_png, ssim
-    from curate.core.stage import begin_stage, finish_stage, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, write_json_atomic, write_text_atomic
     from curate.field.train import TrainStats, load_image, train_field
 
     d = Path(run_dir) / "evaluate" / unit.key
@@ -146,8 +146,12 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
         import shutil
         shutil.copy2(field_path, d / "field.pt")
     else:
+        def report(it: int, _secs: float, _fld) -> None:   # the parent's bar reads it (run_units)
+            if it % PROGRESS_EVERY == 0:
+                write_text_atomic(d / PROGRESS_FILE, str(it))
         fld, st = train_field(cfg.field, cams[sub], [paths[i] for i in sub], d, time_budget_s=cfg.time_budget_s,
-                              iters=cfg.iters, seed=cfg.train_seed, box=box)
+                              iters=cfg.iters, seed=cfg.train_seed, box=box, callback=report)
+        (d / PROGRESS_FILE).unlink(missing_ok=True)
     check_holder(run_dir, lock_token)  # after the long training: do not render into a folder taken since
     per = []
     test = cams[list(holdout)]
@@ -167,6 +171,26 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     log.info("evaluate %s: %d images, PSNR %.2f, SSIM %.3f (%.0fs)", unit.key, len(sub), m["psnr"], m["ssim"],
              time.perf_counter() - t0)
     return m
+
+
+PROGRESS_FILE = ".progress"
+"""``RUN/evaluate/<unit>/.progress``: the iterations a training has done (removed when it finishes)."""
+PROGRESS_EVERY = 10
+
+
+def _unit_progress(ev_dir: Path, units: list, iters: int, done: set) -> int:
+    """Iterations done over ``units``: ``iters`` for each finished one (``done``), else what its
+    progress file says."""
+    n = 0
+    for u in units:
+        if u.key in done:
+            n += iters
+            continue
+        try:
+            n += min(int((ev_dir / u.key / PROGRESS_FILE).read_text()), iters)
+        except (OSError, ValueError):
+            pass
+    return n
 
 
 def _unit_entry(args: tuple) -> dict:
@@ -223,17 +247,49 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     token = held_token(run_dir)
     args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), token,
              level) for u in todo]
-    bar = tqdm(total=len(units), initial=len(fresh), desc="evaluate (trainings)", disable=not progress)
-    from concurrent.futures import as_completed
+    # progress in training iterations over every unit (each training reports through its progress file)
+    ev_dir = Path(run_dir) / "evaluate"
+    trained = [u for u in todo if u.key not in field_paths]
+    bar = tqdm(total=len(trained) * cfg.iters, desc=f"evaluate: {len(trained)} trainings", unit="it",
+               disable=not progress or not trained, smoothing=0.05)
+    done: set = set()
+
+    keys_trained = {u.key for u in trained}
+
+    def show() -> None:
+        bar.n = _unit_progress(ev_dir, trained, cfg.iters, done)
+        bar.set_postfix_str(f"{len(done & keys_trained)} of {len(trained)} done", refresh=False)
+        bar.refresh()
+
+    def collect(futs: dict) -> None:
+        from concurrent.futures import FIRST_COMPLETED, wait
+        pending = set(futs)
+        while pending:
+            finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+            for f in finished:
+                results[futs[f]] = f.result()
+                done.add(futs[f])
+            show()
+
     if executor is not None and todo:
-        futs = {executor.submit(_unit_entry, a): a[1].key for a in args}
-        for f in as_completed(futs):
-            results[futs[f]] = f.result()
-            bar.update(1)
+        collect({executor.submit(_unit_entry, a): a[1].key for a in args})
     elif workers <= 1 or len(todo) <= 1:
-        for a in args:
-            results[a[1].key] = _unit_entry(a)
-            bar.update(1)
+        import threading
+        stop = threading.Event()       # one at a time, here; a thread only moves the bar
+
+        def poll() -> None:
+            while not stop.wait(1.0):
+                show()
+        t = threading.Thread(target=poll, daemon=True)
+        t.start()
+        try:
+            for a in args:
+                results[a[1].key] = _unit_entry(a)
+                done.add(a[1].key)
+        finally:
+            stop.set()
+            t.join()
+        show()
     else:
         import multiprocessing as mp
         import os
@@ -241,13 +297,9 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
         from curate.core.runfolder import die_with_parent
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
                                  initargs=(os.getpid(),)) as ex:
-            futs = {ex.submit(_unit_entry, a): a[1].key for a in args}
-            for f in as_completed(futs):
-                results[futs[f]] = f.result()
-                bar.update(1)
+            collect({ex.submit(_unit_entry, a): a[1].key for a in args})
     for u, src in dups:
         results[u.key] = _copy_unit(Path(run_dir) / "evaluate", src.key, u, results[src.key])
-        bar.update(1)
     bar.close()
     return {u.key: results[u.key] for u in units}
 

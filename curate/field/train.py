@@ -50,12 +50,13 @@ def load_image(src, width: int, height: int) -> np.ndarray:
     return arr
 
 
-def load_images(images: Sequence, cams: Cameras) -> list[np.ndarray]:
-    """Every image at its camera's size: list of [H_i, W_i, 3] float32."""
+def load_images(images: Sequence, cams: Cameras, progress: bool = False) -> list[np.ndarray]:
+    """Every image at its camera's size: list of [H_i, W_i, 3] float32 (``progress``: a bar, shown
+    only when loading takes more than a second)."""
     if len(images) != len(cams):
         raise ValueError(f"{len(images)} images for {len(cams)} cameras")
     return [load_image(im, int(cams.width[i]), int(cams.height[i]))
-            for i, im in enumerate(tqdm(images, desc="load images", leave=False, disable=len(images) < 20))]
+            for i, im in enumerate(tqdm(images, desc="load images", leave=False, delay=1.0, disable=not progress))]
 
 
 def default_box(cams: Cameras, object_cover: float = 0.9, margin: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
@@ -135,7 +136,7 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
                 box: tuple | None = None, prior: NodeGrid | None = None,
                 callback: Callable[[int, float, RadianceField], None] | None = None,
                 ckpt_name: str = "field.pt", init: RadianceField | None = None,
-                start_iter: int = 0) -> tuple[RadianceField, TrainStats]:
+                start_iter: int = 0, progress_desc: str | None = None) -> tuple[RadianceField, TrainStats]:
     """Train a field on ``images`` seen by ``cams`` (at the cameras' sizes).
 
     Args:
@@ -166,6 +167,7 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
             is first re-pruned ``occ_update_start`` iterations after ``start_iter``; the
             ray/jitter generator restarts from ``seed`` (pass a different seed per call).
             Validation / early stopping work as usual (``cfg.val_every = 0`` turns them off).
+        progress_desc: show a progress bar with this label (None: only with INFO logging).
     Returns:
         (field, stats).
     """
@@ -184,7 +186,7 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(seed)
     gen = torch.Generator(device="cpu").manual_seed(seed)
-    imgs = load_images(images, cams)
+    imgs = load_images(images, cams, progress=progress_desc is not None)
     if val_cams is None:
         val_cams, val_imgs = _default_val(cams, imgs)
     else:
@@ -227,7 +229,8 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
     if init is not None:
         ups = [(at, r) for at, r in ups if at >= start_iter and r > fld.res]
     occ_start = cfg.occ_update_start + (start_iter if init is not None else 0)
-    pbar = tqdm(total=iters, desc="train field", leave=False, disable=not log.isEnabledFor(logging.INFO))
+    pbar = tqdm(total=iters, desc=progress_desc or "train field", leave=False,
+                disable=progress_desc is None and not log.isEnabledFor(logging.INFO))
     while True:
         if iters is not None and it - start_iter >= iters:
             st.stop_reason = "iters"

@@ -147,6 +147,18 @@ class RefineConfig:
     from any point)."""
     prior_dilation: int = 2
     """Dilation (voxels) of the prior for 'intersect_dilated'."""
+    field: str = "auto"
+    """When a radiance field refines the occupancy: 'auto' (only for the paper's energy, when the
+    sparse points are too few to give the scene's surface, e.g. poses without points) or 'always'
+    (the paper's refinement on every run: one more training)."""
+
+    def __post_init__(self) -> None:
+        if self.field not in REFINE_FIELD:
+            raise ValueError(f"refine field must be one of {REFINE_FIELD}, got {self.field!r}")
+
+
+REFINE_FIELD = ("auto", "always")
+"""``RefineConfig.field`` choices."""
 
 
 def field_occupancy(field, grid: NodeGrid, cfg: RefineConfig = RefineConfig()) -> np.ndarray:

@@ -119,15 +119,17 @@ def bar_chart(names, values, errors=None, title: str = "", ylabel: str = "", wid
 
 
 def camera_map(xy: np.ndarray, dirs_xy: np.ndarray, chosen, title: str, extra_xy: np.ndarray | None = None,
-               width: int = 520, height: int = 420, labels=("pool", "chosen", "held out")) -> str:
+               width: int = 520, height: int = 420, labels=("pool", "chosen", "held out"),
+               axis_labels: tuple[str, str] = ("x", "y")) -> str:
     """Top-down map of camera centres [N, 2] with view-direction ticks [N, 2]; ``chosen`` highlighted,
     ``extra_xy`` [E, 2] (e.g. held-out views) drawn as hollow squares. The legend shows each mark as
-    it is drawn (the legend is made from the drawn marks)."""
-    return _svg(camera_map_figure(xy, dirs_xy, chosen, title, extra_xy, width, height, labels)[0])
+    it is drawn (the legend is made from the drawn marks). ``axis_labels``: the world axes plotted
+    horizontally and vertically."""
+    return _svg(camera_map_figure(xy, dirs_xy, chosen, title, extra_xy, width, height, labels, axis_labels)[0])
 
 
 def camera_map_figure(xy, dirs_xy, chosen, title, extra_xy=None, width=520, height=420,
-                      labels=("pool", "chosen", "held out")):
+                      labels=("pool", "chosen", "held out"), axis_labels=("x", "y")):
     """(figure, axes) of :func:`camera_map`."""
     xy = np.asarray(xy, np.float64).reshape(-1, 2)
     d = np.asarray(dirs_xy, np.float64).reshape(-1, 2)
@@ -151,8 +153,8 @@ def camera_map_figure(xy, dirs_xy, chosen, title, extra_xy=None, width=520, heig
                    label=labels[2], zorder=4)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title(title)
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    ax.set_xlabel(axis_labels[0])
+    ax.set_ylabel(axis_labels[1])
     ax.legend(frameon=False, loc="best", fontsize=8)
     return fig, ax
 

@@ -31,6 +31,24 @@ def recorded_seconds(run_dir: Path) -> dict[str, float | None]:
     return out
 
 
+def evaluation_status(run_dir: Path, stale: dict[str, str]) -> dict:
+    """What the run's evaluation is worth now: ``status`` 'current' (it estimates the exported
+    selection), 'out of date' (it estimates an earlier selection: ``why``, and ``of``: that
+    selection's size and method) or 'not run'; ``refresh``: the command that (re)makes it."""
+    summ = Path(run_dir) / "evaluate" / "summary.json"
+    refresh = f"curate evaluate {run_dir}"
+    if not summ.is_file():
+        return {"status": "not run", "refresh": refresh}
+    if "evaluate" not in stale:
+        return {"status": "current", "refresh": refresh}
+    try:
+        pr = json.loads(summ.read_text()).get("protocol") or {}
+    except (OSError, ValueError):
+        pr = {}
+    return {"status": "out of date", "why": stale["evaluate"], "refresh": refresh,
+            "of": {"exported_budget": pr.get("exported_budget"), "method": pr.get("method")}}
+
+
 def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: list[dict] | None = None,
         wall: float | None = None) -> StageResult:
     """Write ``report.json`` and ``report.html``.
@@ -39,7 +57,8 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
     ``stages`` adds ``compute_seconds``, the time each took when it actually ran;
     ``wall_seconds``: this invocation (``curate report`` alone keeps the previous figure).
     """
-    from curate.core.stage import config_dict, read_stage, write_json_atomic
+    from curate.core.stage import config_dict, read_stage, stale_stages, versions, write_json_atomic
+    from curate.report.verdict import verdict
     from curate.select.stage import read_selection
     from curate.sfm.io import load_sfm
     t0 = time.perf_counter()
@@ -53,9 +72,10 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
     timings = [{**t, "compute_seconds": recorded.get(t["name"])} for t in timings]
     if wall is None and (run_dir / "report.json").is_file():
         wall = json.loads((run_dir / "report.json").read_text()).get("wall_seconds")
+    stale = stale_stages(run_dir)
     rep = {"photos": photos, "run_dir": str(run_dir), "budget": sel["budget"], "n_photos": len(photos_rec),
-           "n_registered": len(sfm.cameras), "n_pool": len(sel["pool"]), "n_holdout": len(sel["holdout"]),
-           "holdout_every": sel["holdout_every"], "wall_seconds": None if wall is None else round(wall, 2),
+           "n_registered": len(sfm.cameras), "n_candidates": len(sel["pool"]),
+           "wall_seconds": None if wall is None else round(wall, 2),
            "stages": timings, "compute_seconds": round(sum(v for v in recorded.values() if v), 2),
            "sfm": {"skipped": [{"file": r["original"], "reason": r.get("reason", "")} for r in photos_rec
                                if r.get("status") == "skipped"],
@@ -65,7 +85,8 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
                                     if r.get("status") == "kept" and not r.get("registered")],
                    **(read_stage(run_dir / "sfm") or {}).get("stats", {})},
            "selection": {k: v for k, v in sel.items() if k not in ("holdout", "pool")},
-           "config": config_dict(cfg)}
+           "stale": stale, "config": config_dict(cfg), "version": versions()["curate"],
+           "written_at": time.strftime("%Y-%m-%d %H:%M")}
     parts = []
     for f in sorted((run_dir / "parts").glob("*/report.json"), key=lambda f: int(f.parent.name)
                     if f.parent.name.isdigit() else 0):  # --on-split each: the other parts' own runs
@@ -75,9 +96,15 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
                       "report": f"parts/{f.parent.name}/report.html", "export": f"parts/{f.parent.name}/export"})
     if parts:
         rep["parts"] = parts
-    summ = run_dir / "evaluate" / "summary.json"
-    if cfg.run_evaluation and summ.is_file():
-        rep.update(json.loads(summ.read_text()))
+    rep["evaluation"] = evaluation_status(run_dir, stale)
+    if rep["evaluation"]["status"] == "current":   # figures only of the selection they describe
+        summ = json.loads((run_dir / "evaluate" / "summary.json").read_text())
+        rep.update({k: summ[k] for k in ("methods", "paired", "gap_closed") if k in summ})
+        pr = summ.get("protocol") or {}
+        rep["estimate"] = {"budget": pr.get("budget"), "n_pool": len(pr.get("pool", [])),
+                           "n_holdout": len(pr.get("holdout", [])), "holdout_every": pr.get("holdout_every"),
+                           "method": pr.get("method"), "shared_with_export": pr.get("shared_with_export")}
+    rep["verdict"] = verdict(rep)
     write_json_atomic(run_dir / "report.json", rep)
     from curate.report.run_report import write_html
     write_html(run_dir)

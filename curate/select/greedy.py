@@ -250,7 +250,7 @@ def greedy_select(index: PairIndex, budget: int, cfg: EnergyConfig = EnergyConfi
     steps = range(min(int(budget), int((~st.taken).sum())))
     if progress:
         from tqdm import tqdm
-        steps = tqdm(steps, desc="select", unit="cam", leave=False)
+        steps = tqdm(steps, desc="select", unit="cam", leave=False, delay=1.0)
     for _ in steps:
         ts = time.perf_counter()
         k = argmax_lowest(st.scores(), ~st.taken)

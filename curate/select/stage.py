@@ -1,12 +1,19 @@
-"""The select stage: choose the budget from the pool -> ``RUN/select``.
+"""The select stage: choose the budget from every registered photo -> ``RUN/select``.
+
+The selection is a function of the capture and of the options that define a selection, never of
+the evaluation: it chooses among all registered photos, with or without ``--no-evaluate``
+(the evaluation estimates its quality by choosing again with frames held out:
+:mod:`curate.evaluate.stage`).
 
 ``selection.json`` has one schema, written by :func:`selection_record` for a run folder
 and for ``curate select`` on a pose file alike: ``method`` (what ran), ``budget`` (the
-resolved count), ``budget_text`` (as given), ``pool`` and ``holdout`` (camera indices),
-``holdout_every``, ``chosen`` (camera indices in the order chosen), ``chosen_names``,
+resolved count), ``budget_text`` (as given), ``pool`` (the candidates: every registered camera)
+and ``holdout`` (empty: kept for older readers), ``holdout_every`` (0),
+``chosen`` (camera indices in the order chosen), ``chosen_names``,
 per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``, ``n_nodes``, ``up_axis``,
-``note``, ``box`` / ``res`` of the node grid, and with ``--budget auto`` ``budget_auto``
-(:class:`curate.select.auto_budget.BudgetChoice`: the predicted loss curve and why). ``nodes.npz``: ``nodes`` [M,3], per-node
+``note``, ``box`` / ``res`` of the node grid, ``coverage`` (:func:`coverage`), and with
+``--budget auto`` ``budget_auto`` (:class:`curate.select.auto_budget.BudgetChoice`: the predicted
+loss curve and why). ``nodes.npz``: ``nodes`` [M,3], per-node
 ``angular`` and ``frequency`` of the chosen set, ``flat`` [M] grid indices, ``res``,
 ``box_min``, ``box_max``. Camera indices are into ``RUN/sfm/cameras.json``.
 """
@@ -38,6 +45,22 @@ def up_axis(cams: "Cameras") -> int:
     return int(np.argmax(np.abs(up)))
 
 
+def coverage(index, chosen) -> dict:
+    """How much of what the whole capture sees the chosen cameras see: over the scene's surface
+    nodes seen by at least one camera of the pool (``index``: its pair index), the fraction seen by
+    at least one (``seen``) and at least two (``seen_twice``) of ``chosen`` (pool indices).
+    {"seen", "seen_twice", "n_nodes_seen"}; fractions are 0 when the pool sees no node."""
+    cams = np.asarray(index.cam, np.int64)                                   # [P]
+    node_of = np.repeat(np.arange(index.n_nodes), np.diff(index.indptr))     # [P]
+    pick = np.zeros(index.n_cams, bool)
+    pick[np.asarray(list(chosen), np.int64)] = True
+    by_pool = np.bincount(node_of, minlength=index.n_nodes)                  # [M] cameras seeing each node
+    by_chosen = np.bincount(node_of[pick[cams]], minlength=index.n_nodes)    # [M] chosen cameras seeing it
+    n = int((by_pool > 0).sum())
+    frac = (lambda m: float(m.sum() / n) if n else 0.0)
+    return {"seen": frac(by_chosen >= 1), "seen_twice": frac(by_chosen >= 2), "n_nodes_seen": n}
+
+
 def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout: list[int], holdout_every: int,
                      budget_text: str, grid: "NodeGrid") -> dict:
     """The ``selection.json`` record of ``sel`` (chosen indices into ``pool``) over all cameras ``cams``."""
@@ -49,10 +72,10 @@ def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout
 
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
-    """Selection over the pool -> ``RUN/select``."""
+    """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
-    from curate.occupancy.stage import check_budget_fits, key_of, load_node_grid, read_split
+    from curate.occupancy.stage import check_budget_fits, key_of, load_node_grid
     from curate.select.energy import energy_of_subset
     from curate.select.select import select
     from curate.select.visibility import build_pair_index
@@ -69,8 +92,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     if begin_stage(d, key, force):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)
-    split = read_split(run_dir)
-    pool = split["pool"]
+    pool = list(range(len(sfm.cameras)))
     if b != AUTO:
         budget = resolve_budget(b, len(pool))
         check_budget_fits(cfg.budget, budget, len(pool))
@@ -91,7 +113,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
                         frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
                         res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
-    rec = selection_record(sel, sfm.cameras, pool, split["holdout"], split["holdout_every"], cfg.budget, grid)
+    rec = selection_record(sel, sfm.cameras, pool, [], 0, cfg.budget, grid)
+    rec["coverage"] = coverage(index, sel.chosen)
     if auto is not None:
         rec["budget_auto"] = auto.to_dict()
     write_json_atomic(d / "selection.json", rec)
@@ -100,9 +123,10 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
     how = sel.method if sel.method == cfg.select.method else f"{cfg.select.method}: {sel.method}"
     why = f"; {auto.note}" if auto is not None else ""
+    cov = rec["coverage"]
+    sees = (f"; they see {100 * cov['seen']:.0f}% of the scene the capture sees" if cov["n_nodes_seen"] else "")
     return StageResult("select", d, True, time.perf_counter() - t0,
-                       f"{len(rec['chosen'])} of {len(pool)} pool images ({how}{e}), {rec['n_nodes']} nodes, "
-                       f"{sel.seconds:.2f}s{why}")
+                       f"{len(rec['chosen'])} of {len(pool)} photos ({how}{e}){sees}; {sel.seconds:.2f}s{why}")
 
 
 def read_selection(run_dir: Path) -> dict:

@@ -189,7 +189,7 @@ class _TorchFrustum:
         jobs = [(s, min(s + chunk_nodes, M)) for s in range(0, M, chunk_nodes)]
         if progress:
             from tqdm import tqdm
-            jobs = tqdm(jobs, desc="visibility", unit="chunk", leave=False)
+            jobs = tqdm(jobs, desc="visibility", unit="chunk", leave=False, delay=1.0)
         if self.dev.type != "cpu":
             for a, b in jobs:
                 yield self(a, b)
