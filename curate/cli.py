@@ -10,14 +10,16 @@ below only bind a flag to a field, and its default and help come from the field
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 import logging
+import re
 import sys
 from pathlib import Path
 
 from curate import __version__
-from curate.core.options import Opt, add_options, apply_options, given
-from curate.select.methods import METHODS
+from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
+from curate.select.methods import METHODS, method_help
 from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT
 
 
@@ -25,11 +27,91 @@ class CliError(Exception):
     """A user-facing error: printed without a traceback, exit status 2."""
 
 
+def nearest(word: str, candidates: list[str]) -> list[str]:
+    """The candidates nearest to a mistyped ``word`` (difflib; those almost as near as the nearest, at most 3)."""
+    ranked = sorted(((difflib.SequenceMatcher(None, word, c).ratio(), c) for c in candidates), reverse=True)
+    ranked = [(r, c) for r, c in ranked if r >= 0.6]
+    return [c for r, c in ranked[:3] if r >= ranked[0][0] - 0.1]
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (the usage of a command with 30 options buries the message)."""
+    """argparse with a one-line error that names the command's own help and, for a mistyped flag,
+    command or choice, the nearest ones (the usage of a command with 30 options buries the message)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self._argv: list[str] = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)  # for error(): the tokens this parser read
+        return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args=None, namespace=None):
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:  # report them as the command's, not as `curate`'s
+            sub = self._subparsers_action()
+            cmd = sub.choices.get(getattr(ns, "command", None)) if sub is not None else None
+            (cmd or self)._unrecognized(extras)
+        return ns
+
+    def _subparsers_action(self):
+        return next((a for a in self._actions if isinstance(a, argparse._SubParsersAction)), None)
+
+    def _own_tokens(self) -> list[str]:
+        """The tokens this parser reads itself: up to ``--``, and for ``curate`` those before the command."""
+        out = []
+        for t in self._argv:
+            if t == "--" or (self._subparsers_action() is not None and not t.startswith("-")):
+                break
+            out.append(t)
+        return out
+
+    @staticmethod
+    def _is_flag(token: str) -> bool:
+        """A token that names a flag (not a value such as -1 or -1,-2,-3,4,5,6)."""
+        return re.match(r"--?[A-Za-z][\w-]*(=|$)", token) is not None
+
+    def _known(self, flag: str) -> bool:
+        """A flag of this parser, or an abbreviation argparse accepts (or reports as ambiguous itself)."""
+        if flag in self._option_string_actions:
+            return True
+        return flag.startswith("--") and any(o.startswith(flag) for o in self._option_string_actions)
+
+    def _unrecognized(self, tokens: list[str]) -> None:
+        flags = [t.split("=", 1)[0] for t in tokens if self._is_flag(t)]
+        if not flags:
+            self._fail(f"unexpected argument{'s' if len(tokens) > 1 else ''} {' '.join(tokens)}")
+        longs = [o for o in self._option_string_actions if o.startswith("--")]
+        said = []
+        for f in flags:
+            near = ["--" + w for w in nearest(f.lstrip("-"), [o[2:] for o in longs])]
+            said.append((f, f"did you mean {' or '.join(near)}?" if near else ""))
+        if len(said) == 1:
+            f, hint = said[0]
+            self._fail(f"unrecognized argument {f}" + (f"; {hint}" if hint else ""))
+        self._fail("unrecognized arguments " + ", ".join(f + (f" ({hint})" if hint else "") for f, hint in said))
+
+    def _fail(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+        unknown = [t for t in self._own_tokens() if self._is_flag(t) and not self._known(t.split("=", 1)[0])]
+        if unknown:  # a mistyped flag explains the errors that follow from it (a value taken for a positional...)
+            self._unrecognized(unknown)
+        m = re.match(r"argument (\S+): invalid choice: '([^']*)'", message)
+        if m and m.group(1) == "COMMAND":
+            near = nearest(m.group(2), list(COMMANDS))
+            self._fail(f"unknown command {m.group(2)!r}" + (f"; did you mean {' or '.join(near)}?" if near else
+                                                             f"; the commands are {', '.join(COMMANDS)}"))
+        if m:
+            action = self._option_string_actions.get(m.group(1))
+            near = nearest(m.group(2), [str(c) for c in (action.choices if action else ()) or ()])
+            if near:
+                message += f"; did you mean {' or '.join(near)}?"
+        if "required: COMMAND" in message:
+            message = f"give a command: {', '.join(COMMANDS)}"
+        self._fail(message)
 
 
 def _claims(folder: str, inputs: tuple[str, ...] = (), writes: tuple[str, ...] = (), must_exist: bool = False):
@@ -105,7 +187,7 @@ def _words(text: str) -> tuple[str, ...]:
 # ---------------------------------------------------------------------- flag -> field tables (paths in RunConfig)
 BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto"),
           Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
-METHOD = [Opt("--method", "select.method", choices=METHODS),
+METHOD = [Opt("--method", "select.method", choices=METHODS, help=method_help()),
           Opt("--path-weights", "select.medoids.path_weights"),
           Opt("--seed", "select.seed", parse=int)]
 ENERGY = [Opt("--gamma", "select.energy.gamma", parse=float),
@@ -254,11 +336,29 @@ def cmd_score(args) -> int:
 
 
 def cmd_select(args) -> int:
-    if (Path(args.input) / "run.json").is_file():
+    inp = Path(args.input)
+    if (inp / "run.json").is_file():
         return _select_run_folder(args)
+    if not inp.exists():
+        raise CliError(f"{args.input}: no such run folder or pose file")
     if args.out is None:
-        raise CliError("--out is required (except for a run folder)")
+        try:
+            read_poses(inp)
+        except CliError as e:
+            raise CliError(f"{args.input} is neither a run folder (no run.json) nor a pose file "
+                           f"(transforms.json, a COLMAP model, cameras.json): {e}")
+        raise CliError(f"--out is required for a pose file: where to write the subset of {args.input}")
     return _select_posed(args)
+
+
+def check_pool_budget(text: str, budget: int, n: int, source: str) -> None:
+    """CliError unless ``budget`` (the budget ``text`` resolved) leaves a choice among the ``n`` cameras of ``source``."""
+    if budget > n:
+        raise CliError(f"budget {text} is more than the {n} cameras of {source}")
+    if budget == n:
+        raise CliError(f"budget {text} is all {n} cameras of {source}: nothing to choose; give a smaller budget")
+    if budget < 2:
+        raise CliError(f"budget {text} is {budget} of the {n} cameras of {source}: choose at least 2")
 
 
 @_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))
@@ -267,7 +367,6 @@ def _select_posed(args) -> int:
     from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
-    from curate.occupancy.stage import check_budget_fits
     from curate.select.select import select
     from curate.select.stage import selection_record
 
@@ -293,10 +392,7 @@ def _select_posed(args) -> int:
             print(auto.note)
     else:
         budget = resolve_budget(parse_budget(cfg.budget), len(cams))
-        try:
-            check_budget_fits(cfg.budget, budget, len(cams))
-        except ValueError as e:
-            raise CliError(str(e))
+        check_pool_budget(cfg.budget, budget, len(cams), args.input)
     sel = select(cams, grid, budget, cfg.select, progress=not args.json, index=index)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -348,12 +444,36 @@ def _select_run_folder(args) -> int:
     return _stage(args, stage.run, Path(args.input), "select")
 
 
+NEEDS = {"occupancy": ("sfm",), "select": ("sfm", "occupancy"), "evaluate": ("sfm", "occupancy", "select"),
+         "export": ("sfm", "select"), "report": ("sfm", "occupancy", "select")}
+"""The stages each stage command reads: they must have finished in the run folder."""
+
+
+def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
+    """CliError naming the curate command to run when a stage ``command`` reads has not finished."""
+    import shlex
+    from curate.core.stage import read_stage
+    missing = [s for s in NEEDS.get(command, ()) if read_stage(run_dir / s) is None]
+    if not missing:
+        return
+    q = shlex.quote
+    inputs = "".join(f" {q(v)}" if k == "photos" else f" --poses {q(v)}"
+                     for k in ("photos", "poses") if (v := rec.get(k)))
+    whole = f"curate run{inputs or ' PHOTOS'} --out {q(str(run_dir))}"
+    first = missing[0]
+    cmd = f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm" else f"curate {first} {q(str(run_dir))}"
+    what = {"sfm": "SfM", "occupancy": "the occupancy stage", "select": "the selection"}[first]
+    raise CliError(f"{run_dir}: {what} has not finished there; run `{cmd}` first "
+                   f"(or `{whole}` to finish the whole run)")
+
+
 def _stage(args, fn, run_dir: Path, name: str | None = None) -> int:
     """Run one stage of a run folder with its saved options (overridden by the flags given, which are
     saved); then redo the cheap stages after it and the report, and name the evaluation when it is
     now out of date (:func:`curate.pipeline.refresh_after`)."""
     from curate.pipeline import refresh_after, save_run_config
     base, rec = saved_config(run_dir)
+    _check_needs(args.command, run_dir, rec)
     cfg = run_config(args, base)
     if cfg != base:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
@@ -480,17 +600,27 @@ def cmd_batch(args) -> int:
 
 # ---------------------------------------------------------------------- the parser
 COMMANDS = {
-    "sfm": "calibrate a photo folder (COLMAP) or import known poses into a run folder",
-    "score": "score an existing capture with the energy (no NeRF needed)",
-    "select": "choose a subset of a posed pool (a pose file, or a run folder's select stage)",
     "run": "the whole pipeline: photos -> best subset, report and export",
-    "batch": "curate many photo folders (locally or on a Ray cluster), with a summary",
+    "sfm": "calibrate a photo folder (COLMAP) or import known poses into a run folder",
+    "select": "choose a subset of a posed pool (a pose file, or a run folder's select stage)",
+    "score": "score an existing capture with the energy (no NeRF needed)",
     "occupancy": "hold-out split, pool field and occupancy grid of a run folder",
     "evaluate": "train and score the subsets of a run folder",
-    "report": "write RUN/report.json and RUN/report.html",
     "export": "export the chosen subset (COLMAP, transforms.json, list, links)",
+    "report": "write RUN/report.json and RUN/report.html",
+    "batch": "curate many photo folders (locally or on a Ray cluster), with a summary",
     "simulate": "compare camera placements in a synthetic room (the paper's experiment)",
 }
+
+EXAMPLES = """examples:
+  choose 60 photos, compare them with random subsets, export and report:
+    curate run photos/ --budget 60 --out runs/room
+  from a video, the subset and its export only (no trainings):
+    curate run walk.mp4 --budget 15% --no-evaluate --out runs/walk
+  choose 40 cameras of a pose file:
+    curate select transforms.json --budget 40 --out chosen/
+
+`curate COMMAND --help` lists a command's options with their defaults."""
 
 DESCRIPTIONS = {
     "sfm": "Find and decode the photos (JPEG, PNG, TIFF, camera RAW), flag blurry and near-duplicate ones, and run "
@@ -530,10 +660,11 @@ def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
     are read from the config dataclasses) are built for ``command`` only (None: for no
     command, as ``curate --help`` needs), or for every command (:data:`ALL`)."""
     p = _Parser(prog="curate", description="Pick the best photos of a capture for NeRF / "
-                                "Gaussian splatting (Kopanas & Drettakis 2023, extended).")
+                "Gaussian splatting (Kopanas & Drettakis 2023, extended).", epilog=EXAMPLES)
     p.add_argument("--version", action="version", version=f"curate {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+    sub = p.add_subparsers(title="commands", dest="command", required=True, metavar="COMMAND",
+                           parser_class=_Parser)
     for name, text in COMMANDS.items():
         desc = DESCRIPTIONS.get(name, text[0].upper() + text[1:] + ", with the options saved by `curate run`"
                                 " (a flag given here overrides the saved option and is saved).")
@@ -548,33 +679,38 @@ def build_parser(command: str | None = ALL) -> argparse.ArgumentParser:
 def _add_command(name: str, s: argparse.ArgumentParser) -> None:
     """The arguments of ``name`` that are not options of a config: inputs, outputs and switches."""
     if name in ("sfm", "run"):
-        s.add_argument("photos", nargs="?", default=None, help="the photo folder (optional with --poses)")
-        s.add_argument("--out", required=True, help="run folder")
-        s.add_argument("--poses", default=None, help="import this COLMAP model folder or transforms.json instead of SfM")
+        s.add_argument("photos", nargs="?", default=None, metavar="PHOTOS",
+                       help="the photo folder, a video, or a folder of both (optional with --poses)")
+        s.add_argument("--out", required=True, metavar="RUN", help="the run folder to write (created if new)")
+        s.add_argument("--poses", default=None, metavar="POSES",
+                       help="known poses instead of SfM: a COLMAP model folder or a transforms.json")
     elif name == "score":
-        s.add_argument("input", help="transforms.json, a COLMAP model folder (binary or text), the project's "
-                       "cameras.json, or a run folder")
+        s.add_argument("input", metavar="POSES", help="transforms.json, a COLMAP model folder (binary or text), "
+                       "curate's cameras.json, or a run folder")
         s.add_argument("--json", action="store_true", help="print one JSON object")
     elif name == "select":
-        s.add_argument("input", help="transforms.json, a COLMAP model folder, cameras.json, or a run folder")
-        s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
+        s.add_argument("input", metavar="POSES|RUN", help="a pose file (transforms.json, a COLMAP model folder, "
+                       "curate's cameras.json) or a run folder")
+        s.add_argument("--out", default=None, metavar="DIR",
+                       help="where to write the subset of a pose file (a run folder's goes to RUN/select/)")
         s.add_argument("--json", action="store_true", help="print one JSON object")
     elif name == "batch":
-        s.add_argument("folders", nargs="*", help="photo folders")
-        s.add_argument("--list", default=None, help="a text file listing folders, one a line (relative to the file)")
-        s.add_argument("--out", required=True, help="the batch folder (RUNS)")
+        s.add_argument("folders", nargs="*", metavar="FOLDER", help="photo folders")
+        s.add_argument("--list", default=None, metavar="FILE",
+                       help="a text file listing folders, one a line (relative to the file)")
+        s.add_argument("--out", required=True, metavar="RUNS", help="the batch folder: one run folder per photo folder")
         s.add_argument("--executor", default="local", choices=["local", "ray"],
                        help="local: a process per folder (default); ray: Ray tasks, trainings in parallel on the cluster")
-        s.add_argument("--ray-address", default=None,
+        s.add_argument("--ray-address", default=None, metavar="ADDRESS",
                        help="with --executor ray: 'auto' or HOST:PORT of a running cluster (default: a local instance)")
-        s.add_argument("--jobs", type=int, default=0,
+        s.add_argument("--jobs", type=int, default=0, metavar="N",
                        help="folders at once (default: one per core, capped by memory; ray: the cluster's CPUs)")
     elif name == "simulate":
-        s.add_argument("--out", required=True, help="output folder (report.json, report.html, renders)")
+        s.add_argument("--out", required=True, metavar="DIR", help="output folder (report.json, report.html, renders)")
         s.add_argument("--json", action="store_true", help="print one JSON object")
     else:
-        s.add_argument("run", help="run folder")
-    if name != "simulate":
+        s.add_argument("run", metavar="RUN", help="a run folder of `curate run`")
+    if name not in ("simulate", "score"):
         s.add_argument("--force", action="store_true", help="redo the stage(s) even if unchanged")
     if name in ("run", "sfm", "select", "batch"):
         s.add_argument("--adopt", action="store_true", help=_ADOPT)

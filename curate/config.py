@@ -25,11 +25,13 @@ class RunConfig:
     """Every option of ``curate run``."""
 
     budget: str = "15%"
-    """Images to choose: a count (60), a fraction of the pool (15%), or 'auto': the fewest predicted,
-    from the pool's views alone, to come within ``budget_tolerance`` of all frames."""
+    """How many photos to choose: a count (60), a share of the pool (15%), or auto: the fewest
+    predicted, from the poses alone, to come within --budget-tolerance of all photos."""
     budget_tolerance: float = 0.5
-    """``--budget auto``: the held-out PSNR, in dB, the chosen images may lose against every frame
-    (predicted; its measured error is in docs/selection-evidence.md)."""
+    """With --budget auto: how much held-out PSNR, in dB, the chosen photos may lose against all
+    photos (as predicted).
+
+    The predictor's measured error is in docs/selection-evidence.md (``budget_auto``)."""
     sfm: SfmConfig = field(default_factory=SfmConfig)
     """SfM stage options."""
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
@@ -39,8 +41,8 @@ class RunConfig:
     surface_band: int = 1
     """Selection nodes: the refined occupied set's surface, widened by this many voxels on each side."""
     box: tuple[float, float, float, float, float, float] | None = None
-    """Scene box x0,y0,z0,x1,y1,z1 of the selection's node grid, in the poses' frame (default: from the sparse
-    points and the cameras)."""
+    """Scene box x0,y0,z0,x1,y1,z1 of the grid the selection is scored on, in the poses' frame
+    (default: from the sparse points and the cameras)."""
     select: SelectConfig = field(default_factory=SelectConfig)
     """Selection method and energy."""
     evaluate: EvalConfig = field(default_factory=EvalConfig)
@@ -48,7 +50,7 @@ class RunConfig:
     run_evaluation: bool = True
     """Train and score the subsets (off: selection, report and export only)."""
     export_mode: str = "link"
-    """Export links to the original photos ('link') or copies of them ('copy')."""
+    """Export links to the original photos (link) or copies of them (copy)."""
 
     def __post_init__(self) -> None:
         b = parse_budget(str(self.budget))  # ValueError on a malformed budget

@@ -164,7 +164,7 @@ OPTIONS = [
     (["--box=0,0,0,nan,1,1"], "finite"), (["--box=1,0,0,0,1,1"], "max"), (["--bins", "0x10"], "--bins"),
     (["--bins", "ax3"], "--bins"), (["--res", "0"], "res"), (["--device", "gpu9"], "--device"),
     (["--device", "cuda"], "--device"), (["--method", "best"], "--method"), (["--export-mode", "move"], "--export-mode"),
-    (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "max_image_size"),
+    (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "--max-size"),
 ]
 
 

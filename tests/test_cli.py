@@ -145,3 +145,109 @@ def test_sfm_command_imports_poses_and_skips_unchanged(tmp_path):
     assert p.returncode == 2 and "photo folder" in p.stderr
 
 
+
+
+# ---------------------------------------------------------------------- errors a newcomer meets
+def _err(capsys, *argv) -> str:
+    from curate import cli
+    assert cli.main(list(argv)) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    return err.strip()
+
+
+def test_a_mistyped_flag_names_the_commands_help_and_the_nearest_flag(capsys):
+    assert _err(capsys, "run", "photos", "--budjet", "10", "--out", "o") == (
+        "curate run: error: unrecognized argument --budjet; did you mean --budget? (see curate run --help)")
+    # reported before what follows from it (here: --out missing), for any command
+    err = _err(capsys, "select", "x.json", "--methd", "path")
+    assert err.startswith("curate select: error: unrecognized argument --methd; did you mean --method?")
+    assert err.endswith("(see curate select --help)")
+    err = _err(capsys, "run", "--itres", "3", "--budjet", "4", "--out", "o")
+    assert "--itres (did you mean --iters" in err and "--budjet (did you mean --budget?)" in err
+    assert _err(capsys, "report", "RUN", "--colour").endswith("unrecognized argument --colour (see curate report --help)")
+    assert "unexpected argument extra" in _err(capsys, "run", "photos", "extra", "--out", "o")
+    # an abbreviation argparse accepts is not a typo; an ambiguous one is argparse's message
+    assert "ambiguous option: --bud" in _err(capsys, "run", "--bud", "3", "--out", "o")
+    err = _err(capsys, "run", "--method", "pth", "--out", "o")
+    assert "invalid choice: 'pth'" in err and "did you mean path?" in err and "(see curate run --help)" in err
+
+
+def test_a_mistyped_command_suggests_the_nearest_and_names_curates_help(capsys):
+    assert _err(capsys, "rnu") == "curate: error: unknown command 'rnu'; did you mean run? (see curate --help)"
+    assert _err(capsys, "slect", "x").startswith("curate: error: unknown command 'slect'; did you mean select?")
+    err = _err(capsys, "frobnicate")
+    assert "unknown command 'frobnicate'" in err and "run, sfm, select" in err
+    assert "give a command" in _err(capsys)
+
+
+@pytest.mark.parametrize("budget, msg", [("500", "budget 500 is more than the 30 cameras of {p}"),
+                                         ("30", "budget 30 is all 30 cameras of {p}: nothing to choose"),
+                                         ("100%", "budget 100% is all 30 cameras of {p}")])
+def test_select_on_a_pose_file_speaks_of_its_cameras_not_of_a_hold_out(pool_json, tmp_path, capsys, budget, msg):
+    path, _ = pool_json
+    err = _err(capsys, "select", str(path), "--budget", budget, "--res", "8", "--out", str(tmp_path / "sel"))
+    assert msg.format(p=path) in err and "hold-out" not in err
+    assert not (tmp_path / "sel").exists()
+
+
+def test_select_says_what_it_expected(tmp_path, capsys):
+    missing = tmp_path / "runs" / "nonexistent"
+    assert _err(capsys, "select", str(missing), "--budget", "4").endswith(
+        f"{missing}: no such run folder or pose file")
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("x")
+    err = _err(capsys, "select", str(tmp_path / "mine"), "--budget", "4")
+    assert "neither a run folder (no run.json) nor a pose file" in err and "--out" not in err
+
+
+def _posed_run(tmp_path, stages_done: str) -> "Path":
+    """A run folder of the sample walk's first 8 photos with run.json and, when asked, its SfM stage."""
+    from pathlib import Path
+    from curate.config import RunConfig
+    from curate.core import runfolder
+    from curate.pipeline import save_run_config
+    from curate.core.transforms_json import read_transforms
+    src = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    cams, files = read_transforms(src / "transforms.json")
+    tj = write_transforms(tmp_path / "poses" / "transforms.json", cams[list(range(8))], files[:8])
+    run = runfolder.claim(tmp_path / "my run")
+    save_run_config(RunConfig(), run, None, tj)
+    if stages_done == "sfm":
+        from curate.sfm.colmap import import_poses
+        from curate.sfm.config import SfmConfig
+        import_poses(SfmConfig(progress=False), tj, run)
+    return run, tj
+
+
+def test_a_stage_command_on_a_half_finished_run_names_the_curate_command_to_run(tmp_path, capsys):
+    run, tj = _posed_run(tmp_path, "")
+    for cmd in ("occupancy", "select", "evaluate", "export", "report"):
+        err = _err(capsys, cmd, str(run))
+        assert f"SfM has not finished there; run `curate sfm --poses {tj} --out '{run}'` first" in err, err
+        assert f"`curate run --poses {tj} --out '{run}'` to finish the whole run" in err
+        assert "run_sfm" not in err and "import_poses" not in err
+    assert not (run / "occupancy").exists()
+
+
+def test_the_next_missing_stage_is_named(tmp_path, capsys):
+    run, _ = _posed_run(tmp_path, "sfm")
+    assert f"the occupancy stage has not finished there; run `curate occupancy '{run}'` first" in _err(
+        capsys, "select", str(run))
+    # the library's reader speaks of curate's commands too
+    from curate.sfm.io import load_sfm
+    with pytest.raises(FileNotFoundError, match="run `curate sfm PHOTOS --out .*` or `curate run PHOTOS"):
+        load_sfm(tmp_path / "elsewhere")
+
+
+def test_export_says_linked_or_copied(tmp_path, capsys):
+    from curate import cli
+    run, tj = _posed_run(tmp_path, "")
+    out = tmp_path / "run2"
+    args = ["run", "--poses", str(tj), "--out", str(out), "--budget", "3", "--no-evaluate", "--res", "8",
+            "--method", "stride"]   # no pool field to train
+    assert cli.main(args) == 0, capsys.readouterr().err
+    assert "export     3 images (linked)" in capsys.readouterr().out
+    assert cli.main(["export", str(out), "--mode", "copy"]) == 0
+    line = capsys.readouterr().out
+    assert "3 images (copied)" in line and "copys" not in line

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 
 import pytest
 
@@ -129,3 +130,57 @@ def test_help_and_version_are_instant_and_light():
             "print([m for m in ('torch', 'pycolmap', 'open3d', 'numpy') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "curate 0." in out and out.strip().splitlines()[-1] == "[]"
+
+
+# ---------------------------------------------------------------------- --help reads like a tool's, not like code
+CODE_NAMES = {
+    "a constant (CAPS_WITH_UNDERSCORES)": r"\b[A-Z][A-Z0-9]*_[A-Z0-9_]*\b",
+    "an identifier with underscores": r"\b[a-z][a-z0-9]*_[a-z0-9_]+\b",
+    "a function call": r"\b\w+\(\)",
+    "a Python value": r"\b(None|True|False)\b",
+    "a module path": r"\bcurate\.\w+",
+    "reStructuredText markup": r"``|:func:|:class:|:mod:|:data:",
+    "an unrounded float": r"\d\.0*[1-9]\d{5,}",
+}
+
+
+def _help_of(cmd: str | None) -> tuple[str, argparse.ArgumentParser]:
+    p = cli.build_parser(cmd)
+    if cmd is None:
+        return p.format_help(), p
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[cmd]
+    return sub.format_help(), sub
+
+
+@pytest.mark.parametrize("cmd", [None, *cli.COMMANDS])
+def test_help_shows_no_code_names_and_one_default_per_option(cmd):
+    """`curate [COMMAND] --help` speaks to a user: no constants, identifiers, Python values or
+    module paths (the values a flag takes, such as per_image, excepted), floats rounded, and
+    never two "(default: ...)" for one option."""
+    text, parser = _help_of(cmd)
+    choices = {str(c) for a in parser._actions for c in (a.choices or ()) if isinstance(c, str)}
+    flat = " ".join(text.split())
+    for what, pattern in CODE_NAMES.items():
+        bad = sorted({m.group(0) for m in re.finditer(pattern, flat)} - choices)
+        assert not bad, f"curate {cmd or ''} --help shows {what}: {bad}"
+    for a in parser._actions:
+        assert (a.help or "").count("(default") <= 1, f"{a.option_strings}: {a.help}"
+
+
+def test_help_lists_run_first_and_ends_with_examples():
+    text, _ = _help_of(None)
+    section = text.split("commands:")[1].split("examples:")[0]
+    listed = re.findall(r"^    (\w+) ", section, re.M)
+    assert listed[:3] == ["run", "sfm", "select"] and set(listed) == set(cli.COMMANDS)
+    tail = text.split("examples:")[1]
+    assert tail.count("curate run ") >= 2 and "curate select " in tail
+
+
+def test_method_help_has_one_line_per_method_from_the_registry():
+    """--method's choices and help come from curate.select.methods.REGISTRY: one line per method."""
+    from curate.select.methods import REGISTRY
+    text, parser = _help_of("run")
+    action = next(a for a in parser._actions if "--method" in a.option_strings)
+    assert tuple(action.choices) == tuple(REGISTRY)
+    block = text.split("\n  --method {")[1].split("\n  --")[0]
+    assert re.findall(r"^\s+(\w+)  +\S", block, re.M) == list(REGISTRY)

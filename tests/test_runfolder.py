@@ -110,9 +110,10 @@ def test_non_empty_folder_not_made_by_curate_is_refused_and_adoption_never_write
     # adopted, curate would have to write over the user's sfm/, report.html, run.json: refused as well
     assert main(["run", *args, "--adopt", *QUICK]) == 2
     assert "never writes over it" in capsys.readouterr().err
-    assert {k: v for k, v in tree_hash(out).items() if not k.startswith(".curate")} == before
+    assert tree_hash(out) == before  # refused: not even curate's marker stays
     assert main(["sfm", *args]) == 2
     assert main(["report", str(out)]) == 2  # a stage command on a folder curate did not make
+    assert tree_hash(out) == before
 
 
 @pytest.mark.slow
@@ -152,6 +153,104 @@ def test_a_file_dropped_into_a_finished_stage_is_never_cleared(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "my_edit.jpg" in err and "did not write" in err and len(err.strip().splitlines()) == 1
     assert tree_hash(out / "export") == before
+
+
+# ------------------------------------------------------------------ a failed command leaves nothing behind
+def _failures(tmp_path: Path, photos: Path, out: Path) -> dict[str, list[str]]:
+    """Commands refused for a bad input (each after it claimed ``out``), by what is wrong."""
+    tj, images = str(photos / "transforms.json"), str(photos / "images")
+    (tmp_path / "broken.json").write_text("{frames: oops")
+    return {
+        "missing photo folder": ["run", str(tmp_path / "no_photos"), "--out", str(out), *QUICK],
+        "missing photo folder (sfm)": ["sfm", str(tmp_path / "no_photos"), "--out", str(out)],
+        "bad --poses": ["run", images, "--poses", str(tmp_path / "broken.json"), "--out", str(out), *QUICK],
+        "missing --poses": ["sfm", "--poses", str(tmp_path / "none.json"), "--out", str(out)],
+        "budget over the pool": ["select", tj, "--budget", "500", "--out", str(out)],
+        "bad pose file (select)": ["select", str(tmp_path / "broken.json"), "--budget", "4", "--out", str(out)],
+    }
+
+
+def test_a_refused_command_leaves_no_run_folder(tmp_path, capsys):
+    """A bad input found after --out was claimed: the new folder (and the parents curate made for it) is
+    removed; no .curate-lock, .curate-run.json or run.json is left behind."""
+    photos = project(tmp_path / "cap", n=6)
+    for what, argv in _failures(tmp_path, photos, tmp_path / "new" / "deeper" / "out").items():
+        assert main(argv) == 2, what
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and err.startswith("curate "), (what, err)
+        assert not (tmp_path / "new").exists(), (what, sorted(p.name for p in (tmp_path / "new").rglob("*")))
+
+
+def test_a_refused_command_leaves_an_existing_out_folder_as_it_was(tmp_path, capsys):
+    """--out that was there (empty, or the user's and adopted) is left exactly as it was; one that is
+    already a run folder keeps its marker."""
+    photos = project(tmp_path / "cap", n=6)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    users = _users_folder(tmp_path / "users")
+    for what, argv in _failures(tmp_path, photos, empty).items():
+        assert main(argv) == 2, what
+        assert list(empty.iterdir()) == [], (what, [p.name for p in empty.iterdir()])
+    before = tree_hash(users)
+    for what, argv in _failures(tmp_path, photos, users).items():
+        assert main([*argv, "--adopt"]) == 2, what
+        assert tree_hash(users) == before, what
+    run = rf.claim(tmp_path / "run")  # a run folder of curate's: its marker is not this command's to remove
+    assert main(["sfm", "--poses", str(tmp_path / "none.json"), "--out", str(run)]) == 2
+    assert rf.is_claimed(run)
+    capsys.readouterr()
+
+
+def test_a_stage_command_on_a_folder_that_is_not_a_run_folder_leaves_it_untouched(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    users = _users_folder(tmp_path / "users")
+    before = tree_hash(users)
+    for cmd in ("report", "occupancy", "evaluate", "export"):
+        for folder in (empty, users):
+            assert main([cmd, str(folder)]) == 2
+            assert "not a run folder" in capsys.readouterr().err
+        assert list(empty.iterdir()) == [] and tree_hash(users) == before
+    assert main(["select", str(empty), "--budget", "4"]) == 2
+    assert list(empty.iterdir()) == []
+    capsys.readouterr()
+
+
+def test_a_failed_command_keeps_a_folder_that_holds_more_than_bookkeeping(tmp_path, capsys):
+    """A record the error points at (sfm/images.json of a folder without usable photos) stays, and so does
+    the whole run folder; a stage that finished stays for the re-run to resume."""
+    nothing = tmp_path / "nothing"
+    nothing.mkdir()
+    (nothing / "readme.txt").write_text("not a photo")
+    out = tmp_path / "out"
+    assert main(["sfm", str(nothing), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "usable photos" in err and str(out / "sfm" / "images.json") in err
+    assert (out / "sfm" / "images.json").is_file() and rf.is_claimed(out)
+    photos = project(tmp_path / "cap", n=6)
+    run = tmp_path / "run"
+    assert main(["run", str(photos / "images"), "--poses", str(photos / "transforms.json"), "--out", str(run),
+                 *QUICK[2:], "--budget", "6", "--no-evaluate"]) == 2          # the whole pool: found after SfM
+    assert "all 6 registered photos" in capsys.readouterr().err
+    assert (run / "sfm" / "stage.json").is_file() and (run / "run.json").is_file()
+
+
+def test_undo_claim_rules(tmp_path):
+    """Only bookkeeping goes, and only what this claim made; a foreign file anywhere keeps everything."""
+    for extra in ("sfm/colmap.log", "notes.txt", None):
+        out = tmp_path / f"case_{extra is None}_{str(extra).replace('/', '_')}" / "run"
+        with pytest.raises(RuntimeError):
+            with rf.claimed(out):
+                (out / "run.json").write_text("{}")
+                (out / "sfm").mkdir()
+                (out / "sfm" / rf.STAGE_MARKER).write_text("x")
+                (out / "sfm" / "cameras.json.tmp123").write_text("x")
+                if extra:
+                    (out / extra).write_text("x")
+                raise RuntimeError("boom")
+        assert out.parent.exists() == (extra is not None)
+        if extra:
+            assert (out / extra).is_file() and rf.is_claimed(out)
 
 
 # ------------------------------------------------------------------ clearing rules

@@ -1,11 +1,14 @@
 """Command-line options read from the config dataclasses: each default and help text is declared once.
 
 A config dataclass documents each field with an attribute docstring (a string right after
-the field) or, for the older ones, a trailing ``#`` comment. :class:`Opt` names a flag and
-the dotted path of the field it sets (``"evaluate.iters"``); :func:`add_options` adds it to
-an argparse parser with the field's default and docstring as its help, and
-:func:`apply_options` writes the flags the user gave (and only those) into a config, so a
-saved run's options stay the base of every stage re-run.
+the field) or, for the older ones, a trailing ``#`` comment. The docstring's first paragraph
+is the flag's ``--help`` text, written for a user (no code names); a later paragraph, after
+a blank line, is a note for developers that ``--help`` leaves out. :class:`Opt` names a flag
+and the dotted path of the field it sets (``"evaluate.iters"``); :func:`add_options` adds it
+to an argparse parser with the field's default and help, and :func:`apply_options` writes
+the flags the user gave (and only those) into a config, so a saved run's options stay the
+base of every stage re-run. :class:`HelpFormatter` keeps the line breaks of a help text
+that has them (``--method``: one line per method).
 """
 
 from __future__ import annotations
@@ -58,10 +61,15 @@ def _clean(text: str) -> str:
     return re.sub(r"\s+", " ", text).strip()
 
 
+def _user_part(doc: str) -> str:
+    """The first paragraph of a docstring (the user's part; what follows a blank line is for developers)."""
+    return _clean(re.split(r"\n\s*\n", inspect.cleandoc(doc), maxsplit=1)[0])
+
+
 @lru_cache(maxsize=None)
 def field_docs(cls: type) -> dict[str, str]:
-    """{field name: its documentation} of a dataclass: the attribute docstring after the
-    field, else the trailing ``#`` comment on its line and on comment-only lines below it."""
+    """{field name: its help} of a dataclass: the first paragraph of the attribute docstring
+    after the field, else the trailing ``#`` comment on its line and on comment-only lines below it."""
     try:
         src = textwrap.dedent(inspect.getsource(cls))
     except (OSError, TypeError):  # pragma: no cover - no source (frozen app)
@@ -76,7 +84,7 @@ def field_docs(cls: type) -> dict[str, str]:
         name = node.target.id
         nxt = body[i + 1] if i + 1 < len(body) else None
         if isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant) and isinstance(nxt.value.value, str):
-            out[name] = _clean(nxt.value.value)
+            out[name] = _user_part(nxt.value.value)
             continue
         line = lines[node.end_lineno - 1]
         if "#" in line:
@@ -125,10 +133,15 @@ def doc_of(cfg: Any, path: str) -> str:
 
 
 def _show(v: Any) -> str:
+    """A default as a user reads it: 5x10, 0.006667 (not 0.006666666666666667), on / off, none."""
     if hasattr(v, "width") and hasattr(v, "height"):
         return f"{v.width}x{v.height}"
+    if isinstance(v, bool):
+        return "on" if v else "off"
+    if isinstance(v, float):
+        return f"{v:.4g}"
     if isinstance(v, tuple):
-        return "x".join(map(str, v)) if all(isinstance(x, int) for x in v) else ",".join(map(str, v))
+        return "x".join(map(str, v)) if all(isinstance(x, int) for x in v) else ",".join(map(_show, v))
     return "none" if v is None else str(v)
 
 
@@ -137,15 +150,50 @@ def _esc(text: str) -> str:
 
 
 def brief(doc: str) -> str:
-    """The first sentence of a field's docstring, without reStructuredText markup (for ``--help``)."""
+    """A field's help as ``--help`` prints it: without reStructuredText markup or a final full stop,
+    starting in lower case like argparse's own lines (an acronym such as SIFT keeps its capitals)."""
     doc = re.sub(r":\w+:`~?([^`]+)`", lambda m: m.group(1).rsplit(".", 1)[-1], doc)
-    doc = doc.replace("``", "")
-    m = re.match(r"(.+?[.!?])(?=\s+[A-Z(\"']|$)", doc)
-    return (m.group(1) if m else doc).rstrip(".")
+    doc = doc.replace("``", "").strip().rstrip(".")
+    if len(doc) > 1 and doc[0].isupper() and not (doc[1].isupper() or doc[1].isdigit()):
+        doc = doc[0].lower() + doc[1:]
+    return doc
 
 
-def _default_note(default: Any) -> str:
-    return "" if default is None else f" (default: {_show(default)})"
+def _default_note(text: str, default: Any) -> str:
+    """`` (default: X)``, unless there is no default or the text already says it."""
+    return "" if default is None or "(default" in text else f" (default: {_show(default)})"
+
+
+def _metavar(o: "Opt", default: Any) -> str:
+    """The value's name in ``--help``: the Opt's own, else N (a whole number), X (a number) or the flag's word."""
+    if o.metavar:
+        return o.metavar
+    if isinstance(default, int) and not isinstance(default, bool):
+        return "N"
+    if isinstance(default, float):
+        return "X"
+    return o.flag.lstrip("-").split("-")[-1].upper()
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, but a text with line breaks keeps them (an option's help, a
+    description, the examples of an epilog): each line is wrapped on its own, continuation
+    lines indented under the text after a leading key ("path   frames...")."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n" not in text:
+            return super()._fill_text(text, width, indent)
+        return "\n".join(indent + line for line in self._split_lines(text, width - len(indent)))
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        if "\n" not in text:
+            return super()._split_lines(text, width)
+        out: list[str] = []
+        for line in text.splitlines():
+            m = re.match(r"(\s*)(\S+\s{2,})?", line)
+            hang = m.end() if m.group(2) else len(m.group(1)) + 2 * bool(m.group(1))
+            out += textwrap.wrap(line, width, subsequent_indent=" " * hang) or [""]
+        return out
 
 
 def add_options(parser: argparse.ArgumentParser | Any, base: Any, opts: Sequence[Opt]) -> None:
@@ -155,18 +203,17 @@ def add_options(parser: argparse.ArgumentParser | Any, base: Any, opts: Sequence
     for o in opts:
         default = tuple(get_path(base, p) for p in o.paths) if isinstance(o.path, tuple) else get_path(base, o.path)
         text = o.help if o.help is not None else brief(doc_of(base, o.paths[0]))
-        metavar = o.metavar or o.flag.lstrip("-").upper().replace("-", "_")
         kw: dict[str, Any] = {"dest": o.dest, "default": argparse.SUPPRESS}
         if o.const is not NO_CONST:
             parser.add_argument(o.flag, action="store_const", const=o.const, help=_esc(text), **kw)
             continue
         if isinstance(default, bool) and o.parse is None:
             parser.add_argument(o.flag, action=argparse.BooleanOptionalAction,
-                                help=_esc(f"{text} (default: {'on' if default else 'off'})"), **kw)
+                                help=_esc(text + _default_note(text, default)), **kw)
             continue
         typ = o.parse or (type(default) if default is not None and not isinstance(default, tuple) else str)
-        parser.add_argument(o.flag, type=typ, choices=o.choices, metavar=None if o.choices else metavar,
-                            help=_esc(text + _default_note(default)), **kw)
+        parser.add_argument(o.flag, type=typ, choices=o.choices, metavar=None if o.choices else _metavar(o, default),
+                            help=_esc(text + _default_note(text, default)), **kw)
 
 
 def given(args: argparse.Namespace, opts: Sequence[Opt]) -> list[Opt]:

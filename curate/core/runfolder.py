@@ -28,6 +28,14 @@ the stage commands, ``batch``):
   Otherwise nothing at all is removed and :class:`RunFolderError` names the first foreign
   file.
 
+* **A failed command leaves nothing behind** (:func:`claimed`): when the command fails and
+  the run folder holds nothing but curate's bookkeeping (marker, lock, ``run.json``, empty
+  stage folders), what the claim made goes: a folder it created (and the parents it
+  created), or the marker and lock it wrote into a folder that was there (empty, or adopted),
+  which is left as it was. A folder holding anything else (a finished stage, a record the
+  error names) is kept as it is. A stage command never marks a folder: one without the
+  marker is refused.
+
 Stale workers: :func:`check_holder` (called by an evaluation training before it writes its
 results) raises :class:`StaleWorker` unless the run's lock is still held, by the process
 that started the worker (same token, holder alive). Workers also die with their parent:
@@ -50,7 +58,7 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, NamedTuple
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +126,20 @@ def _write_marker(out: Path, adopted: list[str] | None) -> None:
 
 def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
           writes: Iterable[str] = (), must_exist: bool = False) -> Path:
+    """See :func:`_claim` (the folder only)."""
+    return _claim(out, inputs, adopt, writes, must_exist)[0]
+
+
+class _Made(NamedTuple):
+    """What one :func:`_claim` call made: the topmost folder it created (None: it created none) and
+    whether it wrote the marker into a folder that was there before (empty, or adopted)."""
+
+    created: Path | None
+    marked: bool
+
+
+def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
+           writes: Iterable[str] = (), must_exist: bool = False) -> tuple[Path, _Made]:
     """Make sure ``out`` is a run folder curate may write; create and mark it if new. Returns it resolved.
 
     ``inputs``: the photo folder, poses file or model... (None entries are ignored): none
@@ -144,11 +166,16 @@ def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool
         raise RunFolderError(f"the run folder {raw} is a file, not a folder")
     if must_exist and not o.is_dir():
         raise RunFolderError(f"{raw}: no such run folder")
+    created, marked = None, False
     if o.is_dir() and not (o / MARKER).is_file():
         entries = sorted(e.name for e in o.iterdir())
         if (o / "run.json").is_file() and (o / "sfm" / "stage.json").is_file():
             raise RunFolderError(f"{raw} is a run folder of curate 0.1 (no {MARKER}): this version cannot prove which "
                                  "of its files are curate's, so it does not write there; run again into a new folder")
+        if must_exist:  # a stage command needs a run folder; it never makes one of the user's folder
+            raise RunFolderError(f"{raw} is not a run folder (no run.json): `curate run PHOTOS --out RUN` makes one"
+                                 if not (o / "run.json").is_file() else
+                                 f"{raw} is not a run folder curate created (no {MARKER})")
         if entries and not adopt:
             raise RunFolderError(f"{raw} is a non-empty folder curate did not create (no {MARKER}; it holds "
                                  f"{entries[0]!r}{' and more' if len(entries) > 1 else ''}): give an empty or new "
@@ -157,22 +184,79 @@ def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool
             _write_marker(o, entries if entries else None)
         except OSError as e:
             raise RunFolderError(f"cannot write the run folder {raw}: {e.strerror or e}") from None
+        marked = True
         if entries:
             log.warning("%s: adopted (%d entries of yours kept, never written)", raw, len(entries))
     elif not o.exists():
+        created = o
+        while not created.parent.exists():
+            created = created.parent
         try:
             o.mkdir(parents=True, exist_ok=True)
             _write_marker(o, None)
         except OSError as e:
             raise RunFolderError(f"cannot create the run folder {raw}: {e.strerror or e}") from None
+    made = _Made(created, marked)
     if not os.access(o, os.W_OK | os.X_OK):
         raise RunFolderError(f"cannot write the run folder {raw}: read-only")
     theirs = set(read_marker(o).get("adopted") or ())
     clash = [w for w in writes if w in theirs]
     if clash:
+        _undo_claim(o, made)  # adopted just now: the folder goes back to how it was
         raise RunFolderError(f"{raw}/{clash[0]} was there when {raw} was adopted: curate never writes over it; "
                              "move it, or choose another --out")
-    return o
+    return o, made
+
+
+def _only_bookkeeping(o: Path) -> bool:
+    """True when every file under the run folder ``o`` that is not the user's (adopted) is curate's
+    bookkeeping: the marker, the lock, ``run.json`` of a run folder, a stage folder's marker,
+    a temporary file. Nested run folders (``curate batch``) count alike."""
+    theirs = set(read_marker(o).get("adopted") or ())
+    for e in os.scandir(o):
+        if e.name in theirs:
+            continue
+        for p in ([Path(e.path)] if not e.is_dir(follow_symlinks=False) else _walk(Path(e.path))):
+            ok = (p.name in (MARKER, LOCK, STAGE_MARKER) or _is_tmp(p.name)
+                  or p.name == "run.json" and (p.parent / MARKER).is_file())
+            if not ok or p.is_symlink():
+                return False
+    return True
+
+
+def _undo_claim(o: Path, made: _Made) -> None:
+    """After a failed command: remove what :func:`_claim` made, when the run folder holds nothing but
+    curate's bookkeeping (else leave it all: a record the user is told to read, resumable work).
+    A folder this call created goes (with the empty parents it created); a folder that was there
+    keeps its own entries and loses only the marker, the lock and the rest of curate's bookkeeping.
+    Called with the lock held: the marker goes before the lock, so a second process sees a
+    folder it may not use rather than one it may."""
+    if made.created is None and not made.marked:
+        return
+    try:
+        if not o.is_dir() or not _only_bookkeeping(o):
+            return
+        theirs = set(read_marker(o).get("adopted") or ())
+        mine = [Path(e.path) for e in os.scandir(o) if e.name not in theirs]
+        for p in mine:
+            if p.is_dir() and not p.is_symlink():
+                for f in sorted(_walk(p), key=lambda q: len(q.parts), reverse=True):
+                    f.unlink()
+                for sub, _, _ in sorted(os.walk(p), key=lambda t: len(Path(t[0]).parts), reverse=True):
+                    os.rmdir(sub)
+            elif p.name not in (MARKER, LOCK):
+                p.unlink()
+        (o / MARKER).unlink(missing_ok=True)
+        (o / LOCK).unlink(missing_ok=True)
+        if made.created is not None:
+            d = o
+            while True:
+                d.rmdir()  # only empty folders: OSError (left as they are) when anything else is there
+                if d == made.created:
+                    break
+                d = d.parent
+    except OSError as e:  # a concurrent process, a permission: leave the rest, say so
+        log.warning("%s: could not remove what this failed command created: %s", o, e)
 
 
 def check_writable(path: str | Path) -> None:
@@ -361,10 +445,18 @@ class RunLock:
 @contextlib.contextmanager
 def claimed(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
             writes: Iterable[str] = (), must_exist: bool = False, command: str | None = None) -> Iterator[Path]:
-    """:func:`claim` then hold the :class:`RunLock` for the ``with`` block; yields the resolved folder."""
-    o = claim(out, inputs, adopt=adopt, writes=writes, must_exist=must_exist)
+    """:func:`claim` then hold the :class:`RunLock` for the ``with`` block; yields the resolved folder.
+
+    When the block fails and the folder holds nothing but curate's bookkeeping, what the claim
+    made is removed (:func:`_undo_claim`): a command refused for a bad input leaves no run folder
+    behind, and a folder that was there before is left as it was."""
+    o, made = _claim(out, inputs, adopt=adopt, writes=writes, must_exist=must_exist)
     with RunLock(o, command):
-        yield o
+        try:
+            yield o
+        except BaseException:
+            _undo_claim(o, made)
+            raise
 
 
 def check_holder(run_dir: str | Path, token: str | None) -> None:

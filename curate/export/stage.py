@@ -13,6 +13,10 @@ if TYPE_CHECKING:
     from curate.config import RunConfig
 
 
+EXPORTED = {"link": "linked", "copy": "copied"}
+"""How the stage line says each export mode ("10 images (copied)")."""
+
+
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
     from curate.core.stage import begin_stage, finish_stage, stage_key
@@ -33,7 +37,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
                                                                  "list": "images.txt", "images": "images/"},
                  model=model, warning=warn)
     return StageResult("export", d, True, time.perf_counter() - t0,
-                       f"{len(sel['chosen_names'])} images ({cfg.export_mode}s), {model['n_points3D']} points -> {d}",
+                       f"{len(sel['chosen_names'])} images ({EXPORTED[cfg.export_mode]}), {model['n_points3D']} points -> {d}",
                        warning=warn)
 
 

@@ -29,7 +29,7 @@ class OccupancyConfig:
     """Settings of :func:`occupancy_from_points`."""
 
     res: int = 32
-    """Nodes per axis of the grid (the node grid's resolution)."""
+    """Nodes per axis of the scene grid the selection is scored on (more: finer and slower)."""
     nb_neighbors: int = 20
     """open3d statistical outlier removal: neighbours considered per point."""
     std_ratio: float = 2.0

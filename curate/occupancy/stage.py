@@ -32,7 +32,8 @@ def key_of(stage_dir: Path) -> str:
     from curate.core.stage import read_stage
     rec = read_stage(stage_dir)
     if rec is None:
-        raise FileNotFoundError(f"{stage_dir}: stage not finished (`curate run` makes it)")
+        raise FileNotFoundError(f"{stage_dir}: this stage has not finished (run `curate run ... --out RUN` to "
+                                "finish the run)")
     return rec["key"]
 
 

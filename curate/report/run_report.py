@@ -37,15 +37,14 @@ logger = logging.getLogger(__name__)
 __all__ = ["write_html", "floorplan", "top_down_axes"]
 
 METHOD_ORDER = ("selection", "random", "fvs", "all")
-SELECTION_NAME = {"energy": "the paper's energy", "medoids": "view medoids", "fvs": "farthest-view sampling",
-                  "stride": "every n-th frame", "random": "random", "path": "even spacing along the capture path"}
 N_RENDER_VIEWS = 6
 THUMB_SIDE = 160
 
 
 def method_name(key: str | None) -> str:
-    """A selection method's name for a reader (its key when unknown)."""
-    return SELECTION_NAME.get(key or "", key or "—")
+    """A selection method's name for a reader (:func:`curate.select.methods.method_label`)."""
+    from curate.select.methods import method_label
+    return method_label(key) if key else "—"
 
 
 def _load_rgb(path: str | Path, max_side: int) -> np.ndarray | None:
@@ -186,8 +185,9 @@ def _verdict(run: _Run) -> str:
 
 def _plain_note(text: str) -> str:
     """The selection's note with method keys spelled out for a reader."""
-    for k in sorted(SELECTION_NAME, key=len, reverse=True):
-        text = text.replace(f"-> {k}", f"-> {SELECTION_NAME[k]}")
+    from curate.select.methods import REGISTRY
+    for k in sorted(REGISTRY, key=len, reverse=True):
+        text = text.replace(f"-> {k}", f"-> {method_name(k)}")
     return text
 
 

@@ -36,7 +36,9 @@ class EnergyConfig:
     """Parameters of the paper's energy."""
 
     gamma: float = 0.05
-    """Exponent on the observation frequency O_f (authors' code: 0.05), in [0, GAMMA_MAX]."""
+    """The paper's gamma: the exponent on how often each point is seen.
+
+    The exponent on the observation frequency O_f (authors' code: 0.05), in [0, ``GAMMA_MAX``]."""
     n_theta: int = 5
     """Direction bins along theta, the angle from the scene's +z axis (authors' code: 5)."""
     n_phi: int = 10
@@ -46,7 +48,7 @@ class EnergyConfig:
 
     def __post_init__(self) -> None:
         if not (0 <= self.gamma <= GAMMA_MAX):
-            raise ValueError(f"gamma must be in [0, {GAMMA_MAX:g}], got {self.gamma}")
+            raise ValueError(f"--gamma must be in [0, {GAMMA_MAX:g}], got {self.gamma}")
         DirectionBins(self.n_theta, self.n_phi, self.binning)  # validates
 
     @property

@@ -54,13 +54,14 @@ class MedoidsConfig:
     max_iters: int = 100
     """Voronoi iterations at most (it usually stops in under 20)."""
     path_weights: bool = PATH_WEIGHTS
-    """Weigh each pool view by the stretch of the capture path it stands for (half the view
-    distance to the previous plus to the next view in name order, i.e. capture order for
-    numbered video frames; capped at ``PATH_CAP`` times the median step, mean 1): the mean is
-    then taken along the path, not over the frames, so a stretch sampled sparsely (a
-    dropped frame, a fast walk) counts as much as one sampled densely (the walker
-    lingering). Ignored (uniform weights, a warning) when the views are not in path order
-    (:func:`path_weights`)."""
+    """View medoids: weigh each photo by the stretch of the capture path it stands for, so a
+    stretch walked fast (or with dropped frames) counts as much as one where the walker
+    lingered; ignored, with a note, when the photos are not in capture order (name order).
+
+    Each view's weight is half the view distance to the previous plus to the next view in name
+    order (capture order for numbered video frames), capped at ``PATH_CAP`` times the median
+    step, mean 1: the mean is then taken along the path, not over the frames. Ignored (uniform
+    weights, a warning) when the views are not in path order (:func:`path_weights`)."""
 
     def __post_init__(self) -> None:
         if self.depth is not None and not (np.isfinite(self.depth) and self.depth > 0):

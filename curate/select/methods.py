@@ -1,18 +1,55 @@
-"""Names of the selection methods (no heavy imports: the CLI reads them for ``--help``).
+"""The selection methods, in one registry (no heavy imports: the CLI reads it for ``--help``).
+
+Each :class:`Method` has a key (what ``--method`` takes and ``selection.json`` records), a
+label for people (the report names the selection by it: :func:`method_label`), a one-line
+help (``curate run --help`` lists one line per method: :func:`method_help`) and the function
+that runs it, named as ``"module:function"`` and imported only when it runs. Adding a method
+is one :class:`Method` in :data:`REGISTRY` and its function, which
+:func:`curate.select.select.select` calls as ``fn(cams, grid, budget, cfg, initial, index,
+progress) -> Selection`` (``cfg``: the :class:`curate.select.select.SelectConfig`; ``index``:
+the pool's pair index over the grid's nodes; a fallback it takes goes into
+``Selection.note``).
 
 "energy" is the paper's greedy on its energy, unchanged; "medoids" is k-medoids of the pool's
 views in a centre + look-at distance (:mod:`curate.select.medoids`); "path" spaces frames
-evenly along the capture path in that distance (:mod:`curate.select.path`); "fvs" is farthest-view
-sampling; "stride" takes every n-th camera in name order (every n-th frame of a video);
-"random" is a baseline. Variants that were measured and not adopted (pool coverage, medoid
-cost powers, a sharpness prior, an energy share) live in ``research/``. "auto" picks by the kind of capture
-(:func:`curate.select.select.capture_kind`): ``WALK_METHOD`` for a walk-through (viewing axes that
-meet nowhere, or near-parallel ones), ``OBJECT_METHOD`` for an object capture (cameras around
-a point, looking at it).
+evenly along the capture path in that distance (:mod:`curate.select.path`); "fvs" is
+farthest-view sampling; "stride" takes every n-th camera in name order (every n-th frame of a
+video); "random" is a baseline. Variants that were measured and not adopted (pool coverage,
+medoid cost powers, a sharpness prior, an energy share) live in ``research/``. "auto" runs no
+function of its own: :func:`curate.select.select.resolve_method` replaces it by
+:data:`WALK_METHOD` on a walk-through (viewing axes that meet nowhere, or near-parallel ones)
+and by :data:`OBJECT_METHOD` on an object capture (cameras around a point, looking at it).
 """
 
-METHODS = ("auto", "energy", "random", "fvs", "stride", "medoids", "path")
-"""Every selection method :func:`curate.select.select.select` knows."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import import_module
+from typing import Callable
+
+
+@dataclass(frozen=True)
+class Method:
+    """One selection method."""
+
+    key: str
+    """What ``--method`` takes and ``selection.json`` records, e.g. "path"."""
+    label: str
+    """What a person reads in the report, e.g. "even spacing along the capture path"."""
+    help: str
+    """One line of ``--help`` (after the key)."""
+    runner: str | None
+    """``"module:function"`` that runs it (imported when it runs); None for "auto", which
+    :func:`curate.select.select.resolve_method` replaces by another method first."""
+
+    @property
+    def run(self) -> Callable:
+        """The function that runs the method (imported now)."""
+        if self.runner is None:
+            raise ValueError(f"selection method {self.key!r} is resolved to another method before it runs")
+        module, _, name = self.runner.partition(":")
+        return getattr(import_module(module), name)
+
 
 DEFAULT_METHOD = "auto"
 """The method ``curate`` uses unless told otherwise (chosen by the harness, README)."""
@@ -26,12 +63,53 @@ OBJECT_METHOD = "energy"
 method, and why': over all seven every-7th hold-out folds it beat farthest-view sampling,
 the earlier choice, in 5 of 6 cells of three object sets and two budgets)."""
 
-METHOD_HELP = ("selection method (default %(default)s; energy: the paper's, unchanged; "
-               "see the README's 'Which selection method, and why')")
-
 PATH_WEIGHTS = True
-"""Default of ``MedoidsConfig.path_weights`` (README, 'Which selection method, and why')."""
+"""Default of ``MedoidsConfig.path_weights`` (docs/selection-evidence.md)."""
 
-PATH_HELP = ("view medoids: weigh each frame by the stretch of the capture path it stands for, "
-             "so the subset covers the walk by distance, not by frame count (frames in name order; "
-             "default %(default)s)")
+_SELECT = "curate.select.select"
+
+REGISTRY: dict[str, Method] = {m.key: m for m in (
+    Method("auto", "chosen by the kind of capture",
+           f"{WALK_METHOD} on a walk-through, {OBJECT_METHOD} on an object capture (told apart by the poses)", None),
+    Method("path", "even spacing along the capture path",
+           "frames evenly spaced along the capture path by view change (view medoids when the "
+           "photos are not in capture order)", f"{_SELECT}:run_path"),
+    Method("medoids", "view medoids",
+           "the photos whose views lie closest, on average, to every view of the pool", f"{_SELECT}:run_medoids"),
+    Method("energy", "the paper's energy",
+           "Kopanas & Drettakis's greedy on their energy, unchanged", f"{_SELECT}:run_energy"),
+    Method("fvs", "farthest-view sampling",
+           "each next photo the one farthest from those already chosen", f"{_SELECT}:run_fvs"),
+    Method("stride", "every n-th frame",
+           "every n-th photo in name order (every n-th frame of a video)", f"{_SELECT}:run_stride"),
+    Method("random", "random", "a random subset (--seed)", f"{_SELECT}:run_random"),
+)}
+"""Every selection method, in the order ``--help`` lists them."""
+
+METHODS = tuple(REGISTRY)
+"""Every selection method :func:`curate.select.select.select` knows (``--method``'s choices)."""
+
+
+def get_method(key: str) -> Method:
+    """The :class:`Method` of ``key`` (ValueError naming the known ones when there is none)."""
+    try:
+        return REGISTRY[key]
+    except KeyError:
+        raise ValueError(f"unknown selection method {key!r} (one of {', '.join(REGISTRY)})") from None
+
+
+def method_label(key: str) -> str:
+    """What a person reads for the method ``key`` (the report's name of a selection), e.g.
+    "path" -> "even spacing along the capture path"; an unknown key (a research variant, a
+    record of another version) is returned as it is."""
+    m = REGISTRY.get(key)
+    return m.label if m is not None else key
+
+
+def method_help() -> str:
+    """``--method``'s help: one line per method, the default marked."""
+    width = max(map(len, REGISTRY))
+    lines = ["how to choose the photos:"]
+    for m in REGISTRY.values():
+        lines.append(f"{m.key:<{width}}  {m.help}" + (" (default)" if m.key == DEFAULT_METHOD else ""))
+    return "\n".join(lines)

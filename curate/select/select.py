@@ -17,7 +17,8 @@ from curate.select.energy import EnergyConfig, EnergyTerms
 from curate.core.grid import NodeGrid
 from curate.select.medoids import MedoidsConfig
 from curate.select.path import PathConfig, path_select
-from curate.select.methods import DEFAULT_METHOD, METHODS, OBJECT_METHOD, WALK_METHOD  # noqa: F401  (METHODS re-exported)
+from curate.select.methods import (DEFAULT_METHOD, METHODS, OBJECT_METHOD, REGISTRY,  # noqa: F401  (METHODS re-exported)
+                                   WALK_METHOD, get_method)
 
 log = logging.getLogger(__name__)
 
@@ -27,27 +28,26 @@ class SelectConfig:
     """How to choose a subset."""
 
     method: str = DEFAULT_METHOD
-    """One of "auto" (the default, chosen by the harness: ``WALK_METHOD`` for a walk-through,
-    ``OBJECT_METHOD`` for an object capture, see :func:`capture_kind`), "path" (frames evenly
-    spaced along the capture path by view change, :mod:`curate.select.path`; view medoids when
-    the photos are not in capture order), "medoids" (k-medoids of the
-    pool's views, :mod:`curate.select.medoids`), "energy" (the paper: greedy on its energy),
-    "random", "fvs" (farthest-view sampling), "stride" (every n-th camera in name order: every
-    n-th frame of a video)."""
+    """How to choose the photos: a key of :data:`curate.select.methods.REGISTRY`, where each method
+    has its label, its one line of ``--help`` and its function ("auto", the default, is resolved by
+    :func:`resolve_method`)."""
     energy: EnergyConfig = field(default_factory=EnergyConfig)
     """Energy parameters (method "energy", and the energy reported for every method)."""
     seed: int = 0
-    """Seed of the random baseline."""
+    """Seed of the random subsets (method random)."""
     device: str | None = None
-    """Torch device for the visibility test (None: CUDA when available, else CPU)."""
+    """Device that tests which cameras see which points, e.g. cpu or cuda:0 (default: CUDA when
+    available, else the CPU).
+
+    A torch device name; None picks one."""
     medoids: MedoidsConfig = field(default_factory=MedoidsConfig)
     """Method "medoids": its look-at depth and iterations."""
     path: PathConfig = field(default_factory=PathConfig)
     """Method "path": the scale of its look-at depths."""
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.method not in REGISTRY:
+            raise ValueError(f"--method must be one of {', '.join(REGISTRY)}, got {self.method!r}")
 
 
 @dataclass
@@ -132,13 +132,13 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
            progress: bool = False, index=None) -> Selection:
     """Choose ``budget`` more cameras of the pool ``cams`` (fewer if it runs out).
 
-    The energy curve is filled for every method (for baselines, it is evaluated after
-    the choice, so they can be compared on the same footing). ``index``: the pair index
-    of ``cams`` over the grid's nodes with ``cfg.energy.bins`` when the caller already
-    built it (its time is then not in ``Selection.seconds``).
+    "auto" is resolved first (:func:`resolve_method`); the method then runs through its entry
+    in :data:`curate.select.methods.REGISTRY`. The energy curve is filled for every method
+    (for baselines, it is evaluated after the choice, so they can be compared on the same
+    footing). ``index``: the pair index of ``cams`` over the grid's nodes with
+    ``cfg.energy.bins`` when the caller already built it (its time is then not in
+    ``Selection.seconds``).
     """
-    from curate.select.baselines import farthest_view, random_subset, stride_subset
-    from curate.select.greedy import greedy_select, trace_energy
     from curate.select.visibility import build_pair_index
 
     t0 = time.perf_counter()
@@ -149,54 +149,89 @@ def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = Selec
         log.info("select %s", note)
     if index is None:
         index = build_pair_index(cams, grid.nodes(), cfg.energy.bins, device=cfg.device, progress=progress)
-    if cfg.method == "energy" and index.n_pairs == 0:
+    sel = get_method(cfg.method).run(cams, grid, budget, cfg, initial, index, progress)
+    sel.seconds = time.perf_counter() - t0
+    sel.note = _join(note, sel.note)
+    log.info("select %s: %d cameras of %d in %.2fs", sel.method, len(sel.chosen), len(cams), sel.seconds)
+    return sel
+
+
+def _join(*notes: str) -> str:
+    return "; ".join(n for n in notes if n)
+
+
+# ---------------------------------------------------------------------- the methods (curate.select.methods.REGISTRY)
+# Each: (cams, grid, budget, cfg, initial, index, progress) -> Selection; a fallback it takes goes into its note.
+
+def _traced(method: str, chosen: list[int], initial: list[int], index, cfg: SelectConfig, **kw) -> Selection:
+    """A Selection of ``chosen`` with its energy curve evaluated after the choice."""
+    from curate.select.greedy import trace_energy
+    e, a, f = trace_energy(index, cfg.energy, initial, chosen)
+    return Selection(method, chosen, initial, e, a, f, **kw)
+
+
+def run_energy(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """The paper's greedy on its energy; farthest-view sampling (with a note) when no camera sees any node."""
+    from curate.select.greedy import greedy_select
+    if index.n_pairs == 0:
         # no camera sees any node: every subset scores E = 0 and the greedy would return the first
         # cameras; a loud, recorded fallback instead
         fallback = ("the energy sees no node (no camera observes the scene's nodes: check --box and the "
                     "occupancy): fell back to farthest-view sampling")
         log.warning("select: %s", fallback)
-        note = "; ".join(x for x in (note, fallback) if x)
-        cfg = replace(cfg, method="fvs")
-    if cfg.method == "energy":
-        tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
-        sel = Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
-    elif cfg.method == "path" and (chosen := path_select(cams, budget, cfg.path, initial, grid.nodes(), index)) is not None:
-        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
-        sel = Selection("path", chosen, initial, e, a, f)
-    elif cfg.method in ("medoids", "path"):
-        from curate.select.medoids import PathOrderWarning, medoids_select
-        if cfg.method == "path":                                      # not in capture order: no path
-            fallback = ("path: the photos are not in capture order (or too few), so there is no path to "
-                        "space frames along: fell back to view medoids")
-            log.info("select %s", fallback)
-            note = "; ".join(x for x in (note, fallback) if x)
-            cfg = replace(cfg, method="medoids")
-        with warnings.catch_warnings(record=True) as caught:          # path weights ignored: a note
-            warnings.simplefilter("always")
-            chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)
-        for w in caught:
-            if issubclass(w.category, PathOrderWarning):
-                log.info("select %s", w.message)
-                note = "; ".join(x for x in (note, str(w.message)) if x)
-            else:                                                     # any other warning: passed on
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
-        sel = Selection(cfg.method, chosen, initial, e, a, f, objective=cost)
-    else:
-        if cfg.method == "random":
-            chosen = random_subset(len(cams), budget, cfg.seed, initial)
-        elif cfg.method == "fvs":
-            chosen = farthest_view(cams, budget, initial)
-        elif cfg.method == "stride":
-            chosen = stride_subset(len(cams), budget, initial)
-        else:
-            raise ValueError(f"unknown selection method {cfg.method!r}")
-        e, a, f = trace_energy(index, cfg.energy, initial, chosen)
-        sel = Selection(cfg.method, chosen, initial, e, a, f)
-    sel.seconds = time.perf_counter() - t0
-    sel.note = note
-    log.info("select %s: %d cameras of %d in %.2fs", cfg.method, len(sel.chosen), len(cams), sel.seconds)
+        sel = run_fvs(cams, grid, budget, replace(cfg, method="fvs"), initial, index, progress)
+        sel.note = _join(fallback, sel.note)
+        return sel
+    tr = greedy_select(index, budget, cfg.energy, initial, progress=progress)
+    return Selection("energy", tr.chosen, initial, tr.energy, tr.angular, tr.frequency)
+
+
+def run_path(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """Frames evenly spaced along the capture path; view medoids (with a note) when the photos are not in
+    capture order."""
+    chosen = path_select(cams, budget, cfg.path, initial, grid.nodes(), index)
+    if chosen is not None:
+        return _traced("path", chosen, initial, index, cfg)
+    fallback = ("path: the photos are not in capture order (or too few), so there is no path to "
+                "space frames along: fell back to view medoids")
+    log.info("select %s", fallback)
+    sel = run_medoids(cams, grid, budget, replace(cfg, method="medoids"), initial, index, progress)
+    sel.note = _join(fallback, sel.note)
     return sel
+
+
+def run_medoids(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """View medoids; path weights that do not apply (photos not in capture order) become a note."""
+    from curate.select.medoids import PathOrderWarning, medoids_select
+    note = ""
+    with warnings.catch_warnings(record=True) as caught:          # path weights ignored: a note
+        warnings.simplefilter("always")
+        chosen, cost = medoids_select(cams, budget, cfg.medoids, initial, grid.nodes(), index)
+    for w in caught:
+        if issubclass(w.category, PathOrderWarning):
+            log.info("select %s", w.message)
+            note = _join(note, str(w.message))
+        else:                                                     # any other warning: passed on
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return _traced("medoids", chosen, initial, index, cfg, objective=cost, note=note)
+
+
+def run_fvs(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """Farthest-view sampling."""
+    from curate.select.baselines import farthest_view
+    return _traced("fvs", farthest_view(cams, budget, initial), initial, index, cfg)
+
+
+def run_stride(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """Every n-th camera in name order."""
+    from curate.select.baselines import stride_subset
+    return _traced("stride", stride_subset(len(cams), budget, initial), initial, index, cfg)
+
+
+def run_random(cams, grid, budget, cfg, initial, index, progress=False) -> Selection:
+    """A random subset (``cfg.seed``)."""
+    from curate.select.baselines import random_subset
+    return _traced("random", random_subset(len(cams), budget, cfg.seed, initial), initial, index, cfg)
 
 
 def score_cameras(cams: Cameras, grid: NodeGrid, cfg: EnergyConfig = EnergyConfig(), per_node: bool = False,

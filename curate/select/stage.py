@@ -133,5 +133,5 @@ def read_selection(run_dir: Path) -> dict:
     """``RUN/select/selection.json``."""
     p = Path(run_dir) / "select" / "selection.json"
     if not p.is_file():
-        raise FileNotFoundError(f"{p}: no selection yet (run the select stage first)")
+        raise FileNotFoundError(f"{p}: no selection yet (run `curate select RUN` first)")
     return json.loads(p.read_text())

@@ -39,8 +39,10 @@ class VideoConfig:
     """Longer side of the grey image the sharpness is measured on (pixels)."""
 
     def __post_init__(self) -> None:
-        if self.max_frames < 2 or not (0 < self.change_step <= 1) or not (0 <= self.static_change < 1):
-            raise ValueError("video: max_frames >= 2, 0 < change_step <= 1 and 0 <= static_change < 1")
+        if self.max_frames < 2:
+            raise ValueError(f"--max-frames must be >= 2, got {self.max_frames}")
+        if not (0 < self.change_step <= 1) or not (0 <= self.static_change < 1):
+            raise ValueError("video: 0 < change_step <= 1 and 0 <= static_change < 1")
         if self.analysis_side < 16 or self.sharpness_side < 16:
             raise ValueError("video: analysis_side and sharpness_side must be >= 16")
 
@@ -51,21 +53,26 @@ class SfmConfig:
     """Options of the SfM stage. Every field but ``num_threads`` and ``progress`` is part of the stage key."""
 
     # --- ingest
-    max_image_size: int = 1600        # longer side of the working copies (and of SIFT's input), pixels
+    max_image_size: int = 1600        # longer side, in pixels, of the working copies SfM reads
     recursive: bool = False           # also take photos from sub-folders
     # --- quality (curate.sfm.quality)
     drop_duplicates: bool = True      # drop near-identical photos (perceptual hash distance <= dup_max_distance)
     dup_max_distance: int = 4         # of 256 hash bits; consecutive video frames differ by >= ~12
-    drop_blurry: bool = False         # drop photos with sharpness < blur_fraction * median (default: flag only)
+    drop_blurry: bool = False         # drop blurry photos (sharpness far under the pool's median) instead of only
+    #                                   flagging them
     blur_fraction: float = 0.3        # blurry threshold, relative to the pool's median sharpness
     # --- features
-    camera_mode: str = "auto"         # 'auto' (single when one camera model and size), 'single', 'per_image'
+    camera_mode: str = "auto"         # one camera for all photos (single) or one per photo (per_image); auto:
+    #                                   single when every photo comes from one camera model at one size
     camera_model: str = "SIMPLE_RADIAL"  # COLMAP model (f, cx, cy, k). RADIAL / OPENCV over-fit small object
     #                                   rings: templering at 480 px registers 4 of 47 with RADIAL, 46 with SIMPLE_RADIAL
     max_num_features: int = 8192      # SIFT features per image
-    sift_peak_threshold: float = 0.02 / 3  # SIFT detector threshold (COLMAP's default 0.02 / 3); lower: more features
+    sift_peak_threshold: float = 0.02 / 3  # SIFT's peak threshold (COLMAP's default); lower finds more features
     # --- matching
-    matcher: str = "auto"             # 'auto', 'exhaustive', 'sequential', 'spatial' (never a vocab tree: offline)
+    matcher: str = "auto"             # which photo pairs to match: exhaustive (all), sequential (each frame with
+    #                                   the next ones, and loops), spatial (by GPS), or auto: exhaustive for a small
+    #                                   set, else spatial with GPS, sequential for video frames or numbered
+    #                                   photos, exhaustive otherwise (never a vocabulary tree: it is a download)
     exhaustive_max_images: int = 150  # 'auto': exhaustive up to this many photos
     sequential_overlap: int = 15      # sequential: match each frame with the next N frames
     sequential_quadratic: bool = True  # sequential: also frames i + 2^k (helps closing loops without a vocab tree)
@@ -76,11 +83,12 @@ class SfmConfig:
     vocab_tree_descriptors: int = 100_000  # loop detection's vocabulary tree: trained on at most this many of the
     #                                   capture's descriptors (one word per ~40): its training time stays fixed
     spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
-    guided_matching: bool = False     # COLMAP guided matching (more matches, slower)
+    guided_matching: bool = False     # COLMAP's guided matching (more matches, slower)
     # --- mapping
-    mapper: str = "auto"              # 'incremental' (COLMAP), 'global' (COLMAP's global mapper, formerly GLOMAP),
-    #                                   or 'auto': incremental, then global on the same matches when the largest
-    #                                   model holds less than min_registered_fraction of the photos; the larger kept
+    mapper: str = "auto"              # how matches become cameras: incremental (COLMAP's), global (COLMAP's
+    #                                   global mapper, formerly GLOMAP), or auto: incremental, then global on the
+    #                                   same matches when the incremental model leaves photos out, the global
+    #                                   model kept where it holds more photos and agrees with every part
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
     #                                   agrees with each (median orientation difference) within this many degrees
@@ -94,10 +102,10 @@ class SfmConfig:
     """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
-    on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
-    #                                   'largest' curates the largest part with a loud warning; 'each' also curates
-    #                                   every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
-    #                                   size; each part is its own scene, in its own frame); 'stop' stops
+    on_split: str = "largest"         # when SfM splits the capture into separate models: largest curates the
+    #                                   largest one, with a warning; each also curates every other part of 10 or
+    #                                   more photos in RUN/parts/<k> (the budget shared by size, each part its own
+    #                                   scene); stop stops
     normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
     # --- execution (not in the stage key)
     num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
@@ -108,9 +116,9 @@ class SfmConfig:
                    "mapper": MAPPERS}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:
-                raise ValueError(f"SfmConfig.{k} must be one of {ok}, got {getattr(self, k)!r}")
+                raise ValueError(f"sfm: {k.replace('_', ' ')} must be one of {ok}, got {getattr(self, k)!r}")
         if self.max_image_size < 64:
-            raise ValueError("SfmConfig.max_image_size must be >= 64")
+            raise ValueError(f"--max-size must be >= 64 (pixels), got {self.max_image_size}")
         if not self.max_part_disagreement_deg > 0:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1):

@@ -33,7 +33,8 @@ def load_sfm(run_dir: str | Path) -> SfmResult:
     """Cameras, sparse points, normalisation and photo records of a finished SfM/import stage."""
     d = sfm_dir(run_dir)
     if not (d / "stage.json").is_file():
-        raise FileNotFoundError(f"{d}: no finished SfM stage (stage.json missing); run `run_sfm` or `import_poses`")
+        raise FileNotFoundError(f"{d}: SfM has not finished in this run folder (no stage.json); run `curate sfm "
+                                f"PHOTOS --out {Path(run_dir)}` or `curate run PHOTOS --out {Path(run_dir)}` first")
     cams = Cameras.load(d / "cameras.json")
     pts = np.load(d / "points.npy") if (d / "points.npy").is_file() else np.zeros((0, 3), np.float32)
     norm = json.loads((d / "normalization.json").read_text())

@@ -63,7 +63,7 @@ class SimulateConfig:
     n_test: int = 50
     """Views in each test set."""
     methods: tuple = METHODS
-    """Placement methods to compare."""
+    """Placement methods to compare: ours (the energy, placed progressively), random, hemisphere, fvs."""
     placement: ProgressiveConfig = field(default_factory=ProgressiveConfig)
     """Progressive placement settings (its budget is ``budget``)."""
     node_res: int = 32
@@ -75,14 +75,16 @@ class SimulateConfig:
     train_seconds: float = 120.0
     """Field training time per method."""
     train_iters: int | None = None
-    """Or a fixed number of iterations (overrides train_seconds when set)."""
+    """Field training iterations per method instead of a time (default: --train-seconds)."""
     seed: int = 0
     """Seed of every random draw (placements, test sets, training)."""
     occupancy: str = "oracle"
-    """Occupancy of ours' rejection test: 'oracle' (the scene's geometry) or 'field' (the field
-    trained as cameras are added, the paper's setting; see the module docstring)."""
+    """Where ours finds the scene's surfaces when it places cameras: oracle (the room's own geometry)
+    or field (a field trained as cameras are added, the paper's setting).
+
+    See the module docstring."""
     train_between: int = 250
-    """'field': training iterations of the loop's field after each added camera (the paper: 250)."""
+    """With --occupancy field: training iterations after each added camera (the paper: 250)."""
     field_occupancy: FieldOccupancyConfig = field(default_factory=FieldOccupancyConfig)
     """'field': how occupancy is derived from the loop's field."""
     loop_field: FieldConfig | None = None
@@ -93,7 +95,10 @@ class SimulateConfig:
         if self.occupancy not in ("oracle", "field"):
             raise ValueError(f"occupancy must be 'oracle' or 'field', got {self.occupancy!r}")
         if self.train_between < 1:
-            raise ValueError("train_between must be >= 1")
+            raise ValueError(f"--train-between must be >= 1, got {self.train_between}")
+        unknown = [m for m in self.methods if m not in METHODS]
+        if unknown:
+            raise ValueError(f"--methods: unknown placement method {unknown[0]!r} (one of {', '.join(METHODS)})")
 
 
 def surface_nodes(scene, res: int) -> NodeGrid:
