@@ -187,6 +187,8 @@ def _words(text: str) -> tuple[str, ...]:
 # ---------------------------------------------------------------------- flag -> field tables (paths in RunConfig)
 BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto"),
           Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
+BUDGET_CHECK = [Opt("--no-budget-check", "budget_check", const=False,
+                    help="with --budget auto: skip the two extra trainings that measure how many photos this capture needs")]
 METHOD = [Opt("--method", "select.method", choices=METHODS, help=method_help()),
           Opt("--path-weights", "select.medoids.path_weights"),
           Opt("--seed", "select.seed", parse=int)]
@@ -218,7 +220,7 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
        Opt("--on-split", "sfm.on_split", choices=ON_SPLIT),
        Opt("--max-frames", "sfm.video.max_frames", parse=int)]
-RUN = BUDGET + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
+RUN = BUDGET + BUDGET_CHECK + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
 
 SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen")),
             Opt("--scene-seed", "scene_seed", parse=int),
@@ -240,7 +242,7 @@ SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen"))
 COMMAND_OPTS: dict[str, list[Opt]] = {
     "run": RUN, "batch": RUN, "sfm": SFM, "score": ENERGY + GRID,
     "select": BUDGET + METHOD + ENERGY + GRID,
-    "occupancy": GRID + TRAIN, "evaluate": EVAL, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
+    "occupancy": GRID + TRAIN, "evaluate": EVAL + BUDGET_CHECK, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
     "report": [], "simulate": SIMULATE,
 }
 
@@ -566,6 +568,8 @@ def print_verdict(rep: dict, run_dir: Path) -> None:
     if v.get("coverage"):
         print(v["coverage"])
     print(f"verdict: {v['short']}")
+    if v.get("how_many"):
+        print(v["how_many"])
     secs = rep.get("wall_seconds")
     print(f"report: {run_dir / 'report.html'}" + (f" ({secs:.0f} s)" if secs is not None else ""))
 

@@ -32,6 +32,12 @@ class RunConfig:
     photos (as predicted).
 
     The predictor's measured error is in docs/selection-evidence.md (``budget_auto``)."""
+    budget_check: bool = True
+    """With --budget auto and the evaluation: train the same field on two more budgets of the
+    evaluation's split (half and twice its own) to measure how the loss falls on this capture, and
+    advise a budget from that beside the prediction (two more trainings).
+
+    curate.evaluate.check fits the measured losses; docs/selection-evidence.md, "How many photos"."""
     sfm: SfmConfig = field(default_factory=SfmConfig)
     """SfM stage options."""
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)

@@ -74,7 +74,8 @@ def plan(cfg: "RunConfig", run_dir: Path) -> Plan:
         raise ValueError(f"only {len(pool)} registered photos left after holding out every {ev.holdout_every}th: "
                          "too few to evaluate (use --no-evaluate)")
     k = eval_budget(len(exported["chosen"]), n_all, len(pool))
-    sel = select(cams[pool], load_node_grid(run_dir), k, cfg.select)
+    grid = load_node_grid(run_dir)
+    sel = select(cams[pool], grid, k, cfg.select)
     chosen = [pool[i] for i in sel.chosen]
     units = []
     for m in ev.methods:
@@ -89,14 +90,50 @@ def plan(cfg: "RunConfig", run_dir: Path) -> Plan:
             units.append(Unit("all", "all", None, list(pool)))
         else:
             raise ValueError(f"unknown evaluation method {m!r}")
+    check = []
+    if exported.get("budget_auto") and cfg.budget_check and "all" in ev.methods:
+        from curate.evaluate.check import check_budgets
+        for b in check_budgets(k, len(pool)):   # the same method at other budgets: the loss curve here
+            units.append(Unit(f"check_b{b}", "check", None, [pool[i] for i in select(cams[pool], grid, b,
+                                                                                     cfg.select).chosen]))
+            check.append(b)
     # a unit's key: the training settings, its subset and the held-out views
     train = replace(ev, workers=0, methods=(), random_seeds=0)
     sfm_key = key_of(run_dir / "sfm")
     keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": hold}, [sfm_key]) for u in units}
     protocol = {"holdout_every": ev.holdout_every, "holdout": hold, "pool": pool, "n_registered": n_all,
                 "budget": k, "exported_budget": len(exported["chosen"]), "method": sel.method, "chosen": chosen,
-                "shared_with_export": len(set(chosen) & set(exported["chosen"]))}
+                "shared_with_export": len(set(chosen) & set(exported["chosen"])), "check_budgets": check}
     return Plan(units, keys, protocol, stage_key({"units": keys, "protocol": protocol}))
+
+
+def budget_check(cfg: "RunConfig", run_dir: Path, cams, protocol: dict, res: dict):
+    """The measured check (:mod:`curate.evaluate.check`) from the trained units ``res``: the loss of the
+    estimate's selection and of the check's budgets against all photos, on the split's held-out photos."""
+    from curate.core.stats import paired_difference
+    from curate.evaluate.check import fit_check
+    from curate.occupancy.stage import load_node_grid
+    from curate.select.auto_budget import LOSS_MODEL, pool_views
+    from curate.select.spacing import spacing_curve
+    from curate.select.stage import read_selection
+    from curate.select.visibility import build_pair_index
+    nodes = load_node_grid(run_dir).nodes()
+    bins = cfg.select.energy.bins
+
+    def curve(c):
+        return spacing_curve(*pool_views(c, nodes, build_pair_index(c, nodes, bins)))[1]
+    pool = protocol["pool"]
+    rho_pool, rho_full = curve(cams[pool]), curve(cams)
+    all_pv = [v["psnr"] for v in res["all"]["per_view"]]
+    points = []
+    for key, r in res.items():
+        if r["method"] in ("check", "selection"):
+            d = paired_difference(all_pv, [v["psnr"] for v in r["per_view"]])
+            points.append({"k": r["n_train"], "rho": float(rho_pool[r["n_train"] - 1]), "loss": d["mean"],
+                           "lo": d["lo"], "hi": d["hi"]})
+    auto = read_selection(run_dir)["budget_auto"]
+    return fit_check(sorted(points, key=lambda x: x["k"]), LOSS_MODEL[auto["kind"]][1], rho_full,
+                     auto["tolerance_db"], len(cams) / len(pool))
 
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
@@ -122,9 +159,12 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     hold = p.protocol["holdout"]
     res = run_units(run_dir, p.units, p.keys, cfg.evaluate, cams, paths, hold, default_box(sfm.cameras),
                     executor=executor)
-    methods, paired, gap = summarize(res)
-    write_json_atomic(d / "summary.json", {"key": p.key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods,
-                                           "paired": paired, "gap_closed": gap, "protocol": p.protocol})
+    methods, paired, gap = summarize({k: v for k, v in res.items() if v["method"] != "check"})
+    summary = {"key": p.key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
+               "gap_closed": gap, "protocol": p.protocol}
+    if p.protocol["check_budgets"] and "all" in res and "selection" in res:
+        summary["budget_check"] = budget_check(cfg, run_dir, sfm.cameras, p.protocol, res).to_dict()
+    write_json_atomic(d / "summary.json", summary)
     pr = p.protocol
     order = ("selection", "random", "fvs", "all")      # as the report lists them
     txt = ", ".join(f"{m} {methods[m]['psnr']:.2f}" for m in sorted(methods, key=lambda m: (

@@ -60,28 +60,36 @@ def line_chart(series: dict, title: str, xlabel: str, ylabel: str, width: int = 
     return _svg(fig)
 
 
-def budget_chart(k, loss, tolerance: float, chosen: int, measured: float | None = None,
+def budget_chart(k, loss, tolerance: float, chosen: int, measured=None, check_loss=None, advised: int | None = None,
                  width: int = 520, height: int = 300) -> str:
     """``--budget auto``: the predicted loss [n] against the budgets ``k`` [n], the tolerance as a
-    dashed line, the chosen budget as a dot (and, when the run was evaluated, the measured loss
-    at it as a cross)."""
+    dashed line, the chosen budget as a dot; ``measured``: the budget check's points [(k, loss dB)]
+    as crosses, ``check_loss`` [n] its fitted curve at ``k`` and ``advised`` its budget."""
     fig, ax = _figure(width, height)
     k, loss = np.asarray(k, np.float64).ravel(), np.asarray(loss, np.float64).ravel()
     ok = np.isfinite(k) & np.isfinite(loss) if len(k) == len(loss) else np.zeros(0, bool)
-    ax.plot(k[ok], loss[ok], color=PALETTE[0], lw=1.8, label="predicted loss")
+    ax.plot(k[ok], loss[ok], color=PALETTE[0], lw=1.8, label="predicted from the poses")
     ax.axhline(tolerance, color="#888888", lw=1, ls="--", label=f"tolerance {tolerance:g} dB")
     if ok.any():
         at = float(np.interp(chosen, k[ok], loss[ok]))
-        ax.plot([chosen], [at], "o", color=PALETTE[1], ms=7, label=f"chosen: {chosen}")
-    if measured is not None and np.isfinite(measured):
-        ax.plot([chosen], [measured], "x", color=PALETTE[2], ms=8, mew=2, label=f"measured: {measured:.2f} dB")
+        ax.plot([chosen], [at], "o", color=PALETTE[0], ms=7, label=f"predicted budget: {chosen}")
+    top = max(5.0 * tolerance, 2.0)
+    if check_loss is not None and len(check_loss) == len(k):
+        cl = np.asarray(check_loss, np.float64)
+        ax.plot(k[ok], cl[ok], color=PALETTE[1], lw=1.8, ls="-.", label="fitted to the measured points")
+        if advised is not None:
+            ax.plot([advised], [float(np.interp(advised, k[ok], cl[ok]))], "o", color=PALETTE[1], ms=7,
+                    label=f"measured budget: {advised}")
+    if measured:
+        mk, ml = np.asarray(measured, np.float64).reshape(-1, 2).T
+        ax.plot(mk, ml, "x", color=PALETTE[2], ms=8, mew=2, label="measured on this capture")
+        top = max(top, float(np.nanmax(ml)) * 1.2)
     ax.set_xscale("log")
-    top = max(5.0 * tolerance, 2.0, (measured or 0.0) * 1.2)          # the region around the tolerance
-    ax.set_ylim(0, min(top, float(loss[ok].max()) * 1.05) if ok.any() and loss[ok].max() > 0 else top)
-    ax.set_title("Predicted held-out PSNR lost against all frames")
+    ax.set_ylim(0, min(top, float(loss[ok].max()) * 1.05) if ok.any() and loss[ok].max() > top / 5 else top)
+    ax.set_title("Held-out PSNR lost against all photos")
     ax.set_xlabel("photos chosen (log scale)")
-    ax.set_ylabel("dB below all frames")
-    ax.legend(frameon=False)
+    ax.set_ylabel("dB below all photos")
+    ax.legend(frameon=False, fontsize=8)
     return _svg(fig)
 
 

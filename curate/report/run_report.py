@@ -178,6 +178,8 @@ def _verdict(run: _Run) -> str:
         q = q.replace(words, f"\x00{words}\x01")
     q = esc(q).replace("\x00", "<b>").replace("\x01", "</b>")
     lines.append(f"<p>{q}</p>")
+    if v.get("how_many"):
+        lines.append(f"<p>{esc(v['how_many'])}</p>")
     if s.get("note"):
         lines.append(f'<p class="small">How the method was chosen: {esc(_plain_note(s["note"]))}.</p>')
     return '<div class="verdict">' + "".join(lines) + "</div>"
@@ -341,19 +343,27 @@ def _budget_auto(run) -> str:
     b = run.sel.get("budget_auto")
     if not b:
         return note(f"Budget given: {run.sel.get('budget_text', '—')} (--budget auto predicts one from the "
-                    "capture's views).")
-    m = run.methods
-    measured = None
-    if "selection" in m and "all" in m and m["selection"].get("psnr") is not None and m["all"].get("psnr") is not None:
-        measured = float(m["all"]["psnr"]) - float(m["selection"]["psnr"])
-    svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], b["budget"], measured)
-    meas = (f" Measured here (with photos held out): all photos {fmt_num(m['all']['psnr'])} dB, this method "
-            f"{fmt_num(m['selection']['psnr'])} dB, a loss of <b>{measured:.2f} dB</b>." if measured is not None
-            else "")
+                    "capture's views, and with the evaluation measures it on the capture).")
+    chk = (run.rep or {}).get("budget_check") if hasattr(run, "rep") else None
+    pts = (chk or {}).get("points") or []
+    measured = [(p["k"] * chk["pool"] / max(run.rep.get("estimate", {}).get("n_pool") or 1, 1), p["loss"])
+                for p in pts] if chk else []
+    ratio = (chk["alpha"] / b["alpha"]) if chk and chk.get("alpha") and b.get("alpha") else None
+    svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], b["budget"], measured,
+                              [x * ratio for x in b["curve_loss_db"]] if ratio else None,
+                              chk.get("budget") if chk else None)
+    rng = f" ({b['low']} to {b['high']})" if b.get("low") is not None and b["low"] != b["high"] else ""
+    txt = [f"<p>Predicted from the poses alone: <b>{b['budget']}{rng}</b> of {b['pool']} photos for "
+           f"{b['tolerance_db']:g} dB ({esc(b['kind'])} law).</p>"]
+    if chk:
+        txt.append(f"<p>Measured on this capture: {esc(chk['note'])}. The points: the same method at "
+                   + ", ".join(f"{p['k']}" for p in pts) + f" of the {run.rep.get('estimate', {}).get('n_pool', '?')} "
+                   "photos left after the hold-out, each trained and scored against all of them (shown at the "
+                   "capture's scale).</p>")
     checked = (BUDGET_CHECK_OBJECT if b.get("kind") == "object" else BUDGET_CHECK_WALK)
-    return (f"<p>{esc(b['note'])}.{meas}</p>{svg}<p class=\"small\">Predicted from the capture's views alone, by "
-            "how far each view is from the nearest chosen one relative to the scene's depth, and a law fitted per "
-            f"kind of capture (docs/selection-evidence.md, \"How many photos\"). {checked}</p>")
+    return ("".join(txt) + svg + "<p class=\"small\">The prediction reads how far each view of the capture is "
+            "from the nearest chosen one relative to the scene's depth, through a law fitted per kind of capture "
+            f"(docs/selection-evidence.md, \"How many photos\"). {checked}</p>")
 
 
 BUDGET_CHECK_WALK = ("Checked with each scene left out of the fit: on eight synthetic walks the predicted budget "

@@ -99,7 +99,7 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
     rep["evaluation"] = evaluation_status(run_dir, stale)
     if rep["evaluation"]["status"] == "current":   # figures only of the selection they describe
         summ = json.loads((run_dir / "evaluate" / "summary.json").read_text())
-        rep.update({k: summ[k] for k in ("methods", "paired", "gap_closed") if k in summ})
+        rep.update({k: summ[k] for k in ("methods", "paired", "gap_closed", "budget_check") if k in summ})
         pr = summ.get("protocol") or {}
         rep["estimate"] = {"budget": pr.get("budget"), "n_pool": len(pr.get("pool", [])),
                            "n_holdout": len(pr.get("holdout", [])), "holdout_every": pr.get("holdout_every"),

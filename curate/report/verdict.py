@@ -83,4 +83,21 @@ def verdict(rep: dict) -> dict:
         quality = ("Not evaluated: no field was trained to compare this selection with random subsets and FVS"
                    f" (`{ev.get('refresh', 'curate evaluate RUN')}` does, in a few minutes).")
         short_line = "not evaluated"
-    return {"exported": exported, "coverage": coverage, "quality": quality, "short": short_line, "against": against}
+    how_many = None
+    chk, auto = rep.get("budget_check"), sel.get("budget_auto")
+    if auto:
+        how_many = (f"How many: --budget auto predicted {auto['budget']}"
+                    + (f" ({auto['low']} to {auto['high']})" if auto.get("low") is not None
+                       and auto["low"] != auto["high"] else "")
+                    + f" for {auto['tolerance_db']:g} dB from the poses alone")
+        if chk and chk.get("budget") is not None:
+            how_many += (f"; measured on this capture, about {chk['budget']} ({chk['low']} to {chk['high']}) come "
+                         f"within {chk['tolerance_db']:g} dB")
+            if chk["low"] > k:
+                how_many += f": the export has {k}, `curate select {rep.get('run_dir', 'RUN')} --budget {chk['budget']}` " \
+                            "takes more"
+        elif chk and chk.get("high") is not None:
+            how_many += f"; measured on this capture, {chk['high']} or fewer suffice"
+        how_many += "."
+    return {"exported": exported, "coverage": coverage, "quality": quality, "short": short_line, "against": against,
+            "how_many": how_many}

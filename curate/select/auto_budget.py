@@ -29,6 +29,10 @@ LOSS_MODEL = {"walk": (13.19, 1.47), "object": (18.55, 1.0)}
 """(alpha, p) by capture kind: held-out PSNR lost, in dB, is alpha * rho ** p at relative spacing
 rho (fitted by research/budget_fit.py; docs/evidence/budget_auto.json)."""
 
+ALPHA_RANGE = {"walk": (13.19, 13.19), "object": (18.55, 18.55)}
+"""(low, high) alpha by capture kind: the spread of the captures the law was fitted on; the advice's
+range is the budgets these give (docs/selection-evidence.md, "How many photos")."""
+
 CURVE_POINTS = 120
 """The predicted curve is kept (selection.json, the report) at about this many budgets."""
 
@@ -55,6 +59,14 @@ class BudgetChoice:
     """The predicted loss at each of ``curve_k``, dB."""
     note: str
     """One sentence: what it chose and why."""
+    alpha: float = 0.0
+    """The law's alpha used (dB)."""
+    power: float = 1.0
+    """The law's exponent p."""
+    low: int | None = None
+    """The advice's range, low end: the budget with the lowest alpha of :data:`ALPHA_RANGE`."""
+    high: int | None = None
+    """The advice's range, high end: the budget with the highest alpha."""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -109,9 +121,13 @@ def choose_budget(c: np.ndarray, a: np.ndarray, depths: np.ndarray, tolerance_db
         note = (f"budget auto: no budget below the whole pool is predicted within {tolerance_db:g} dB of all "
                 f"frames (at {K - 1} of {K}: {loss[K - 2]:.2f} dB): the capture has little to spare; "
                 f"{k} images chosen")
+    alpha, power = LOSS_MODEL[kind]
+    lo, hi = (fewest_within(a * rho ** power, tolerance_db) or K - 1 for a in ALPHA_RANGE[kind])
+    if (lo, hi) != (k, k):
+        note = note.replace(f"budget auto: {k} of", f"budget auto: {k} ({lo} to {hi}) of", 1)
     ks = curve_budgets(K)
     return BudgetChoice(k, K, float(tolerance_db), kind, float(loss[k - 1]), float(rho[k - 1]),
-                        ks.tolist(), [round(float(x), 4) for x in loss[ks - 1]], note)
+                        ks.tolist(), [round(float(x), 4) for x in loss[ks - 1]], note, alpha, power, lo, hi)
 
 
 def choose_for_pool(cams, nodes: np.ndarray | None, index, tolerance_db: float = 0.5) -> BudgetChoice:

@@ -124,8 +124,10 @@ def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
         return method, ""
     kind, ang = capture_kind(cams)
     method = OBJECT_METHOD if kind == "object" else WALK_METHOD
-    return method, (f"auto: {'an object capture' if kind == 'object' else 'a walk-through'} (median angle to "
-                    f"the viewing axes' meeting point {ang:.1f} deg) -> {method}")
+    why = ("the cameras look at one point (an object capture; their median angle to it {:.0f} deg)" if kind == "object"
+           else "the cameras do not look at one point (a walk-through; their median angle to the nearest common "
+                "point {:.0f} deg)").format(ang)
+    return method, f"auto: {why} -> {method}"
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),
