@@ -594,9 +594,11 @@ def cmd_batch(args) -> int:
         raise CliError(str(e))
     for r in summ["rows"]:
         p = r["psnr"]
-        print(f"{r['name']:24s} {r['status']:6s} " + (f"{r['chosen']}/{r['registered']} chosen, PSNR selection "
-              f"{p['selection'] or float('nan'):.2f} random {p['random'] or float('nan'):.2f}" if r["status"] == "ok"
-              else r["reason"]))
+        ok = r["status"] == "ok"
+        print(f"{r['name']:24s} {r['status']:6s} " + (f"{r['chosen']} of {r['registered']} chosen; "
+              + (r.get("verdict") or ("PSNR selection {:.2f}, random {:.2f}".format(p["selection"], p["random"])
+                                      if p.get("selection") is not None and p.get("random") is not None
+                                      else "not evaluated")) if ok else r["reason"]))
     print(f"summary: {Path(args.out) / 'summary.html'} ({summ['n_ok']} ok, {summ['n_failed']} failed, "
           f"{summ['wall_seconds']:.0f}s)")
     return 0 if summ["n_failed"] == 0 else 1

@@ -31,6 +31,18 @@ def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> N
                                                    "poses": str(poses) if poses else None, "versions": versions()})
 
 
+STARTS = {"sfm": "photos to cameras", "occupancy": "where the scene is", "select": "choosing photos",
+          "evaluate": "training on the subsets", "export": "writing the export", "report": "writing the report"}
+"""What a stage's start line says (on a terminal; its end line replaces it)."""
+
+
+def _start(name: str) -> None:
+    """On a terminal, a line saying which stage runs now (the stage's own line replaces it)."""
+    import sys
+    if sys.stdout.isatty():
+        print(f"{name:10s} {STARTS.get(name, '')} ...", flush=True)
+
+
 def _done(res: StageResult, results: list[StageResult]) -> StageResult:
     results.append(res)
     print(res.line(), flush=True)
@@ -145,6 +157,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     run_dir.mkdir(parents=True, exist_ok=True)
     save_run_config(cfg, run_dir, photos, poses)
     results: list[StageResult] = []
+    _start("sfm")
     last = _done(sfm.run(cfg, run_dir, force, photos=photos, poses=poses), results)
     parts = split_parts(run_dir) if cfg.sfm.on_split == "each" and until is None else []
     if parts:  # the largest part takes its share of a count budget; the others follow the export
@@ -161,6 +174,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     for name, fn in steps:
         if until is not None and last.name == until:
             return last.path
+        _start(name)
         last = _done(fn(cfg, run_dir, force), results)
     if until is not None and last.name == until:
         return last.path

@@ -43,7 +43,8 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
         from curate.evaluate.units import legacy_keys
         m = legacy_keys(rep.get("methods", {}))
         paired = legacy_keys(rep.get("paired", {}))
-        row.update(photos=rep.get("n_photos"), registered=rep.get("n_registered"), pool=rep.get("n_pool"),
+        row.update(photos=rep.get("n_photos"), registered=rep.get("n_registered"),
+                   pool=rep.get("n_candidates", rep.get("n_pool")), verdict=(rep.get("verdict") or {}).get("short"),
                    chosen=len(sel.get("chosen", [])), chosen_names=list(sel.get("chosen_names", [])),
                    psnr={k: (m[k]["psnr"] if k in m else None) for k in METHODS},
                    psnr_random_std=m.get("random", {}).get("psnr_std"),

@@ -120,13 +120,13 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     write_json_atomic(d / "selection.json", rec)
     finish_stage(d, key, parts, t0,
                  outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
-    e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
-    how = sel.method if sel.method == cfg.select.method else f"{cfg.select.method}: {sel.method}"
+    from curate.select.methods import method_label
+    how = method_label(sel.method) + (" (auto)" if cfg.select.method == "auto" else "")
     why = f"; {auto.note}" if auto is not None else ""
     cov = rec["coverage"]
     sees = (f"; they see {100 * cov['seen']:.0f}% of the scene the capture sees" if cov["n_nodes_seen"] else "")
     return StageResult("select", d, True, time.perf_counter() - t0,
-                       f"{len(rec['chosen'])} of {len(pool)} photos ({how}{e}){sees}; {sel.seconds:.2f}s{why}")
+                       f"{len(rec['chosen'])} of {len(pool)} photos by {how}{sees}; {sel.seconds:.2f}s{why}")
 
 
 def read_selection(run_dir: Path) -> dict:
