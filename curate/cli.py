@@ -610,8 +610,8 @@ COMMANDS = {
     "sfm": "calibrate a photo folder (COLMAP) or import known poses into a run folder",
     "select": "choose a subset of a posed pool (a pose file, or a run folder's select stage)",
     "score": "score an existing capture with the energy (no NeRF needed)",
-    "occupancy": "hold-out split, pool field and occupancy grid of a run folder",
-    "evaluate": "train and score the subsets of a run folder",
+    "occupancy": "where the scene is (the occupancy grid the selection reads) in a run folder",
+    "evaluate": "estimate how good a run folder's selection is (trainings with photos held out)",
     "export": "export the chosen subset (COLMAP, transforms.json, list, links)",
     "report": "write RUN/report.json and RUN/report.html",
     "batch": "curate many photo folders (locally or on a Ray cluster), with a summary",
@@ -637,9 +637,11 @@ DESCRIPTIONS = {
     "select": "Choose a budget of cameras from a posed pool and write transforms.json (image paths relative to it), "
               "selected.txt and selection.json in --out; or, for a run folder, redo its select stage with its "
               "saved options and the flags given.",
-    "run": "SfM (or --poses), occupancy, selection, evaluation against random subsets, farthest-view sampling and "
-           "all images on held-out views, export (RUN/export) and report (RUN/report.json, RUN/report.html). "
-           "Unchanged stages are skipped on a re-run.",
+    "run": "SfM (or --poses), occupancy, the selection among every registered photo, its export (RUN/export) "
+           "and report (RUN/report.html, RUN/report.json). Unless --no-evaluate, an estimate of how good it is: the "
+           "same method chooses again with every 14th photo held out, and the same small radiance field is trained "
+           "on that choice, on random subsets, on farthest-view sampling and on all photos. The exported photos "
+           "are the same with and without the evaluation. Unchanged stages are skipped on a re-run.",
     "batch": "`curate run` on every folder: RUNS/<name>/ per folder, RUNS/summary.json and RUNS/summary.html. A "
              "folder's poses: its transforms.json, else its sparse/0 (COLMAP), else SfM. A failing folder is "
              "reported failed, the others go on; a re-run resumes.",

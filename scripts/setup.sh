@@ -4,10 +4,18 @@
 #  2. Debian's libusb-1.0-0 for open3d (when root and missing)
 #  3. torch: with an NVIDIA GPU the default index's (CUDA) build; without one PyTorch's own CPU
 #     wheel index, falling back to the default index when that index cannot be reached
-#  4. curate itself (editable) with its test tools and Ray
+#  4. curate itself (editable) with its test tools; with --ray also Ray (only `curate batch --executor
+#     ray` needs it: about 300 MB more)
 # Afterwards run curate as .venv/bin/python -m curate (or activate .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+EXTRAS="test"
+for a in "$@"; do
+  case "$a" in
+    --ray) EXTRAS="test,ray" ;;
+    *) echo "setup: unknown option $a (known: --ray)" >&2; exit 2 ;;
+  esac
+done
 TORCH="torch==2.13.0"
 CPU_INDEX="https://download.pytorch.org/whl/cpu"
 step() { echo "setup: $*"; }
@@ -48,12 +56,15 @@ else
   fi
 fi
 
-if "$PY" -c "import curate, pytest, hypothesis, ray" 2>/dev/null && "$PY" -m pip check -q >/dev/null 2>&1 \
-   && [ "$(cat .venv/.curate-setup 2>/dev/null)" = "$(sha256sum pyproject.toml | cut -c1-16)" ]; then
+WANT="$(sha256sum pyproject.toml | cut -c1-16)"
+HAVE="$(cat .venv/.curate-setup 2>/dev/null || true)"
+# up to date: the same pyproject.toml, and every extra asked for already there (Ray, once installed, stays)
+if "$PY" -c "import curate, pytest, hypothesis" 2>/dev/null && "$PY" -m pip check -q >/dev/null 2>&1 \
+   && [ "${HAVE%% *}" = "$WANT" ] && { [ "$EXTRAS" = "test" ] || "$PY" -c "import ray" 2>/dev/null; }; then
   step "curate and its test tools already installed"
 else
-  step "installing curate (editable) with its test tools and Ray"
-  "${PIP[@]}" -e ".[test,ray]"
-  sha256sum pyproject.toml | cut -c1-16 > .venv/.curate-setup
+  step "installing curate (editable) with its test tools$([ "$EXTRAS" = "test" ] || echo " and Ray")"
+  "${PIP[@]}" -e ".[$EXTRAS]"
+  echo "$WANT" > .venv/.curate-setup
 fi
 step "done: $("$PY" -m curate --version)"
