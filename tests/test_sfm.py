@@ -113,13 +113,14 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
     assert (tmp_path / "database.db").read_bytes() == b"db"   # the global mapper ran on a copy
 
 
-@pytest.mark.parametrize("dis, kept, n", [
-    ([1.2, 2.9, 0.5], "global", 10),        # agrees with every part: kept whole
-    ([1.2, 2.9, 14.0], "global", 8),        # bent the smallest part: that part leaves, the rest is one model
-    ([14.0, 1.0, 1.0], "incremental", 5),   # bent the largest: what is left is no larger than it
-    ([1.0, None, 1.0], "global", 7),        # a part too small to check: left out too
+@pytest.mark.parametrize("dis, passes, kept, n", [
+    ([1.2, 2.9, 0.5], False, "global", 10),        # agrees with every part: kept whole
+    ([1.2, 2.9, 14.0], True, "global", 8),         # bent the smallest part: it leaves, however its frames look alone
+    ([14.0, 1.0, 1.0], True, "incremental", 5),    # bent the largest: what is left is no larger than it
+    ([1.0, None, 1.0], False, "global", 7),        # a part too small to check, whose frames fail on their own
+    ([1.0, None, 1.0], True, "global", 10),        # ... or pass on their own: kept (issue 36)
 ])
-def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_path, dis, kept, n):
+def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_path, dis, passes, kept, n):
     """office.mp4 without loop detection: the global mapper registered all 371 frames but turned two
     incremental parts (24 and 13 frames) by 16 and 21 deg; each part alone was right. A bent whole
     is no better than sound parts: only the parts it agrees with stay in it."""
@@ -128,10 +129,14 @@ def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_p
     monkeypatch.setattr(sfm, "_map", lambda *a_, **k: {0: _Model(5, a), 1: _Model(3, b), 2: _Model(2, c)})
     monkeypatch.setattr(sfm, "_map_global", lambda *a_, **k: {0: _Model(10, a + b + c)})
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: list(zip(dis, (set(a), set(b), set(c)))))
+    checked = []
+    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg: checked.extend(names) or
+                        {x: {"ok": passes, "why": "" if passes else "disagrees"} for x in names})
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
     assert stats["mapper"] == kept and stats["mappers_tried"]["global"]["part_disagreement_deg"] == dis
+    assert set(checked) == (set(b) if dis[1] is None else set())   # only frames no part checked, never a refuted part
     assert sfm._sizes(models) == ([n] if kept == "global" else [5, 3, 2])
 
 

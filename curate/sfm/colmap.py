@@ -370,8 +370,15 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     tried["global"]["part_disagreement_deg"] = [d for d, _ in checks]
     ok = [d is not None and d <= cfg.max_part_disagreement_deg for d, _ in checks]
     best = max(glob.values(), key=lambda r: r.num_reg_images())
-    if not all(ok):  # keep of the global model only the parts it agrees with, in one frame
+    if not all(ok):  # keep of the global model the parts it agrees with, and the frames that pass on their own
         keep = set().union(*(names for (_, names), good in zip(checks, ok) if good))
+        refuted = set().union(*(names for (d, names), good in zip(checks, ok) if d is not None and not good))
+        unchecked = [im.name for im in best.images.values() if im.has_pose and im.name not in keep | refuted]
+        verdicts = verify_frames(best, unchecked, cfg.max_part_disagreement_deg)
+        passed = {n for n, v in verdicts.items() if v["ok"]}
+        keep |= passed
+        tried["global"]["verified"] = {"checked": len(unchecked), "kept": len(passed),
+                                       "refused": {n: v["why"] for n, v in verdicts.items() if not v["ok"]}}
         for im in list(best.images.values()):
             if im.name not in keep and im.has_pose:
                 best.deregister_frame(im.frame_id)
@@ -387,6 +394,60 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
                    "" if all(ok) else "; the parts it disagrees with, and the photos no part checks, are left out")
     stats["mapper"] = "global"
     return {0: best}
+
+
+VERIFY_MIN_POINTS = 30
+""":func:`verify_frames`: the fewest 2D-3D matches to points the other frames see, and the fewest PnP inliers."""
+VERIFY_MAX_STEP = 0.05
+""":func:`verify_frames`: the largest distance between a frame's own pose and the model's, as a fraction
+of the median depth of the points it sees."""
+
+
+def verify_frames(rec, names: list[str], max_rot_deg: float) -> dict[str, dict]:
+    """Check frames of the model ``rec`` that no mapper part confirms, each by its own evidence: its
+    pose estimated again (PnP with LO-RANSAC, then refined: pycolmap) from its matches to the 3D points
+    the *other* frames see (tracks of at least two other frames), with the model held fixed, must agree
+    with the pose the model gives it: within ``max_rot_deg`` degrees and :data:`VERIFY_MAX_STEP` of its
+    scene depth, with at least :data:`VERIFY_MIN_POINTS` inliers, half of its matches or more.
+
+    Returns {name: {"ok", "why", "inliers", "rot_deg", "step"}}."""
+    import pycolmap
+    by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+    out: dict[str, dict] = {}
+    for n in names:
+        im = by_name.get(n)
+        if im is None:
+            continue
+        xy, xyz = [], []
+        for p in im.points2D:
+            if not p.has_point3D():
+                continue
+            pt = rec.point3D(p.point3D_id)
+            others = {e.image_id for e in pt.track.elements} - {im.image_id}
+            if len(others) >= 2:
+                xy.append(p.xy)
+                xyz.append(pt.xyz)
+        if len(xy) < VERIFY_MIN_POINTS:
+            out[n] = {"ok": False, "why": f"{len(xy)} matches to points other frames see (< {VERIFY_MIN_POINTS})",
+                      "inliers": 0, "rot_deg": None, "step": None}
+            continue
+        xy, xyz = np.asarray(xy, np.float64), np.asarray(xyz, np.float64)
+        res = pycolmap.estimate_and_refine_absolute_pose(xy, xyz, rec.camera(im.camera_id))
+        if res is None:
+            out[n] = {"ok": False, "why": "no pose from its matches", "inliers": 0, "rot_deg": None, "step": None}
+            continue
+        mine, model = res["cam_from_world"], im.cam_from_world()
+        Rm, Rg = np.asarray(mine.rotation.matrix()), np.asarray(model.rotation.matrix())
+        rot = float(np.degrees(np.arccos(np.clip((np.trace(Rm @ Rg.T) - 1) / 2, -1.0, 1.0))))   # same world frame
+        cm, cg = -Rm.T @ np.asarray(mine.translation), -Rg.T @ np.asarray(model.translation)
+        depth = float(np.median(np.linalg.norm(xyz - cg, axis=1)))
+        step = float(np.linalg.norm(cm - cg) / max(depth, 1e-12))
+        inl = int(res["num_inliers"])
+        ok = inl >= max(VERIFY_MIN_POINTS, len(xy) // 2) and rot <= max_rot_deg and step <= VERIFY_MAX_STEP
+        why = "" if ok else (f"{inl} of {len(xy)} matches agree" if inl < max(VERIFY_MIN_POINTS, len(xy) // 2) else
+                             f"its own pose is {rot:.1f} deg and {step:.2f} x depth from the model's")
+        out[n] = {"ok": ok, "why": why, "inliers": inl, "rot_deg": round(rot, 2), "step": round(step, 4)}
+    return out
 
 
 def part_agreement(glob: dict, parts: dict, min_images: int = 10) -> list[tuple[float | None, set]]:
