@@ -78,7 +78,9 @@ def colmap_log(path: Path):
     L = pycolmap.logging
     saved = (L.logtostderr, L.alsologtostderr, L.stderrthreshold)
     prefix = str(path) + ".part."
-    L.logtostderr, L.alsologtostderr, L.stderrthreshold = False, False, 2
+    # COLMAP's errors go to the log too: the global mapper logs "Global mapping failed" for parts of
+    # runs that succeed; a real failure reaches the user as curate's own error
+    L.logtostderr, L.alsologtostderr, L.stderrthreshold = False, False, 3
     for lvl in (L.WARNING, L.ERROR, L.FATAL):
         L.set_log_destination(lvl, "")
     L.set_log_destination(L.INFO, prefix)
@@ -383,15 +385,19 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
             if im.name not in keep and im.has_pose:
                 best.deregister_frame(im.frame_id)
         tried["global"]["pruned_to"] = int(best.num_reg_images())
+    dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
+                    for d in tried["global"]["part_disagreement_deg"])
     if best.num_reg_images() <= i:
-        logger.warning("sfm: the global model disagrees with the incremental parts (median orientation %s deg; "
-                       "limit %g); keeping the incremental models", tried["global"]["part_disagreement_deg"],
+        logger.warning("sfm: the global model disagrees with the incremental parts (median orientation difference "
+                       "per part, deg: %s; limit %g); keeping the incremental models", dis,
                        cfg.max_part_disagreement_deg)
         stats["mapper"] = "incremental"
         return inc
+    ver = tried["global"].get("verified")
     logger.warning("sfm: the global mapper keeps %d photos in one model (it agrees with the incremental parts: %s "
-                   "deg%s)", best.num_reg_images(), tried["global"]["part_disagreement_deg"],
-                   "" if all(ok) else "; the parts it disagrees with, and the photos no part checks, are left out")
+                   "deg%s)", best.num_reg_images(), dis,
+                   "" if all(ok) else (f"; the parts it disagrees with are left out; of {ver['checked']} photos no "
+                                       f"part checks, {ver['kept']} pass a check of their own pose" if ver else ""))
     stats["mapper"] = "global"
     return {0: best}
 

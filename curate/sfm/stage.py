@@ -66,8 +66,18 @@ def split_warning(run_dir: Path, each: bool = False) -> str | None:
         return None
     sizes = st.get("model_sizes") or []
     kept = st.get("n_kept", st.get("n_registered", 0) + len(lost))
-    how = (f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos)" if len(sizes) > 1
-           else "SfM could not register every photo")
+    glob = (st.get("mappers_tried") or {}).get("global") or {}
+    if st.get("mapper") == "global" and glob.get("pruned_to") is not None:
+        inc = (st["mappers_tried"].get("incremental") or {}).get("model_sizes") or []
+        ver = glob.get("verified") or {}
+        how = (f"the incremental mapper split the capture ({', '.join(map(str, inc))} photos) and the global "
+               f"mapper placed {(glob.get('model_sizes') or ['?'])[0]} in one model; the photos of parts it bends, "
+               f"and those no part checks whose own pose check failed ({len(ver.get('refused') or {})} of "
+               f"{ver.get('checked', 0)}), are left out")
+    elif len(sizes) > 1:
+        how = f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos)"
+    else:
+        how = "SfM could not register every photo"
     return (f"{how}: curate uses the largest, {st.get('n_registered', kept - len(lost))} of {kept} photos; "
             f"{len(lost)} are left out of the selection, the export and the evaluation: {name_ranges(lost)}")
 
