@@ -550,7 +550,7 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
         s.add_argument("--out", default=None, help="output folder (not for a run folder: its select/ stage is written)")
         s.add_argument("--json", action="store_true", help="print one JSON object")
     elif name == "batch":
-        s.add_argument("folders", nargs="*", help="photo folders")
+        s.add_argument("folders", nargs="*", help="photo folders (or videos: one capture each)")
         s.add_argument("--list", default=None, help="a text file listing folders, one a line (relative to the file)")
         s.add_argument("--out", required=True, help="the batch folder (RUNS)")
         s.add_argument("--executor", default="local", choices=["local", "ray"],
