@@ -146,6 +146,9 @@ def _header(run: _Run) -> str:
     each = ((r.get("config") or {}).get("sfm") or {}).get("on_split") == "each"
     warns = [w for w in (split_warning(run.dir, each=each),
                          ((read_json(run.dir / "export" / "stage.json") or {}).get("warning"))) if w]
+    for v in ((read_json(run.dir / "sfm" / "stage.json") or {}).get("stats") or {}).get("videos") or []:
+        if v.get("stopped"):   # a damaged or cut video: the capture after that point is not in this run
+            warns.append(f"video {v.get('video')}: {v['stopped']}; nothing after that point is in this run")
     for w in warns:   # what the user must know before reading the figures: at the top, in a box
         out.append(f'<div class="warnbox"><b>Warning:</b> {esc(w)}.</div>')
     if r.get("parts"):  # --on-split each: the other parts, each curated in its own run folder
