@@ -1,19 +1,20 @@
 """Videos in: candidate frames chosen before SfM, so SfM never sees what the scene does not need.
 
 A video is decoded with PyAV (FFmpeg inside the wheel, its decoder threads on: frame and
-slice threading). For every frame, at a small size taken straight from the decoder's
+slice threading). For every frame, on small grey images scaled straight from the decoder's
 picture (the frame is never converted to full-size RGB), the analysis measures its sharpness
-(variance of the Laplacian of a grey image at ``sharpness_side``) and how much the view
-changed since the previous frame (mean absolute difference of grey thumbnails at
-``analysis_side``, made from that grey image). The walk is cut into windows by accumulated
-change, not by time: a window closes when the view has changed by ``VideoConfig.change_step``
-since it opened, so a fast pan gives many windows and a walker standing still gives none
-(frames whose change is below ``static_change`` add nothing). Each window keeps its sharpest
-frame. Windows are decided as the frames come, so the same pass writes each window's frame
+(variance of the Laplacian at ``sharpness_side``) and how much the view changed since the
+previous frame (mean absolute difference of grey thumbnails at ``analysis_side``). The walk is
+cut into windows by accumulated change, not by time: a window closes when the view has changed
+by ``VideoConfig.change_step`` since it opened, so a fast pan gives many windows and a walker
+standing still gives none (frames whose change is below ``static_change`` add nothing). Each
+window keeps its sharpest frame. Windows are decided as the frames come, so the same pass writes each window's frame
 when the window closes (one decoded frame is held meanwhile): one decoding of the video. Only
 when there are more windows than ``max_frames`` does the step grow (bisection) until the cap
 holds, and a second pass writes the frames that choice adds (and the first pass's extra ones are
-deleted from the working folder).
+deleted from the working folder); the first pass stops writing as soon as the windows so far,
+after a tenth of the video, are on course for more than 1.2 times the cap. The frames chosen
+are those of :func:`choose` either way; what is written in the first pass only saves work.
 
 Frames are written as working copies named by video and time, ``walk_000123.450.jpg``
 (seconds, from each frame's own timestamp: variable frame rates are honoured; the prefix is
@@ -202,15 +203,16 @@ def analyse(path: Path, cfg: VideoConfig, on_frame=None) -> tuple[list[FrameInfo
     dec = _Decode(path)
     for i, t, frame in dec:
         rotation = int(getattr(frame, "rotation", 0) or 0)
-        sw, sh = _fit(frame.width, frame.height, cfg.sharpness_side)
-        grey = frame.reformat(width=sw, height=sh, format="gray")      # from the decoder's picture: no full-size RGB
-        g = grey.to_ndarray()
+        # both measures from the decoder's picture scaled straight to a small grey image (no full-size RGB);
+        # the thumbnail is scaled from the frame too, not from the sharpness image: that saved no CPU beyond
+        # the noise at 4K (decoding is the cost) and moved 43 of 1000 candidates of the benchmark walk (docs/sfm.md)
         w, h = _fit(frame.width, frame.height, cfg.analysis_side)
-        small = (grey.reformat(width=w, height=h) if (w, h) != (sw, sh) else grey).to_ndarray().astype(np.float32)
-        small /= 255.0
+        small = frame.reformat(width=w, height=h, format="gray").to_ndarray().astype(np.float32) / 255.0
+        sw, sh = _fit(frame.width, frame.height, cfg.sharpness_side)
+        sharp = _laplacian_var(frame.reformat(width=sw, height=sh, format="gray").to_ndarray())
         change = 0.0 if prev is None else float(np.mean(np.abs(small - prev)))
         prev = small
-        f = FrameInfo(i, t, _laplacian_var(g), change)
+        f = FrameInfo(i, t, sharp, change)
         out.append(f)
         if on_frame is not None:
             on_frame(f, frame)
@@ -294,10 +296,24 @@ def extract(path: Path, rel: str, out_dir: Path, max_size: int, cfg: VideoConfig
     check_options(cfg)
     t0 = _time.perf_counter()
     written: dict[int, object] = {}
+    container, stream = _open(path)
+    try:
+        end, _ = _declared_end(container, stream)
+        start = float((stream.start_time or 0) * stream.time_base) if stream.time_base else 0.0
+    finally:
+        container.close()
+    cap_binds = [False]
 
     def emit(f: FrameInfo, frame) -> None:
-        if len(written) >= cfg.max_frames:          # more windows than the cap: the step will grow, and a
-            return                                   # second pass writes what that choice adds
+        # more windows than the cap (or on course for more than 1.2 x the cap, judged after a tenth of
+        # the video): the step will grow and a second pass writes what that choice adds; the frames
+        # written so far are kept where it chooses them too. Only the cost depends on this guess.
+        seen = f.time - start
+        if len(written) >= cfg.max_frames or (end is not None and end - start > 0 and seen > 0.1 * (end - start)
+                                              and online.n * (end - start) / seen > 1.2 * cfg.max_frames):
+            cap_binds[0] = True
+        if cap_binds[0]:
+            return
         written[f.index] = _write(frame, f.time, f.index, int(getattr(frame, "rotation", 0) or 0), path, rel,
                                   out_dir, max_size, prefix)
 
