@@ -703,7 +703,7 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
                        help="where to write the subset of a pose file (a run folder's goes to RUN/select/)")
         s.add_argument("--json", action="store_true", help="print one JSON object")
     elif name == "batch":
-        s.add_argument("folders", nargs="*", metavar="FOLDER", help="photo folders")
+        s.add_argument("folders", nargs="*", metavar="FOLDER", help="photo folders (or videos: one capture each)")
         s.add_argument("--list", default=None, metavar="FILE",
                        help="a text file listing folders, one a line (relative to the file)")
         s.add_argument("--out", required=True, metavar="RUNS", help="the batch folder: one run folder per photo folder")

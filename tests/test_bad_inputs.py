@@ -266,6 +266,48 @@ def test_the_field_decodes_16_bit_grey_and_exif_rotation_like_ingest(tmp_path):
     assert np.abs(up - ref / 255.0).max() < 0.05                       # as SfM ingest decodes it
 
 
+def test_videos_given_wrong_are_one_line_errors_naming_the_file(good, tmp_path, capsys):
+    """An audio-only .mp4, a video whose camera never moved, --max-frames 0 with a video: one line each,
+    naming the file (or only the user's flag); --max-frames 0 does not fail a run without a video."""
+    from test_video import walk_frames, write_audio_only, write_video
+    d = tmp_path / "videos"
+    d.mkdir()
+    voice = write_audio_only(d / "voice.mp4")
+    still = write_video(d / "still.mp4", walk_frames(1, 5) * 20)
+    walk = write_video(d / "walk.mp4", walk_frames(6, 0))
+    last = check(["sfm", str(voice), "--out", str(tmp_path / "o1")], capsys, "no video stream", d)
+    assert str(voice) in last and "only audio" in last and "IndexError" not in last
+    last = check(["sfm", str(still), "--out", str(tmp_path / "o2")], capsys, "the camera never moved", d)
+    assert str(still) in last and "1 candidate frame of 20" in last and "usable photos" not in last
+    last = check(["sfm", str(walk), "--out", str(tmp_path / "o3"), "--max-frames", "0"], capsys, "--max-frames", d)
+    assert "change_step" not in last and "static_change" not in last and "got 0" in last
+    assert cli.main(["sfm", "--poses", str(good / "transforms.json"), "--out", str(tmp_path / "o4"),
+                     "--max-frames", "0"]) == 0                                  # no video: nothing to check
+
+
+def test_an_unsupported_camera_model_is_one_warning_per_run(good, tmp_path, caplog):
+    """A COLMAP model with fisheye cameras is imported through their pinhole part, said once for the
+    whole run (with the count of images), not once per image."""
+    import pycolmap
+    from curate.sfm.colmap import reconstruction_from_cameras
+    cams, files = read_transforms(good / "transforms.json")
+    cams = type(cams)(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.dist,
+                      tuple(Path(f).name for f in files))
+    rec = reconstruction_from_cameras(cams)
+    for cid, cam in list(rec.cameras.items()):
+        p = cam.params
+        rec.cameras[cid] = pycolmap.Camera(camera_id=cid, model="OPENCV_FISHEYE", width=cam.width, height=cam.height,
+                                           params=[p[0], p[1], p[2], p[3], 0.01, 0.0, 0.0, 0.0])
+    model = tmp_path / "model"
+    model.mkdir()
+    rec.write(str(model))
+    with caplog.at_level("WARNING"):
+        assert cli.main(["run", str(good / "images"), "--poses", str(model), "--out", str(tmp_path / "run"),
+                         "--budget", "4", "--no-evaluate"]) == 0
+    lines = [r.getMessage() for r in caplog.records if "pinhole part only" in r.getMessage()]
+    assert len(lines) == 1 and lines[0].startswith(f"{N} of {N} images") and "OPENCV_FISHEYE" in lines[0], lines
+
+
 def test_the_suite_covers_a_hundred_cases():
     n = len(POSES) * len(COMMANDS) + len(OPTIONS) + 16 + 2
     assert n >= 100

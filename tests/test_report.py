@@ -168,6 +168,19 @@ def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path
     assert body.index("warnbox") < body.index('class="verdict"') < body.index("<dl")   # above the figures
 
 
+def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):
+    """A video that stopped decoding before its end: where it stopped, above the figures."""
+    run = make_run(tmp_path)
+    stopped = "decoding stopped at 10.7 s of 12.5 s: the file is damaged or cut after that point"
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"videos": [
+        {"video": "walk.mp4", "decoded": 107, "candidates": 40, "static": 0, "stopped": stopped},
+        {"video": "hall.mp4", "decoded": 50, "candidates": 20, "static": 0, "stopped": ""}]}}))
+    body = write_html(run).read_text()
+    body = body[body.index("<body"):]
+    assert body.count('class="warnbox"') == 1 and f"video walk.mp4: {stopped}" in body
+    assert body.index("warnbox") < body.index("<dl") and "video hall.mp4</dt><dd>50 frames decoded" in body
+
+
 @pytest.mark.parametrize("kind, says, not_says", [("walk", "eight synthetic walks", "skull"),
                                                    ("object", "the skull", "eight synthetic walks")])
 def test_budget_auto_section_states_the_check_for_its_kind(kind, says, not_says):

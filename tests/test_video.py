@@ -116,7 +116,7 @@ def test_a_truncated_video_gives_its_good_part(tmp_path):
     out = tmp_path / "frames"
     out.mkdir()
     recs, summary = extract(cut, "cut_tail.mkv", out, 1600, VideoConfig(change_step=1e-6, static_change=0.0))
-    assert 5 < summary["decoded"] < 30
+    assert 5 < summary["decoded"] < 30 and "decoding stopped at" in summary["stopped"]
     assert len(recs) == summary["candidates"] and all((out / r.working).is_file() for r in recs)
 
 
@@ -175,3 +175,220 @@ def test_curate_sfm_on_a_video(tmp_path):
     cams = json.loads((tmp_path / "run" / "sfm" / "cameras.json").read_text())["cameras"]
     assert len(cams) >= 0.8 * st["n_kept"] and all(c["name"].startswith("walk_0000") for c in cams)
     assert sha(v) == before
+
+
+def write_audio_only(path: Path, seconds: float = 0.5) -> Path:
+    """A file holding one AAC audio stream (silence) and no video stream."""
+    out = av.open(str(path), "w")
+    s = out.add_stream("aac", rate=44100, layout="mono")
+    for k in range(int(seconds * 44100 / 1024) + 1):
+        f = av.AudioFrame.from_ndarray(np.zeros((1, 1024), np.float32), format="fltp", layout="mono")
+        f.sample_rate, f.pts = 44100, k * 1024
+        for p in s.encode(f):
+            out.mux(p)
+    for p in s.encode():
+        out.mux(p)
+    out.close()
+    return path
+
+
+def cut(path: Path, fraction: float) -> Path:
+    """A copy of ``path`` holding its first ``fraction`` of bytes (a transfer or a recording cut short)."""
+    data = path.read_bytes()
+    out = path.with_name(path.stem + "_cut" + path.suffix)
+    out.write_bytes(data[: int(len(data) * fraction)])
+    return out
+
+
+def test_a_video_cut_short_says_where_decoding_stopped(tmp_path, caplog):
+    """With threaded decoding FFmpeg raises nothing at a cut: the end is found by the last decoded
+    time against the duration the file's header declares, and said in the summary and the log."""
+    whole = write_video(tmp_path / "walk.mkv", walk_frames(125, 0), [100 * i for i in range(125)])
+    damaged = cut(whole, 0.9)
+    out = tmp_path / "frames"
+    out.mkdir()
+    recs, summary = extract(whole, "walk.mkv", out, 1600, VideoConfig())
+    assert summary["decoded"] == 125 and summary["stopped"] == ""
+    with caplog.at_level("WARNING", logger="curate.sfm.video"):
+        recs, summary = extract(damaged, "walk_cut.mkv", out, 1600, VideoConfig())
+    assert 90 < summary["decoded"] < 125 and recs
+    last = max(r.extra["time"] for r in recs)
+    assert summary["stopped"].startswith("decoding stopped at ") and " of 12.4 s: the file is damaged or cut" \
+        in summary["stopped"], summary["stopped"]
+    stopped_at = float(summary["stopped"].split()[3])
+    assert abs(stopped_at - (summary["decoded"] - 1) * 0.1) < 0.051 and last <= stopped_at + 0.05
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert any("walk_cut.mkv" in m and "decoding stopped at" in m for m in warned), warned
+
+
+def test_a_variable_frame_rate_video_that_ends_with_a_long_frame_is_not_called_cut(tmp_path):
+    """The last frame shown for a long time (a phone's variable frame rate) is not a damaged tail."""
+    times = [0, 40, 80, 120, 160, 200, 240, 1200]
+    v = write_video(tmp_path / "vfr.mkv", walk_frames(8, 0), times)
+    out = tmp_path / "frames"
+    out.mkdir()
+    _, summary = extract(v, "vfr.mkv", out, 1600, VideoConfig())
+    assert summary["decoded"] == 8 and summary["stopped"] == ""
+
+
+def test_the_cap_binding_takes_a_second_pass_that_writes_only_the_chosen_frames(tmp_path):
+    """One decoding writes each window's frame as it closes; when the windows outnumber --max-frames,
+    the longer windows' frames are written by a second pass and the first pass's extras deleted:
+    the frames on disk are exactly the chosen ones, and the same as choose() picks."""
+    v = write_video(tmp_path / "long.mp4", walk_frames(40, 0))
+    for cap, passes in ((1000, 1), (6, 2)):
+        cfg = VideoConfig(max_frames=cap, change_step=1e-4)
+        out = tmp_path / f"frames{cap}"
+        out.mkdir()
+        recs, summary = extract(v, "long.mp4", out, 1600, cfg)
+        info, _, _ = analyse(v, cfg)
+        chosen, _ = choose(info, cfg)
+        assert summary["passes"] == passes and [r.extra["frame"] for r in recs] == chosen
+        assert sorted(p.name for p in out.iterdir()) == sorted(r.working for r in recs)
+        assert len(recs) <= cap
+
+
+def test_the_first_pass_converts_frames_only_at_the_working_size(tmp_path):
+    """A frame larger than --max-size is scaled straight from the decoder's picture: the working copy
+    has the working size and the picture of the frame (no full-size RGB in between)."""
+    src = [np.asarray(Image.fromarray(f).resize((640, 480), Image.BICUBIC)) for f in walk_frames(3, 50)]
+    v = write_video(tmp_path / "big.mp4", src)
+    out = tmp_path / "frames"
+    out.mkdir()
+    recs, _ = extract(v, "big.mp4", out, 200, VideoConfig(change_step=1e-6, static_change=0.0))
+    for r in recs:
+        im = Image.open(out / r.working)
+        assert im.size == (200, 150) and (r.orig_width, r.orig_height) == (640, 480)
+        ref = np.asarray(Image.fromarray(src[r.extra["frame"]]).resize((200, 150), Image.LANCZOS), np.float32)
+        assert np.abs(np.asarray(im, np.float32) - ref).mean() < 6.0
+
+
+def test_a_photo_named_like_a_frame_keeps_its_name_and_nothing_is_compared_with_itself(tmp_path):
+    """clip.mp4 beside a photo clip_000000.000.jpg (a frame of the clip copied out, say): the photo keeps
+    its name, the clip's frames are named by its whole file name, every working name is unique, no
+    record is a near-duplicate of itself and every kept record has its file."""
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.prep import prepare_photos
+    folder = tmp_path / "cap"
+    folder.mkdir()
+    write_video(folder / "clip.mp4", walk_frames(10, 0))
+    with av.open(str(folder / "clip.mp4")) as c:                                   # the clip's first frame,
+        first = next(c.decode(video=0)).to_ndarray(format="rgb24")                 # copied out as curate does
+    Image.fromarray(first).save(folder / "clip_000000.000.jpg", quality=95)
+    Image.fromarray(walk_frames(1, 80)[0]).save(folder / "clip_000000.040.jpg", quality=95)  # another picture
+    before = {p.name: sha(p) for p in folder.iterdir()}
+    out = tmp_path / "run" / "sfm"
+    cfg = SfmConfig(progress=False, video=VideoConfig(change_step=1e-6, static_change=0.0))
+    records, kept, t = prepare_photos(cfg, folder, out)
+    names = [r.working for r in records if r.working]
+    assert len(names) == len(set(names)) == 12
+    by = {r.rel: r for r in records}
+    assert by["clip_000000.000.jpg"].working == "clip_000000.000.jpg"            # a photo keeps its name
+    assert by["clip_000000.040.jpg"].working == "clip_000000.040.jpg"
+    frames = {r.working for r in records if r.extra.get("video")}
+    assert frames == {f"clip.mp4_{0.04 * i:010.3f}.jpg" for i in range(10)}
+    assert t["videos"][0]["frame_prefix"] == "clip.mp4"
+    for r in records:
+        assert r.extra.get("duplicate_of") != r.rel, r.rel
+    dropped = [r for r in records if r.status == "dropped"]
+    assert len(dropped) == 1 and {dropped[0].rel, dropped[0].extra["duplicate_of"]} == \
+        {"clip_000000.000.jpg", "clip.mp4_000000.000.jpg"}                        # the photo and the frame it was
+    assert all((out / "images" / r.working).is_file() for r in kept) and len(kept) == 11
+    assert not (out / "images" / dropped[0].working).exists()
+    assert {p.name: sha(p) for p in folder.iterdir()} == before
+
+
+def test_working_names_are_unique_and_unchanged_where_nothing_clashes():
+    from curate.sfm.ingest import unique_names, working_name
+    tags, prefixes = unique_names(["IMG_1.JPG", "a.png", "raw/IMG_2.CR2"], ["walk.mp4", "sub/other.mov"])
+    assert set(tags.values()) == {""} and prefixes == {"walk.mp4": "walk", "sub/other.mov": "other"}
+    photos = ["a__b.jpg", "a/b.jpg", "x.tif", "x.tif.png", "walk_000001.000.jpg", "c/walk.mp4_000000.000.jpg"]
+    videos = ["walk.mp4", "walk.mov", "c/walk.mp4", "d/walk.mp4"]
+    tags, prefixes = unique_names(photos, videos)
+    assert tags["a__b.jpg"] == "" and tags["a/b.jpg"] == "~2"                     # fewer folder levels first
+    assert working_name("a/b.jpg", "jpeg", tags["a/b.jpg"]) == "a__b~2.jpg"
+    assert {working_name("x.tif", "tiff", tags["x.tif"]), working_name("x.tif.png", "png", tags["x.tif.png"])} \
+        == {"x.tif.png", "x.tif~2.png"}
+    assert prefixes == {"walk.mov": "walk.mov", "walk.mp4": "walk.mp4", "c/walk.mp4": "c__walk.mp4~2",
+                        "d/walk.mp4": "d__walk.mp4"}
+    from curate.sfm.video import frame_name
+    names = {working_name(p, f, tags[p]) for p in photos for f in ("jpeg", "png")}
+    for rel, pre in prefixes.items():
+        for t in (0.0, 1.0, 2.5):
+            assert frame_name(Path(rel), t, pre) not in names
+    assert len(set(prefixes.values())) == len(videos)
+    tags, prefixes = unique_names(["walk.mp4_000000.000.jpg", "walk_000000.000.jpg"], ["walk.mp4"])
+    assert prefixes == {"walk.mp4": "walk.mp4~2"}
+
+
+def test_recursive_photos_whose_flat_names_clash_both_keep_their_files(tmp_path):
+    from curate.sfm.ingest import ingest
+    folder = tmp_path / "cap"
+    (folder / "a").mkdir(parents=True)
+    pics = walk_frames(2, 10)
+    Image.fromarray(pics[0]).save(folder / "a__b.jpg", quality=95)
+    Image.fromarray(pics[1]).save(folder / "a" / "b.jpg", quality=95)
+    recs = ingest(folder, tmp_path / "w", 1600, recursive=True, progress=False)
+    by = {r.rel: r for r in recs}
+    assert by["a__b.jpg"].working == "a__b.jpg" and by["a/b.jpg"].working == "a__b~2.jpg"
+    for rel, pic in (("a__b.jpg", pics[0]), ("a/b.jpg", pics[1])):
+        got = np.asarray(Image.open(tmp_path / "w" / by[rel].working), np.float32)
+        assert np.abs(got - pic).mean() < 3.0                                    # each file holds its own photo
+
+
+def test_an_audio_only_file_is_skipped_with_its_reason(tmp_path):
+    from curate.sfm.ingest import ingest
+    folder = tmp_path / "cap"
+    folder.mkdir()
+    for p in sorted(SAMPLE.glob("*.jpg"))[:3]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    write_audio_only(folder / "voice.mp4")
+    recs = ingest(folder, tmp_path / "w", 1600, progress=False)
+    by = {r.rel: r for r in recs}
+    assert by["voice.mp4"].status == "skipped" and "no video stream" in by["voice.mp4"].reason
+    assert "only audio" in by["voice.mp4"].reason and "IndexError" not in by["voice.mp4"].reason
+    assert sum(r.status == "kept" for r in recs) == 3
+
+
+def test_max_frames_is_checked_only_when_there_is_a_video(tmp_path):
+    """--max-frames 0 fails a run with a video, naming only that flag; a photo-only ingest ignores it."""
+    from curate.sfm.ingest import ingest
+    folder = tmp_path / "cap"
+    folder.mkdir()
+    for p in sorted(SAMPLE.glob("*.jpg"))[:3]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    cfg = VideoConfig(max_frames=0)
+    assert sum(r.status == "kept" for r in ingest(folder, tmp_path / "w1", 1600, video=cfg, progress=False)) == 3
+    write_video(folder / "walk.mp4", walk_frames(4, 0))
+    with pytest.raises(ValueError) as e:
+        ingest(folder, tmp_path / "w2", 1600, video=cfg, progress=False)
+    assert str(e.value).startswith("--max-frames") and "change_step" not in str(e.value)
+    assert "static_change" not in str(e.value)
+    assert not (tmp_path / "w2").exists() or not list((tmp_path / "w2").iterdir())
+
+
+@pytest.mark.slow
+def test_curate_batch_takes_a_video_as_one_capture(tmp_path):
+    """`curate batch walk.mp4` curates the video as `curate run walk.mp4` does, into RUNS/walk."""
+    from curate import cli
+    v = write_video(tmp_path / "walk.mp4", walk_frames(24, 0))
+    before = sha(v)
+    runs = tmp_path / "runs"
+    assert cli.main(["batch", str(v), "--out", str(runs), "--budget", "4", "--no-evaluate"]) == 0
+    row = json.loads((runs / "summary.json").read_text())["rows"][0]
+    assert row["status"] == "ok" and row["name"] == "walk", row
+    assert (runs / "walk" / "report.json").is_file() and sha(v) == before
+
+
+def test_batch_plans_a_video_as_one_capture(tmp_path):
+    """`curate batch walk.mp4 photos/`: the video is a capture of its own (SfM on its frames), its run
+    folder named by its stem; its resume key follows the file."""
+    from curate.batch.runner import folder_key, plan
+    from curate.config import RunConfig
+    v = write_video(tmp_path / "walk.mp4", walk_frames(4, 0))
+    items = plan([v], tmp_path / "runs")
+    assert len(items) == 1 and items[0].name == "walk" and items[0].source == "sfm"
+    assert items[0].photos == str(v.resolve()) and items[0].poses is None
+    k1 = folder_key(items[0], RunConfig())
+    write_video(v, walk_frames(5, 0))
+    assert folder_key(items[0], RunConfig()) != k1

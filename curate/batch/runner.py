@@ -1,4 +1,4 @@
-"""``curate batch``: ``curate run`` on many photo folders, locally or on a Ray cluster.
+"""``curate batch``: ``curate run`` on many photo folders (or videos), locally or on a Ray cluster.
 
 One run folder per input folder, ``RUNS/<name>/`` (the same contents as ``curate run``
 plus ``run.log``, the folder's stage lines and log, and ``batch.json``, its summary row
@@ -8,7 +8,8 @@ log: :mod:`curate.batch.log`).
 
 Poses of a folder: its ``transforms.json`` if it has one (image paths relative to it), else
 a COLMAP model in ``sparse/0`` (photos in ``images/`` if that exists, else the folder),
-else SfM on the folder's photos.
+else SfM on the folder's photos. A video file given instead of a folder is one capture, as
+``curate run walk.mp4`` takes it (SfM on its candidate frames; run folder named by its stem).
 
 Executors:
 
@@ -115,9 +116,15 @@ def _safe_name(s: str) -> str:
     return s or "folder"
 
 
+def _is_video(p: Path) -> bool:
+    from curate.sfm.config import VIDEO_EXTS
+    return p.is_file() and p.suffix.lower() in VIDEO_EXTS
+
+
 def plan(folders: Iterable[str | Path], out: str | Path) -> list[Folder]:
-    """One :class:`Folder` per distinct input folder, in order; names are the folders' base
-    names, with a short hash of the full path where two base names clash."""
+    """One :class:`Folder` per distinct input folder (or video file: one capture, as ``curate run
+    walk.mp4`` takes it), in order; names are the folders' base names (a video's stem), with a
+    short hash of the full path where two base names clash."""
     out = Path(out).resolve()
     seen, paths = set(), []
     for f in folders:
@@ -125,12 +132,12 @@ def plan(folders: Iterable[str | Path], out: str | Path) -> list[Folder]:
         if p not in seen:
             seen.add(p)
             paths.append(p)
-    base = [_safe_name(p.name) for p in paths]
+    base = [_safe_name(p.stem if _is_video(p) else p.name) for p in paths]
     items = []
     for p, b in zip(paths, base):
         name = b if base.count(b) == 1 and b not in ("summary.json", "summary.html", "batch.log") else \
             f"{b}-{hashlib.sha1(str(p).encode()).hexdigest()[:6]}"
-        photos, poses, source = find_poses(p)
+        photos, poses, source = (str(p), None, "sfm") if _is_video(p) else find_poses(p)
         items.append(Folder(str(p), name, photos, poses, source, str(out / name)))
     return items
 
@@ -140,7 +147,10 @@ def folder_key(item: Folder, cfg) -> str:
     from curate.core.stage import stage_key
     h = hashlib.sha256()
     root = Path(item.folder)
-    if root.is_dir():
+    if _is_video(root):
+        st = root.stat()
+        h.update(f"{root.name}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+    elif root.is_dir():
         for p in sorted(root.rglob("*")):
             try:
                 st = p.stat()
@@ -191,8 +201,9 @@ def run_folder(item: Folder, cfg, force: bool = False, executor=None, phase: str
     with folder_log(run_dir, fd_level) as f:
         print(f"folder {item.folder} ({item.source}) -> {run_dir} [{phase}]", flush=True)
         try:
-            if not Path(item.folder).is_dir():
-                raise FileNotFoundError(f"no such folder: {item.folder}")
+            if not (Path(item.folder).is_dir() or _is_video(Path(item.folder))):
+                raise FileNotFoundError(f"no such folder: {item.folder}" if not Path(item.folder).exists() else
+                                        f"{item.folder} is neither a folder nor a video")
             if run_dir.resolve().is_relative_to(Path(item.photos).resolve()):
                 raise ValueError(f"the run folder {run_dir} is inside the photo folder {item.photos}")
             if phase == "prep":

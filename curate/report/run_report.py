@@ -154,8 +154,8 @@ def _warnings(run: _Run) -> list[str]:
         out.append(f"the export in {run.dir / 'export'} is of an earlier selection ({stale['export']}): "
                    f"`curate export {run.dir}` makes it match this one")
     for v in run.sfm_stats.get("videos") or []:
-        if v.get("stopped"):
-            out.append(f"{v.get('video')}: {v['stopped']}")
+        if v.get("stopped"):   # a damaged or cut video: the capture after that point is not in this run
+            out.append(f"video {v.get('video')}: {v['stopped']}; nothing after that point is in this run")
     return out
 
 

@@ -58,7 +58,8 @@ import numpy as np
 from curate.core.cameras import Cameras
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
-from curate.sfm.prep import choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, write_outputs
+from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside,
+                              too_few_message, write_outputs)
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 
 logger = logging.getLogger(__name__)
@@ -113,8 +114,12 @@ def _stdout_to(path: Path):
 
 
 # ------------------------------------------------------------------ conversions
-def cameras_from_reconstruction(rec) -> tuple[Cameras, np.ndarray, np.ndarray, np.ndarray]:
+def cameras_from_reconstruction(rec, warn: bool = True) -> tuple[Cameras, np.ndarray, np.ndarray, np.ndarray]:
     """Registered images of a ``pycolmap.Reconstruction`` as project cameras, sorted by name.
+
+    A camera model the project does not hold (fisheye, ...) keeps its pinhole part; that is
+    logged as one warning per model with the count of images (``warn``; off for the mapper's
+    internal comparisons, which read the same models again).
 
     pycolmap 4 exposes ``image.cam_from_world()`` (a ``Rigid3d``, world-to-camera); its
     rotation is read as a matrix (``rotation.matrix()``), avoiding the quaternion order
@@ -127,6 +132,7 @@ def cameras_from_reconstruction(rec) -> tuple[Cameras, np.ndarray, np.ndarray, n
 
     ids = sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name)
     R, t, fx, fy, cx, cy, w, h, dist, names = [], [], [], [], [], [], [], [], [], []
+    pinhole_only: dict[str, list[str]] = {}           # unsupported model's message -> its images: one line each
     for i in ids:
         im = rec.image(i)
         T = im.cam_from_world()
@@ -136,11 +142,15 @@ def cameras_from_reconstruction(rec) -> tuple[Cameras, np.ndarray, np.ndarray, n
         try:
             f_x, f_y, c_x, c_y, d = intrinsics_from_colmap(cam.model_name, cam.params)
         except ValueError as e:
-            logger.warning("%s: %s; using its pinhole part only", im.name, e)
+            pinhole_only.setdefault(str(e), []).append(im.name)
             f_x, f_y, c_x, c_y, d = cam.focal_length_x, cam.focal_length_y, cam.principal_point_x, \
                 cam.principal_point_y, np.zeros(4)
         fx.append(f_x), fy.append(f_y), cx.append(c_x), cy.append(c_y), dist.append(d)
         w.append(cam.width), h.append(cam.height), names.append(im.name)
+    if warn:
+        for msg, ims in pinhole_only.items():
+            logger.warning("%d of %d images (%s%s): %s; using the pinhole part only", len(ims), len(ids),
+                           ", ".join(ims[:3]), ", ..." if len(ims) > 3 else "", msg)
     if not ids:
         cams = Cameras.empty()
     else:
@@ -469,11 +479,11 @@ def part_agreement(glob: dict, parts: dict, min_images: int = 10) -> list[tuple[
     """
     from curate.core.cameras import rotation_disagreement
     g = max(glob.values(), key=lambda r: r.num_reg_images())
-    gc = cameras_from_reconstruction(g)[0]
+    gc = cameras_from_reconstruction(g, warn=False)[0]
     gi = {n: k for k, n in enumerate(gc.names)}
     out = []
     for rec in sorted(parts.values(), key=lambda r: -r.num_reg_images()):
-        pc = cameras_from_reconstruction(rec)[0]
+        pc = cameras_from_reconstruction(rec, warn=False)[0]
         both = [(gi[n], k) for k, n in enumerate(pc.names) if n in gi]
         d = None
         if len(both) >= min_images:
@@ -525,7 +535,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     names = [r.working for r in kept]
     if len(names) < 2:
         write_outputs(out, Cameras.empty(), None, None, None, records, [], cfg.normalize_percentile)
-        raise RuntimeError(f"sfm: only {len(names)} usable photos in {photos}; see {out / 'images.json'}")
+        raise RuntimeError(too_few_message(photos, records, videos, out / "images.json"))
     single = choose_camera_mode(cfg, kept)
     matcher = choose_matcher(cfg, kept)
     db, images = out / "database.db", out / "images"

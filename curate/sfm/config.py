@@ -27,7 +27,8 @@ class VideoConfig:
     """How candidate frames are chosen from a video."""
 
     max_frames: int = 1000
-    """Most candidate frames per video (keeps SfM bounded: matching and mapping grow with the pool)."""
+    """Most candidate frames per video (keeps SfM bounded: matching and mapping grow with the pool);
+    at least 2, checked when there is a video."""
     change_step: float = 0.04
     """A window closes when the view has changed this much since it opened (mean absolute grey
     difference between consecutive thumbnails, 0..1, summed); raised until ``max_frames`` holds."""
@@ -39,12 +40,14 @@ class VideoConfig:
     """Longer side of the grey image the sharpness is measured on (pixels)."""
 
     def __post_init__(self) -> None:
-        if self.max_frames < 2:
-            raise ValueError(f"--max-frames must be >= 2, got {self.max_frames}")
-        if not (0 < self.change_step <= 1) or not (0 <= self.static_change < 1):
-            raise ValueError("video: 0 < change_step <= 1 and 0 <= static_change < 1")
+        # max_frames (the user's --max-frames) is checked when there is a video to read
+        # (curate.sfm.video.check_options), so that a run without one never fails on it
+        if not (0 < self.change_step <= 1):
+            raise ValueError(f"VideoConfig.change_step must be in (0, 1], got {self.change_step!r}")
+        if not (0 <= self.static_change < 1):
+            raise ValueError(f"VideoConfig.static_change must be in [0, 1), got {self.static_change!r}")
         if self.analysis_side < 16 or self.sharpness_side < 16:
-            raise ValueError("video: analysis_side and sharpness_side must be >= 16")
+            raise ValueError("VideoConfig.analysis_side and sharpness_side must be >= 16")
 
 
 

@@ -10,8 +10,17 @@ Each good photo gets a *working copy* in ``out_dir`` whose longer side is at mos
 GPS) for JPEG and RAW sources, PNG for PNG and TIFF sources. A JPEG that needs neither
 rotation nor resizing is copied byte for byte. Working names are the photo's path
 relative to the input folder with ``/`` replaced by ``__``, plus ``.jpg``/``.png``
-when the original extension differs (``a/IMG_1.CR2`` -> ``a__IMG_1.CR2.jpg``), so
-they are unique and traceable.
+when the original extension differs (``a/IMG_1.CR2`` -> ``a__IMG_1.CR2.jpg``); a video's
+frames are named by video and time (``walk_000123.450.jpg``, :mod:`curate.sfm.video`).
+
+Working names are unique across photos and video frames (:func:`unique_names`): where two
+inputs would get the same name, the first in the order below keeps it and the other is
+named apart, deterministically, so a name never changes unless it clashes. Photos come
+first (fewest folder levels, then path order); a photo that clashes gets ``~2`` (``~3``...)
+before its extension (``a__b.jpg`` in the folder and ``a/b.jpg`` with ``--recursive``: the
+second is ``a__b~2.jpg``). Videos follow: a video's frames are named by its stem unless a
+photo is named like one of its frames or an earlier video has the same stem; then by its whole
+relative path (``clip.mp4_000000.000.jpg``, ``a__walk.mp4_000001.500.jpg``).
 
 Files that cannot be used (unsupported extension, empty, truncated, not an image,
 undecodable RAW) are *skipped* with a reason; the run goes on. The input folder is
@@ -222,12 +231,61 @@ def read_image(path: str | Path) -> tuple[np.ndarray, dict]:
     return rgb, info
 
 
-def working_name(rel: str, fmt: str) -> str:
-    """Working-copy file name for the photo at ``rel`` (relative posix path)."""
+def working_name(rel: str, fmt: str, tag: str = "") -> str:
+    """Working-copy file name for the photo at ``rel`` (relative posix path); ``tag`` (``~2``) goes
+    before the extension of a name that would clash (:func:`unique_names`)."""
     flat = rel.replace("/", "__")
     want = ".png" if fmt in ("png", "tiff") else ".jpg"
     ok = {".png"} if want == ".png" else {".jpg", ".jpeg"}
-    return flat if Path(flat).suffix.lower() in ok else flat + want
+    suffix = Path(flat).suffix
+    if suffix.lower() in ok:
+        return flat[: len(flat) - len(suffix)] + tag + suffix
+    return flat + tag + want
+
+
+def _frame_pattern(prefix: str):
+    """The working names of a video's frames with this prefix (:func:`curate.sfm.video.frame_name`)."""
+    import re
+    return re.compile(re.escape(prefix) + r"_-?\d+\.\d{3}\.jpg")
+
+
+def unique_names(photos: list[str], videos: list[str]) -> tuple[dict[str, str], dict[str, str]]:
+    """Working names unique across photos and video frames: (photo rel -> tag for
+    :func:`working_name`, video rel -> prefix of its frames' names), see the module docstring.
+
+    A photo's name depends on its format (known once decoded), so both names it could get
+    (JPEG and PNG copy) are reserved. A video's frame names are ``{prefix}_{seconds}.jpg``: two
+    different prefixes never give the same name, so a prefix is free when no other video has it
+    and no photo's name matches its pattern.
+    """
+    order = lambda r: (r.count("/"), r)  # noqa: E731
+    taken: set[str] = set()
+    tags: dict[str, str] = {}
+    for rel in sorted(photos, key=order):
+        k = 1
+        while True:
+            tag = "" if k == 1 else f"~{k}"
+            names = {working_name(rel, "jpeg", tag), working_name(rel, "png", tag)}
+            if not names & taken:
+                break
+            k += 1
+        taken |= names
+        tags[rel] = tag
+    prefixes: dict[str, str] = {}
+    for rel in sorted(videos, key=order):
+        flat = rel.replace("/", "__")
+        k = 0
+        while True:
+            p = Path(rel).stem if k == 0 else flat if k == 1 else f"{flat}~{k}"
+            pat = _frame_pattern(p)
+            if p not in prefixes.values() and not any(pat.fullmatch(n) for n in taken):
+                break
+            k += 1
+        prefixes[rel] = p
+        if k:
+            logger.info("video %s: its frames are named %s_<seconds>.jpg (%s_<seconds>.jpg would clash with "
+                        "another input's names)", rel, p, Path(rel).stem)
+    return tags, prefixes
 
 
 def _resize(rgb: np.ndarray, max_size: int) -> np.ndarray:
@@ -240,8 +298,10 @@ def _resize(rgb: np.ndarray, max_size: int) -> np.ndarray:
     return np.asarray(Image.fromarray(rgb).resize((nw, nh), Image.LANCZOS))
 
 
-def ingest_one(path: Path, folder: Path, out_dir: Path, max_size: int) -> tuple[PhotoRecord, np.ndarray | None]:
-    """Read one photo and write its working copy. Returns the record and the working image [H, W, 3]."""
+def ingest_one(path: Path, folder: Path, out_dir: Path, max_size: int,
+               tag: str = "") -> tuple[PhotoRecord, np.ndarray | None]:
+    """Read one photo and write its working copy (named by :func:`working_name` with ``tag``).
+    Returns the record and the working image [H, W, 3]."""
     from PIL import Image
 
     rel = path.relative_to(folder).as_posix()
@@ -259,7 +319,7 @@ def ingest_one(path: Path, folder: Path, out_dir: Path, max_size: int) -> tuple[
     small = _resize(rgb, max_size)
     rec.height, rec.width = small.shape[:2]
     rec.scale_x, rec.scale_y = rec.width / rec.orig_width, rec.height / rec.orig_height
-    rec.working = working_name(rel, rec.format)
+    rec.working = working_name(rel, rec.format, tag)
     dst = out_dir / rec.working
     if rec.format == "jpeg" and small is rgb and rec.orientation == 1:
         shutil.copyfile(path, dst)  # nothing to change: keep the original bytes
@@ -293,7 +353,7 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
         by relative path.
     """
     from tqdm import tqdm
-    from curate.sfm.video import VIDEO_EXTS, VideoConfig, extract
+    from curate.sfm.video import VIDEO_EXTS, NoVideoStream, VideoConfig, check_options, extract
 
     path, out_dir = Path(folder), Path(out_dir)
     folder = source_root(path)
@@ -301,21 +361,30 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
     imgs, other = find_images(path, recursive)
     videos = [p for p in other if p.suffix.lower() in VIDEO_EXTS]
     other = [p for p in other if p.suffix.lower() not in VIDEO_EXTS]
+    video = video or VideoConfig()
+    if videos:
+        check_options(video)          # an option for videos is checked when there is one (ValueError: the flag)
+    rel_of = {p: p.relative_to(folder).as_posix() for p in imgs + videos}
+    tags, prefixes = unique_names([rel_of[p] for p in imgs], [rel_of[p] for p in videos])
     records = [PhotoRecord(original=str(p.resolve()), rel=p.relative_to(folder).as_posix(), status="skipped",
                            reason=f"unsupported extension {p.suffix!r}") for p in other]
     for v in videos:
-        rel = v.relative_to(folder).as_posix()
+        rel = rel_of[v]
         try:
-            frames, summary = extract(v, rel, out_dir, max_size, video or VideoConfig())
+            frames, summary = extract(v, rel, out_dir, max_size, video, prefix=prefixes[rel])
+        except NoVideoStream as e:    # an audio-only file: the reason as it is
+            records.append(PhotoRecord(original=str(v.resolve()), rel=rel, status="skipped", reason=str(e)))
+            continue
         except Exception as e:  # noqa: BLE001 - PyAV's errors: an unreadable video is skipped, like a photo
             records.append(PhotoRecord(original=str(v.resolve()), rel=rel, status="skipped",
                                        reason=f"cannot decode the video: {type(e).__name__}: {e}"))
             continue
         if video_summaries is not None:
-            video_summaries.append(summary)
+            video_summaries.append({**summary, "frame_prefix": prefixes[rel]})
         if not frames:
             records.append(PhotoRecord(original=str(v.resolve()), rel=rel, status="skipped",
-                                       reason="no decodable frame"))
+                                       reason="no decodable frame" + (f" ({summary['stopped']})"
+                                                                      if summary.get("stopped") else "")))
         if on_image is not None:
             from PIL import Image
             for r in frames:
@@ -324,7 +393,7 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
         records += frames
 
     def work(p: Path) -> PhotoRecord:
-        rec, rgb = ingest_one(p, folder, out_dir, max_size)
+        rec, rgb = ingest_one(p, folder, out_dir, max_size, tags[rel_of[p]])
         if rgb is not None and on_image is not None:
             on_image(rec, rgb)
         return rec

@@ -45,7 +45,7 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
     metrics: dict[str, tuple[float, np.ndarray]] = {}
 
     def on_image(rec: PhotoRecord, rgb: np.ndarray) -> None:
-        metrics[rec.rel] = (sharpness(rgb), phash(rgb))
+        metrics[rec.working] = (sharpness(rgb), phash(rgb))   # working names are unique (ingest.unique_names)
 
     threads = cfg.num_threads if cfg.num_threads > 0 else 2
     videos: list[dict] = []
@@ -54,9 +54,11 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
     t_ingest = round(time.perf_counter() - t, 2)
     t = time.perf_counter()
     good = [r for r in records if r.status == "kept"]
+    if len({r.working for r in good}) != len(good):   # ingest.unique_names guarantees it; never compare a photo
+        raise RuntimeError("sfm: two kept inputs share a working name")   # with itself or lose its file
     if good:
-        sharp = np.array([metrics[r.rel][0] for r in good])
-        blurry, dup_of, dup_dist = assess(sharp, np.stack([metrics[r.rel][1] for r in good]), cfg.blur_fraction,
+        sharp = np.array([metrics[r.working][0] for r in good])
+        blurry, dup_of, dup_dist = assess(sharp, np.stack([metrics[r.working][1] for r in good]), cfg.blur_fraction,
                                           cfg.dup_max_distance)
         med = float(np.median(sharp))
         for i, r in enumerate(good):
@@ -78,6 +80,35 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
     n_blur = sum(bool(r.extra.get("blurry")) for r in records)
     logger.info("quality: %d kept, %d dropped, %d flagged blurry", len(kept), len(good) - len(kept), n_blur)
     return records, kept, {"ingest": t_ingest, "quality": round(time.perf_counter() - t, 2), "videos": videos}
+
+
+def too_few_message(photos: Path, records: list[PhotoRecord], videos: list[dict], images_json: Path) -> str:
+    """Why SfM cannot start (fewer than 2 usable photos), in one line naming the input and, for each
+    video or skipped file that explains it, what happened to it."""
+    n = sum(r.status == "kept" for r in records)
+    why = []
+    for v in videos:
+        rel, dec, cand = v.get("video"), v.get("decoded", 0), v.get("candidates", 0)
+        kept = sum(r.status == "kept" and r.extra.get("video_rel") == rel for r in records)
+        if kept > 1:
+            continue
+        if dec == 1:
+            why.append(f"{rel} holds a single frame")
+        elif dec > 1 and cand <= 1:
+            why.append(f"the camera never moved in {rel}: the video gave {cand} candidate frame of {dec} because "
+                       f"the view never changed (SfM needs views from at least 2 places)")
+        elif cand > 1:
+            why.append(f"the camera never moved in {rel}: its {cand} candidate frames are near-duplicates of one "
+                       f"another (SfM needs views from at least 2 places)")
+        if v.get("stopped"):
+            why.append(f"{rel}: {v['stopped']}")
+    if Path(photos).is_file():
+        why += [r.reason if r.rel == Path(photos).name else f"{r.rel}: {r.reason}" for r in records
+                if r.status == "skipped"]
+        if why:
+            return f"sfm: {photos}: " + "; ".join(why) + f"; see {images_json}"
+    return (f"sfm: too few usable photos in {photos} ({n}; SfM needs at least 2)" + "".join(f"; {w}" for w in why)
+            + f"; see {images_json}")
 
 
 def _trailing_number(name: str) -> tuple[str, int] | None:
