@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
     """{model id: Reconstruction} of ``kind`` ('incremental', 'global' or 'auto': curate's
@@ -104,6 +106,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")
+    ap.add_argument("--dump", type=Path, default=None, help="write each kept frame's pose error to this JSON file")
     a = ap.parse_args(argv)
     from curate.sfm.colmap import cameras_from_reconstruction
     from research.align import pose_errors
@@ -136,6 +139,11 @@ def main(argv=None) -> dict:
                 e = pose_errors(*truth_for(cams, truth, frame_of))
                 row.update({k: e[k] for k in ("n_matched", "rotation_deg_median", "rotation_deg_max",
                                               "centre_rel_median")})
+                rd = np.asarray(e["rotation_deg"])
+                row["n_over_5deg"] = int((rd > 5).sum())
+                if a.dump is not None:   # per frame: its error, for the frames a check kept (issue 36)
+                    a.dump.write_text(json.dumps({"names": e["names"], "rotation_deg": e["rotation_deg"],
+                                                  "centre_rel": e["centre_rel"]}))
             out[kind] = row
             kept[kind] = models
             print(json.dumps({kind: row}), flush=True)
