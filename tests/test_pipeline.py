@@ -153,7 +153,7 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     from curate.sfm.config import SfmConfig
     from curate.sfm.io import load_sfm, original_cameras
     from curate.sfm.io import image_paths
-    import_poses(SfmConfig(progress=False), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
+    import_poses(SfmConfig(progress=False, triangulate="off"), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
     res = load_sfm(tmp_path)
     oc, paths = original_cameras(res.cameras, res.records)
     assert all(Path(p).is_absolute() and Path(p).is_file() for p in paths)
@@ -280,7 +280,7 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     from curate.config import RunConfig
     from curate.select.select import SelectConfig
     from curate.sfm.config import SfmConfig
-    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False),
+    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False, triangulate="off"),
                     select=SelectConfig(method="medoids"))
     out = tmp_path / "run"
     pipeline.run(cfg, None, out, poses="SPLIT")
