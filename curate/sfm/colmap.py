@@ -15,8 +15,11 @@ global mapper on the same matches, kept where it agrees with the incremental par
 more photos) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
 mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
 and config give the same matches and, up to multi-threaded bundle adjustment, the same
-model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
-transforms.json.
+model. ``import_poses`` produces the same outputs from known poses (a transforms.json, a
+cameras.json, a COLMAP model; each pose's photo looked up in the photo folder given); poses
+that come without 3D points get points triangulated from the photos with the poses held fixed
+(``triangulate_known_poses``: the same SIFT extraction and matching, then COLMAP's point
+triangulator).
 
 Run-folder contract, ``RUN/sfm/``:
 
@@ -24,7 +27,8 @@ Run-folder contract, ``RUN/sfm/``:
   last, a run killed half-way has none and is redone.
 * ``images/``: working copies (SfM only), longer side <= ``max_image_size``.
 * ``sparse/0/``: COLMAP binary model of the registered images, COLMAP's world frame
-  (for an import: the imported cameras, points when the source had them).
+  (for an import: the imported cameras at their own intrinsics and names, with the source's points,
+  or the points triangulated for them; none with ``triangulate='off'``).
   ``sparse/1/``, ...: the other models of a capture that split, largest first, each in its
   own frame (``stats.parts`` lists them; ``--on-split each`` curates them too).
 * ``cameras.json``: the same cameras as ``curate.core.cameras.Cameras`` (OpenCV c2w, same
@@ -36,12 +40,15 @@ Run-folder contract, ``RUN/sfm/``:
   nerfstudio dataset; import: absolute paths of the original photos.
   ``curate.sfm.io.original_cameras`` maps cameras to the full-resolution originals.
 * ``points.npy`` [P, 3] float32 sparse points, ``points_rgb.npy`` [P, 3] uint8,
-  ``points_error.npy`` [P] float32 reprojection errors (absent for a transforms.json).
+  ``points_error.npy`` [P] float32 reprojection errors (absent for an import without points).
 * ``normalization.json``: ``x_canonical = scale * (x - centre)`` maps the scene into
   [-1, 1]^3 (``curate.sfm.io.normalization``).
 * ``images.json``: per input file: original path, working name, status (``kept``,
-  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``.
-* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database.
+  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``. An import lists
+  each pose (its photo, or ``skipped``: no photo in the folder) and the folder's photos no pose
+  names (``skipped``).
+* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database (an import's:
+  of the triangulation, at the working size).
 * ``dense/fused.ply``: dense point cloud, only with CUDA (``dense='auto'``).
 """
 
