@@ -299,9 +299,11 @@ def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = N
     from curate.config import RunConfig
     from curate.occupancy.stage import run as stage_occupancy
     from curate.sfm.colmap import import_poses
+    from dataclasses import replace
     run = out / scene
     cfg = RunConfig(evaluate=ev)
-    import_poses(cfg.sfm, scene_poses(scene, out, data), run)
+    # the harness's protocol (docs/selection-evidence.md) imports the poses alone: no triangulated points
+    import_poses(replace(cfg.sfm, triangulate="off"), scene_poses(scene, out, data), run)
     if train:
         stage_occupancy(cfg, run)
     return run

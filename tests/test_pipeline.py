@@ -202,7 +202,8 @@ def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp
 @pytest.mark.slow
 def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     """`--no-evaluate` with view medoids (or FVS) trains no pool field: the selection needs none. The
-    energy on a pose import (no sparse points to give its occupancy) still gets one."""
+    energy on a pose import without points (--triangulate off: no sparse points to give its occupancy)
+    still gets one."""
     out = tmp_path / "run"
     res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "medoids"), capture_output=True, text=True,
                          env=_env(), timeout=600)
@@ -212,8 +213,8 @@ def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     assert "not needed" in rec["field"] and "no pool field" in res.stdout
     assert len(json.loads((out / "select" / "selection.json").read_text())["chosen"]) == 12
     assert (out / "export" / "transforms.json").is_file() and (out / "report.html").is_file()
-    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "energy"), capture_output=True, text=True,
-                         env=_env(), timeout=600)
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "energy", "--triangulate", "off"), capture_output=True,
+                         text=True, env=_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     assert (out / "occupancy" / "field.pt").is_file()
     assert "energy" in json.loads((out / "occupancy" / "stage.json").read_text())["field"]

@@ -202,6 +202,10 @@ def test_points_are_triangulated_for_known_poses_and_exported(tmp_path):
     assert rec.compute_mean_reprojection_error() < 320 / 200 * 1.0 and np.all(np.isfinite(err))
     assert all(len(p.track.elements) >= 2 for p in rec.points3D.values())
     assert not (run / "sfm" / "triangulation").exists()   # the working copies are gone
+    # unchanged photos, poses and options: the stage is skipped, its record untouched
+    record = (run / "sfm" / "stage.json").read_bytes()
+    import_poses(SfmConfig(progress=False, max_image_size=200), cap / "transforms.json", run, photos=cap / "images")
+    assert (run / "sfm" / "stage.json").read_bytes() == record
     # the export: the chosen images and the points two of them see
     chosen = list(ref.names[:8])
     export_subset(run, chosen, run / "export")

@@ -97,10 +97,10 @@ class SfmConfig:
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
     triangulate: str = "auto"
-    """Known poses (--poses) without 3D points (a transforms.json, a cameras.json, a COLMAP model without
-    points): 'auto' triangulates points from the photos with the poses held fixed (SIFT features and
-    matches as SfM makes them, at max_image_size), so RUN/sfm and the export's sparse/0 carry the point
-    cloud 3DGS starts from; 'off' imports the poses alone (no points)."""
+    """Known poses (--poses) that come without 3D points (a transforms.json, a cameras.json, a COLMAP model
+    without points): auto triangulates points from the photos with the poses held fixed (SIFT features and
+    matches as SfM makes them, at the working size of --max-size), so the run and the export's sparse/0
+    carry the point cloud 3DGS starts from; off imports the poses alone, without points."""
     on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
     #                                   'largest' curates the largest part with a loud warning; 'each' also curates
     #                                   every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
