@@ -20,7 +20,7 @@ from pathlib import Path
 from curate import __version__
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
-from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT
+from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
 
 
 class CliError(Exception):
@@ -219,7 +219,8 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--guided-matching", "sfm.guided_matching"),
        Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
        Opt("--on-split", "sfm.on_split", choices=ON_SPLIT),
-       Opt("--max-frames", "sfm.video.max_frames", parse=int)]
+       Opt("--max-frames", "sfm.video.max_frames", parse=int),
+       Opt("--triangulate", "sfm.triangulate", choices=TRIANGULATE)]
 RUN = BUDGET + BUDGET_CHECK + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
 
 SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen")),
@@ -512,14 +513,14 @@ def cmd_sfm(args) -> int:
     from curate.sfm import stage
     cfg = run_config(args)
     if not args.photos and not args.poses:
-        raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
+        raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
     try:
         res = stage.run(cfg, Path(args.out), args.force, photos=args.photos, poses=args.poses)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
     st = json.loads((res.path / "stage.json").read_text()).get("stats", {})
     print(f"sfm: {res.summary}" + (f" of {st['n_kept']} kept photos" if "n_kept" in st else "")
-          + (f", {st['n_points']} points" if "n_points" in st else "")
+          + (f", {st['n_points']} points" if "n_points" in st and "points" not in res.summary else "")
           + ("" if res.ran else " (unchanged: skipped)") + f" in {res.seconds:.1f}s -> {res.path}")
     if res.warning:
         print(f"WARNING: {res.warning}", file=sys.stderr)
@@ -550,7 +551,7 @@ def cmd_run(args) -> int:
     cfg = run_config(args)
     _check_device(cfg.select.device)
     if not args.photos and not args.poses:
-        raise CliError("give a photo folder, or --poses with a COLMAP model or transforms.json")
+        raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
     try:
         out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force, adopt=args.adopt)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
@@ -688,10 +689,13 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
     """The arguments of ``name`` that are not options of a config: inputs, outputs and switches."""
     if name in ("sfm", "run"):
         s.add_argument("photos", nargs="?", default=None, metavar="PHOTOS",
-                       help="the photo folder, a video, or a folder of both (optional with --poses)")
+                       help="the photo folder, a video, or a folder of both. With --poses: the folder of the photos "
+                            "the poses describe, each found by its path in the folder, else by its unique file name "
+                            "(optional: without it, the pose file's own image paths)")
         s.add_argument("--out", required=True, metavar="RUN", help="the run folder to write (created if new)")
         s.add_argument("--poses", default=None, metavar="POSES",
-                       help="known poses instead of SfM: a COLMAP model folder or a transforms.json")
+                       help="known poses instead of SfM: a transforms.json, a COLMAP model folder, a cameras.json, "
+                            "or a folder holding one")
     elif name == "score":
         s.add_argument("input", metavar="POSES", help="transforms.json, a COLMAP model folder (binary or text), "
                        "curate's cameras.json, or a run folder")

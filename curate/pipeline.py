@@ -82,7 +82,8 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
         pcfg = replace(cfg, budget=part_budget(cfg.budget, p["n_registered"], n_all),
                        sfm=replace(cfg.sfm, on_split="largest"))
         print(f"part {k}: {p['n_registered']} photos, budget {pcfg.budget} -> {sub}", flush=True)
-        run(pcfg, run_dir / "sfm" / "images", sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
+        # photos: SfM's working copies, found beside the model (RUN/sfm/images; the other parts' are not listed)
+        run(pcfg, None, sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
 
 
 CHEAP_AFTER = {"occupancy": ("select", "export"), "select": ("export",), "evaluate": (), "export": ()}

@@ -306,7 +306,8 @@ def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = N
     run = out / scene
     cfg = RunConfig(evaluate=ev)
     cfg = _replace(cfg, refine=_replace(cfg.refine, field="always"))
-    import_poses(cfg.sfm, scene_poses(scene, out, data), run)
+    # the harness's protocol (docs/selection-evidence.md) imports the poses alone: no triangulated points
+    import_poses(_replace(cfg.sfm, triangulate="off"), scene_poses(scene, out, data), run)
     if train:
         pool = holdout_split(len(load_sfm(run).cameras), ev.holdout_every)[0].tolist()
         stage_occupancy(cfg, run, train_on=pool)

@@ -14,7 +14,7 @@ from curate.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12"]
+TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12", "--triangulate", "off"]
 
 
 def _run(out: Path, *extra: str) -> list[str]:

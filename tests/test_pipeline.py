@@ -157,7 +157,7 @@ def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
     from curate.sfm.config import SfmConfig
     from curate.sfm.io import load_sfm, original_cameras
     from curate.sfm.io import image_paths
-    import_poses(SfmConfig(progress=False), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
+    import_poses(SfmConfig(progress=False, triangulate="off"), SAMPLE / "transforms.json", tmp_path, photos=SAMPLE)
     res = load_sfm(tmp_path)
     oc, paths = original_cameras(res.cameras, res.records)
     assert all(Path(p).is_absolute() and Path(p).is_file() for p in paths)
@@ -206,7 +206,8 @@ def test_stage_reruns_keep_the_saved_options_and_only_the_changed_stage_runs(tmp
 @pytest.mark.slow
 def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     """`--no-evaluate` with view medoids (or FVS) trains no pool field: the selection needs none. The
-    energy on a pose import (no sparse points to give its occupancy) still gets one."""
+    energy on a pose import without points (--triangulate off: no sparse points to give its occupancy)
+    still gets one."""
     out = tmp_path / "run"
     res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "medoids"), capture_output=True, text=True,
                          env=_env(), timeout=600)
@@ -216,8 +217,8 @@ def test_no_evaluate_trains_no_field_unless_the_method_needs_one(tmp_path):
     assert "not needed" in rec["field"] and "no pool field" in res.stdout
     assert len(json.loads((out / "select" / "selection.json").read_text())["chosen"]) == 12
     assert (out / "export" / "transforms.json").is_file() and (out / "report.html").is_file()
-    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "energy"), capture_output=True, text=True,
-                         env=_env(), timeout=600)
+    res = subprocess.run(_cmd(out, "--no-evaluate", "--method", "energy", "--triangulate", "off"), capture_output=True,
+                         text=True, env=_env(), timeout=600)
     assert res.returncode == 0, res.stderr
     assert (out / "occupancy" / "field.pt").is_file()
     assert "energy" in json.loads((out / "occupancy" / "stage.json").read_text())["field"]
@@ -284,7 +285,7 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     from curate.config import RunConfig
     from curate.select.select import SelectConfig
     from curate.sfm.config import SfmConfig
-    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False),
+    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False, triangulate="off"),
                     select=SelectConfig(method="medoids"))
     out = tmp_path / "run"
     pipeline.run(cfg, None, out, poses="SPLIT")

@@ -251,7 +251,7 @@ def test_import_transforms_json(tmp_path):
     from curate.core.transforms_json import read_transforms
     src = need("fox") / "transforms.json"
     ref, files = read_transforms(src)
-    out = import_poses(small_cfg(), src, tmp_path / "run")
+    out = import_poses(small_cfg(triangulate="off"), src, tmp_path / "run")  # points: test_pose_import.py
     res = load_sfm(tmp_path / "run")
     assert res.cameras.names == ref.names
     for k in ("c2w", "fx", "fy", "cx", "cy", "width", "height", "dist"):
@@ -318,7 +318,7 @@ def test_a_split_capture_is_said_loudly_and_can_stop(tmp_path):
     from curate.sfm import stage
     sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
     cfg = RunConfig()
-    cfg = dc_replace(cfg, sfm=dc_replace(cfg.sfm, progress=False))
+    cfg = dc_replace(cfg, sfm=dc_replace(cfg.sfm, progress=False, triangulate="off"))
     res = stage.run(cfg, tmp_path, photos=sample, poses=sample / "transforms.json")
     assert res.ran and res.warning is None
     rec_path = tmp_path / "sfm" / "stage.json"

@@ -19,7 +19,7 @@ EXPORTED = {"link": "linked", "copy": "copied"}
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
-    from curate.core.stage import begin_stage, finish_stage, stage_key
+    from curate.core.stage import begin_stage, finish_stage, read_stage, stage_key
     from curate.export.subset import export_subset
     from curate.occupancy.stage import key_of
     from curate.select.stage import read_selection
@@ -27,18 +27,52 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     run_dir = Path(run_dir)
     d = run_dir / "export"
     key = stage_key({"mode": cfg.export_mode}, [key_of(run_dir / "select")])
-    if begin_stage(d, key, force):
-        return StageResult("export", d, False, time.perf_counter() - t0)
+    if begin_stage(d, key, force):  # unchanged: its warning still holds
+        return StageResult("export", d, False, time.perf_counter() - t0,
+                           warning=(read_stage(d) or {}).get("export_warning"))
     sel = read_selection(run_dir)
     export_subset(run_dir, sel["chosen_names"], d, mode=cfg.export_mode)
     model = json.loads((d / "export.json").read_text())["model"]
-    warn = connectivity_warning(model)
+    sfm = read_stage(run_dir / "sfm") or {}
+    warn = "; ".join(w for w in (points_warning(model, sfm), connectivity_warning(model)) if w) or None
+    from curate.sfm.stage import import_warning
+    # the record's warning (shown atop the report) also says when the photos and the poses did not match
+    shown = "; ".join(w for w in (import_warning(run_dir), warn) if w) or None
     finish_stage(d, key, {"mode": cfg.export_mode}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",
                                                                  "list": "images.txt", "images": "images/"},
-                 model=model, warning=warn)
+                 model=model, warning=shown, export_warning=warn)
     return StageResult("export", d, True, time.perf_counter() - t0,
                        f"{len(sel['chosen_names'])} images ({EXPORTED[cfg.export_mode]}), {model['n_points3D']} points -> {d}",
                        warning=warn)
+
+
+MIN_POINTS = 100
+"""The export warns when its ``sparse/0`` holds fewer 3D points than this."""
+
+
+def points_warning(model: dict, sfm: dict | None = None) -> str | None:
+    """A warning when the exported ``sparse/0`` has no or few (< :data:`MIN_POINTS`) 3D points, and why
+    (``sfm``: the SfM stage's record); None otherwise."""
+    n = int(model.get("n_points3D", 0))
+    if n >= MIN_POINTS:
+        return None
+    st = (sfm or {}).get("stats") or {}
+    tri = st.get("triangulation") or {}
+    status = tri.get("status")
+    if (sfm or {}).get("mode") != "import" or status == "source":
+        why = (f"the chosen images share {'none' if n == 0 else 'few'} of the {model.get('n_points3D_source', 0)} "
+               "points of RUN/sfm/sparse/0 (a point is kept when two chosen images see it): a larger budget keeps more")
+    elif status == "off":
+        why = "the poses came without points and --triangulate off skipped them: --triangulate auto computes them"
+    elif status == "skipped":
+        why = f"the poses came without points and none could be triangulated ({tri.get('reason')})"
+    elif status == "failed":
+        why = f"triangulating the photos with the known poses failed ({tri.get('reason')})"
+    else:
+        why = (f"triangulating the photos with the known poses found {tri.get('n_points', 0)} points, "
+               f"{model.get('n_points3D_source', 0)} of them in RUN/sfm/sparse/0, and the chosen images share "
+               f"{'none' if n == 0 else 'few'} (photos with little texture, or poses that do not fit the photos?)")
+    return f"the export has {'no' if n == 0 else f'only {n}'} 3D points: 3DGS needs an initial point cloud; {why}"
 
 
 def connectivity_warning(model: dict) -> str | None:

@@ -15,8 +15,11 @@ global mapper on the same matches, kept where it agrees with the incremental par
 more photos) -> optional dense reconstruction (CUDA only). Verification RANSAC, the
 mapper and the tree's training sample are seeded (``SfmConfig.seed``): the same photos
 and config give the same matches and, up to multi-threaded bundle adjustment, the same
-model. ``import_poses`` produces the same outputs from an existing COLMAP model or a
-transforms.json.
+model. ``import_poses`` produces the same outputs from known poses (a transforms.json, a
+cameras.json, a COLMAP model; each pose's photo looked up in the photo folder given); poses
+that come without 3D points get points triangulated from the photos with the poses held fixed
+(``triangulate_known_poses``: the same SIFT extraction and matching, then COLMAP's point
+triangulator).
 
 Run-folder contract, ``RUN/sfm/``:
 
@@ -24,7 +27,8 @@ Run-folder contract, ``RUN/sfm/``:
   last, a run killed half-way has none and is redone.
 * ``images/``: working copies (SfM only), longer side <= ``max_image_size``.
 * ``sparse/0/``: COLMAP binary model of the registered images, COLMAP's world frame
-  (for an import: the imported cameras, points when the source had them).
+  (for an import: the imported cameras at their own intrinsics and names, with the source's points,
+  or the points triangulated for them; none with ``triangulate='off'``).
   ``sparse/1/``, ...: the other models of a capture that split, largest first, each in its
   own frame (``stats.parts`` lists them; ``--on-split each`` curates them too).
 * ``cameras.json``: the same cameras as ``curate.core.cameras.Cameras`` (OpenCV c2w, same
@@ -36,12 +40,15 @@ Run-folder contract, ``RUN/sfm/``:
   nerfstudio dataset; import: absolute paths of the original photos.
   ``curate.sfm.io.original_cameras`` maps cameras to the full-resolution originals.
 * ``points.npy`` [P, 3] float32 sparse points, ``points_rgb.npy`` [P, 3] uint8,
-  ``points_error.npy`` [P] float32 reprojection errors (absent for a transforms.json).
+  ``points_error.npy`` [P] float32 reprojection errors (absent for an import without points).
 * ``normalization.json``: ``x_canonical = scale * (x - centre)`` maps the scene into
   [-1, 1]^3 (``curate.sfm.io.normalization``).
 * ``images.json``: per input file: original path, working name, status (``kept``,
-  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``.
-* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database.
+  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``. An import lists
+  each pose (its photo, or ``skipped``: no photo in the folder) and the folder's photos no pose
+  names (``skipped``).
+* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database (an import's:
+  of the triangulation, at the working size).
 * ``dense/fused.ply``: dense point cloud, only with CUDA (``dense='auto'``).
 """
 
@@ -49,8 +56,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import shutil
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -166,8 +175,13 @@ def cameras_from_reconstruction(rec, warn: bool = True) -> tuple[Cameras, np.nda
     return cams, xyz, rgb, err
 
 
-def reconstruction_from_cameras(cams: Cameras):
-    """A ``pycolmap.Reconstruction`` holding ``cams`` (no points); cameras with equal intrinsics share one."""
+def reconstruction_from_cameras(cams: Cameras, keypoints: list | None = None, image_ids: list[int] | None = None,
+                                camera_ids: list[int] | None = None):
+    """A ``pycolmap.Reconstruction`` holding ``cams`` (no points); cameras with equal intrinsics share one.
+
+    ``keypoints``: per camera, its [K_i, 2] keypoints (pixels) or None. ``image_ids`` / ``camera_ids``:
+    per camera, the COLMAP ids to use (default: ``i + 1``, and one per distinct intrinsics).
+    """
     import pycolmap
 
     from curate.core.cameras import w2c_from_c2w
@@ -178,11 +192,16 @@ def reconstruction_from_cameras(cams: Cameras):
     for i in range(len(cams)):
         model, params = colmap_from_intrinsics(cams.fx[i], cams.fy[i], cams.cx[i], cams.cy[i], cams.dist[i])
         key = (model, tuple(params), int(cams.width[i]), int(cams.height[i]))
+        if camera_ids is not None:
+            key = (camera_ids[i],) + key
         if key not in cam_ids:
-            cam_ids[key] = len(cam_ids) + 1
+            cam_ids[key] = camera_ids[i] if camera_ids is not None else len(cam_ids) + 1
             rec.add_camera_with_trivial_rig(pycolmap.Camera(
-                camera_id=cam_ids[key], model=model, width=key[2], height=key[3], params=params))
-        im = pycolmap.Image(name=cams.names[i] or f"{i:06d}", camera_id=cam_ids[key], image_id=i + 1)
+                camera_id=cam_ids[key], model=model, width=key[-2], height=key[-1], params=params))
+        kw = {} if keypoints is None or keypoints[i] is None else \
+            {"keypoints": np.asarray(keypoints[i], np.float64).reshape(-1, 2)}
+        im = pycolmap.Image(name=cams.names[i] or f"{i:06d}", camera_id=cam_ids[key],
+                            image_id=image_ids[i] if image_ids is not None else i + 1, **kw)
         rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(Rw[i]), tw[i]))
     return rec
 
@@ -612,16 +631,6 @@ def read_colmap_model(model: Path, photos: Path | None):
     return Poses(cams, files, xyz, rgb, err, rec)
 
 
-def _read_source(source: Path, photos: Path | None):
-    """-> (cameras, xyz, rgb, err, reconstruction or None, original paths)."""
-    from curate.sfm.poses import read_poses
-    if source.is_dir() and not any((source / f).is_file() for f in ("cameras.bin", "cameras.txt")) \
-            and not (source / "sparse" / "0").is_dir():
-        raise FileNotFoundError(f"{source}: neither a transforms.json nor a COLMAP model folder")
-    p = read_poses(source, photos)
-    return p.cameras, p.points, p.colors, p.errors, p.reconstruction, p.files
-
-
 def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
     """Cameras of a pose source (:func:`curate.sfm.poses.read_poses`), without writing anything:
     (cameras, image paths)."""
@@ -674,41 +683,317 @@ def check_photos(cams: Cameras, originals: list[str], source: Path) -> tuple[lis
     return records, keep
 
 
+def _check_photo_folder(photos: Path, source: Path) -> None:
+    """The photo folder given with poses must be a folder: a video's frames (or one photo) have no names
+    the poses could refer to."""
+    from curate.sfm.video import VIDEO_EXTS
+    if not photos.exists():
+        raise FileNotFoundError(f"photo folder {photos} does not exist")
+    if photos.is_file() and photos.suffix.lower() in VIDEO_EXTS:
+        raise ValueError(f"{photos}: a video cannot be given with --poses {source}: its frames have no names the "
+                         "poses could refer to. Give the folder of the photos the poses describe, or the video "
+                         "alone (SfM finds its cameras)")
+    if not photos.is_dir():
+        raise NotADirectoryError(f"{photos}: not a folder; with --poses give the folder of the photos the poses "
+                                 "describe (or no photo folder: the pose file's own image paths are used)")
+
+
+def _examples(names, k: int = 3) -> str:
+    names = list(names)
+    return ", ".join(names[:k]) + (f" (and {len(names) - k} more)" if len(names) > k else "")
+
+
+def _pose_photos(cfg: SfmConfig, poses, source: Path, photos: Path | None):
+    """(indices of the poses kept, their photos, images.json records of what was left out, the match's
+    statistics or None): each pose's photo looked up in the photo folder (:func:`curate.sfm.poses.match_photos`),
+    the one given or the usual one beside a COLMAP model (:func:`curate.sfm.poses.default_photos`); without
+    either, the pose file's own image paths."""
+    from curate.sfm.poses import default_photos, match_photos
+    folder = photos if photos is not None else default_photos(source)
+    if folder is None:
+        return list(range(len(poses.cameras))), list(poses.files), [], None
+    folder = Path(folder).resolve()
+    names = list(poses.cameras.names)
+    m = match_photos(names, poses.files, folder, cfg.recursive)
+    idx = m.matched
+    if not idx:
+        if m.n_photos == 0:
+            raise ValueError(f"{folder} holds no photos for the {len(names)} poses of {source}")
+        raise ValueError(f"no pose of {source} names a photo of {folder}: the poses name e.g. "
+                         f"{_examples(names)}; the folder holds e.g. {_examples(p.name for p in m.unposed)}")
+    left = [{"original": str(folder / n) if n and not Path(n).is_absolute() else n, "rel": n, "status": "skipped",
+             "reason": f"pose without a photo: {m.how[i]}", "working": "", "registered": False}
+            for i, n in enumerate(names) if m.files[i] is None]
+    unposed = m.unposed if photos is not None else []  # a folder found by the layout, not given: not listed
+    from curate.sfm.video import VIDEO_EXTS
+    left += [{"original": str(p), "rel": p.relative_to(folder).as_posix(), "status": "skipped",
+              "reason": ("a video: its frames have no names the poses could refer to" if p.suffix.lower() in VIDEO_EXTS
+                         else f"no pose in {source} names this photo"), "working": "", "registered": False}
+             for p in unposed]
+    stats = {"folder": str(folder), "given": photos is not None, "n_poses": len(names), "n_matched": len(idx),
+             "n_by_name": sum(m.how[i] == "name" for i in idx), "n_photos": m.n_photos if photos is not None else None,
+             "n_unposed": len(unposed) if photos is not None else None,
+             "poses_without_photo": [names[i] for i in range(len(names)) if m.files[i] is None][:50],
+             "photos_without_pose": [p.relative_to(folder).as_posix() for p in unposed][:50]}
+    if len(idx) < len(names):
+        logger.warning("sfm import: %d of the %d poses of %s have no photo in %s (left out), e.g. %s", len(names) - len(idx),
+                       len(names), source, folder, _examples(stats["poses_without_photo"]))
+    if unposed:
+        logger.warning("sfm import: %d of the %d photos of %s have no pose in %s (left out), e.g. %s", len(unposed),
+                       m.n_photos, folder, source, _examples(stats["photos_without_pose"]))
+    return idx, [m.files[i] for i in idx], left, stats
+
+
+def _import_key(cfg: SfmConfig, source: Path, photos: Path | None, originals: list[str], left: list[dict],
+                triangulate: bool) -> str:
+    """The import stage's key: the pose files, the photos used (names and content), what was left out,
+    and the options that shape the result (SfM's feature and matching options when triangulating)."""
+    import dataclasses
+    from curate.sfm.poses import pose_files
+    from curate.sfm.prep import _NOT_IN_KEY
+    conf: dict = {"mode": "import", "source": str(source), "photos": str(photos),
+                  "normalize_percentile": cfg.normalize_percentile, "recursive": cfg.recursive,
+                  "triangulate": triangulate}
+    if triangulate:
+        conf.update({k: v for k, v in dataclasses.asdict(cfg).items() if k not in _NOT_IN_KEY + ("video", "dense")})
+    photos_used = [o for o in originals if Path(o).is_absolute()]
+    return stage_key(conf, [hash_files(pose_files(source)), hash_files(photos_used),
+                            "\n".join(f"{r['rel']}:{r['reason']}" for r in left)])
+
+
 def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
                   force: bool = False) -> Path:
     """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.
 
     Args:
-        source: a COLMAP model folder (binary or text; or a folder with ``sparse/0``), or a transforms.json.
-        photos: folder of the photos the model's image names refer to (COLMAP model only;
-            a transforms.json's file paths are resolved against its own folder).
+        source: a pose source (:func:`curate.sfm.poses.read_poses`: a transforms.json, a cameras.json, a
+            COLMAP model folder, a folder holding one of them).
+        photos: the folder of the photos the poses describe: each pose's photo is looked up there
+            (:func:`curate.sfm.poses.match_photos`); poses without a photo, and photos without a pose,
+            are left out and listed in ``images.json``; none matching is an error. Without it, a COLMAP
+            model's usual ``images/`` folder, else the pose file's own image paths.
+
+    With no 3D points in the source and ``cfg.triangulate == "auto"``, points are triangulated from
+    the photos with the poses held fixed (:func:`triangulate_known_poses`).
     """
+    from curate.sfm.poses import read_poses
     source = Path(source).resolve()
     photos = Path(photos).resolve() if photos is not None else None
     run_dir = Path(run_dir).resolve()
     out = _sfm_dir(run_dir)
-    files = [source] if source.is_file() else sorted(p for p in source.rglob("*") if p.is_file())
-    key = stage_key({"mode": "import", "source": str(source), "photos": str(photos),
-                     "normalize_percentile": cfg.normalize_percentile}, [hash_files(files)])
+    if photos is not None:
+        _check_photo_folder(photos, source)
+        refuse_inside(out, photos)
+    poses = read_poses(source)
+    idx, originals, left, match = _pose_photos(cfg, poses, source, photos)
+    cams = poses.cameras[idx]
+    records, keep = check_photos(cams, originals, source)
+    cams, originals = cams[keep], [originals[i] for i in keep]
+    has_points = poses.points is not None and len(poses.points) > 0
+    readable = sum(Path(o).is_absolute() for o in originals)
+    triangulate = cfg.triangulate == "auto" and not has_points and readable >= 2
+    key = _import_key(cfg, source, photos, originals, left, triangulate)
     if begin_stage(out, key, force):
         logger.info("sfm import: up to date (%s), skipped", out)
         return out
     started = time.perf_counter()
-    cams, xyz, rgb, err, rec, originals = _read_source(source, photos)
-    records, keep = check_photos(cams, originals, source)
-    if len(keep) < len(cams):
-        cams, originals = cams[keep], [originals[i] for i in keep]
-        rec = None          # the model written describes the usable photos only
-    if rec is None:
-        rec = reconstruction_from_cameras(cams)
     sparse = out / "sparse" / "0"
-    sparse.mkdir(parents=True)
-    rec.write(sparse)
-    stats = write_outputs(out, cams, xyz, rgb, err, records, originals, cfg.normalize_percentile)
+    stats: dict = {"n_poses": len(poses.cameras)}
+    if match is not None:
+        stats["pose_match"] = match
+    if has_points:
+        if len(cams) < len(poses.cameras):  # the model of the photos kept, with the points they see
+            write_subset_model(poses.reconstruction, list(cams.names), sparse, min_track=2)
+            rec = pycolmap_reconstruction(sparse)
+        else:
+            rec = poses.reconstruction
+            sparse.mkdir(parents=True)
+            rec.write(sparse)
+        _, xyz, rgb, err = cameras_from_reconstruction(rec)
+        stats["triangulation"] = {"status": "source", "reason": "the source has 3D points"}
+    elif triangulate:
+        rec, stats["triangulation"] = triangulate_known_poses(cfg, cams, originals, out)
+        sparse.mkdir(parents=True)
+        rec.write(sparse)
+        _, xyz, rgb, err = cameras_from_reconstruction(rec)
+    else:
+        reason = ("--triangulate off" if cfg.triangulate == "off" else
+                  "fewer than 2 readable photos (image names without a photo folder)")
+        stats["triangulation"] = {"status": "off" if cfg.triangulate == "off" else "skipped", "reason": reason}
+        rec = reconstruction_from_cameras(cams)
+        sparse.mkdir(parents=True)
+        rec.write(sparse)
+        xyz = rgb = err = None
+    stats.update(write_outputs(out, cams, xyz, rgb, err, records + left, originals, cfg.normalize_percentile))
     finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
                  mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)
-    logger.info("sfm import: %d cameras, %d points from %s", len(cams), len(xyz) if xyz is not None else 0, source)
+    logger.info("sfm import: %d cameras, %d points from %s", len(cams), stats["n_points"], source)
     return out
+
+
+def pycolmap_reconstruction(path: str | Path):
+    """The COLMAP model at ``path`` (pycolmap stays inside this module)."""
+    import pycolmap
+    return pycolmap.Reconstruction(str(path))
+
+
+# ------------------------------------------------------------------ points for known poses
+def _working_copy(src: str, dst: Path, size: tuple[int, int]) -> None:
+    """``dst``: the photo ``src`` upright at ``size`` (width, height), JPEG (quality 95) or PNG by ``dst``'s
+    suffix; the original's bytes when nothing changes."""
+    from PIL import Image
+
+    from curate.sfm.ingest import RAW_EXTS, decode_upright, read_image
+    if Path(src).suffix.lower() in RAW_EXTS:
+        rgb, _ = read_image(src)
+        if (rgb.shape[1], rgb.shape[0]) != size:
+            rgb = np.asarray(Image.fromarray(rgb).resize(size, Image.LANCZOS))
+    else:
+        with Image.open(src) as im:
+            same = im.size == size and im.getexif().get(0x0112, 1) in (0, 1)
+            if same and (im.format, dst.suffix) in (("JPEG", ".jpg"), ("PNG", ".png")):
+                shutil.copyfile(src, dst)
+                return
+            rgb = decode_upright(im, size)
+    if dst.suffix == ".png":
+        Image.fromarray(rgb).save(dst, format="PNG", compress_level=1)
+    else:
+        Image.fromarray(rgb).save(dst, format="JPEG", quality=95)
+
+
+def working_sizes(cams: Cameras, max_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """([N] widths, [N] heights) of the cameras' images with the longer side at most ``max_size``
+    (the SfM stage's working size; never enlarged)."""
+    s = np.minimum(1.0, max_size / np.maximum(cams.width, cams.height))
+    return (np.maximum(1, np.round(cams.width * s)).astype(int),
+            np.maximum(1, np.round(cams.height * s)).astype(int))
+
+
+def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str], out: Path):
+    """3D points for cameras whose poses are known: (a ``pycolmap.Reconstruction`` of ``cams`` with
+    the points, statistics). Never raises for what the photos hold: a failure is a status.
+
+    The SfM stage's own steps on working copies of the photos (``out/triangulation/images``, upright,
+    longer side at most ``cfg.max_image_size``, removed afterwards): SIFT features (:func:`_extract`,
+    one camera when every image has the same intrinsics), matches verified as SfM verifies them
+    (:func:`_match`, the matcher :func:`curate.sfm.prep.choose_matcher` picks), then COLMAP's point
+    triangulator (``pycolmap.triangulate_points``) with the poses and the known intrinsics (scaled to
+    the working size) held fixed: bundle adjustment moves the points only. The database
+    (``out/database.db``) is written with the model's image and camera ids, so the two agree.
+
+    The model returned describes the photos at the poses' own size (``cams``' intrinsics, keypoints
+    scaled back), image names = ``cams.names``, as the import writes it. Statistics: ``status``
+    (``done``, ``failed``), ``n_points``, ``mean_track_length``, ``mean_reprojection_error_px``
+    (at the working size), ``working_max_side``, seconds per step.
+    """
+    import pycolmap
+
+    from curate.core.cameras import w2c_from_c2w
+    from curate.sfm.ingest import PhotoRecord
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    usable = [i for i, o in enumerate(originals) if Path(o).is_absolute()]
+    stats: dict = {"status": "failed", "n_images": len(usable)}
+    work = out / "triangulation"
+    images = work / "images"
+    images.mkdir(parents=True)
+    ww, hh = working_sizes(cams, cfg.max_image_size)
+    sx, sy = ww / cams.width, hh / cams.height
+    stats["working_max_side"] = int(max(ww.max(), hh.max()))
+    names = {}
+    for i in usable:
+        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(cams.names[i]).stem)[:60]
+        ext = ".png" if Path(originals[i]).suffix.lower() in (".png", ".tif", ".tiff") else ".jpg"
+        names[i] = f"{i:05d}_{stem}{ext}"
+    threads = cfg.num_threads if cfg.num_threads > 0 else 2
+    try:
+        with ThreadPoolExecutor(threads) as pool:
+            list(tqdm(pool.map(lambda i: _working_copy(originals[i], images / names[i], (int(ww[i]), int(hh[i]))),
+                               usable), total=len(usable), desc="working copies", unit="img",
+                      disable=not cfg.progress, leave=False))
+    except (OSError, ValueError) as e:
+        stats["reason"] = f"a photo could not be decoded: {e}"
+        shutil.rmtree(work, ignore_errors=True)
+        return reconstruction_from_cameras(cams), stats
+    stats["copies_seconds"] = round(time.perf_counter() - t0, 2)
+    wk = {i: (cams.fx[i] * sx[i], cams.fy[i] * sy[i], cams.cx[i] * sx[i], cams.cy[i] * sy[i]) for i in usable}
+    intr = {i: colmap_from_intrinsics(*wk[i], cams.dist[i]) + (int(ww[i]), int(hh[i])) for i in usable}
+    single = len({(m, tuple(p), w, h) for m, p, w, h in intr.values()}) == 1
+    matcher = choose_matcher(cfg, [PhotoRecord(original=originals[i], rel=cams.names[i]) for i in usable])
+    stats.update(matcher=matcher, camera_mode="single" if single else "per_image")
+    db = out / "database.db"
+    try:
+        pycolmap.set_random_seed(cfg.seed)
+        with colmap_log(out / "colmap.log"):
+            t = time.perf_counter()
+            _extract(cfg, db, images, [names[i] for i in usable], single)
+            stats["extract_seconds"] = round(time.perf_counter() - t, 2)
+            dbh = pycolmap.Database.open(db)
+            dbim = {im.name: im for im in dbh.read_all_images()}
+            kept = [i for i in usable if names[i] in dbim]
+            for cid in sorted({dbim[names[i]].camera_id for i in kept}):
+                i = next(k for k in kept if dbim[names[k]].camera_id == cid)
+                model, params, w, h = intr[i]
+                dbh.update_camera(pycolmap.Camera(camera_id=cid, model=model, width=w, height=h, params=params))
+            dbh.close()
+            if len(kept) < 2:
+                raise RuntimeError(f"features of only {len(kept)} photos")
+            t = time.perf_counter()
+            _match(cfg, db, matcher)
+            stats["match_seconds"] = round(time.perf_counter() - t, 2)
+            dbh = pycolmap.Database.open(db)
+            _, inliers = dbh.read_two_view_geometry_num_inliers()
+            dbh.close()
+            stats["n_pairs_verified"] = int(sum(n >= cfg.min_num_matches for n in inliers))
+            sub = cams[kept]
+            work_cams = Cameras(sub.c2w, np.array([wk[i][0] for i in kept]), np.array([wk[i][1] for i in kept]),
+                                np.array([wk[i][2] for i in kept]), np.array([wk[i][3] for i in kept]),
+                                ww[kept], hh[kept], sub.dist, tuple(names[i] for i in kept))
+            rec = reconstruction_from_cameras(work_cams, image_ids=[dbim[names[i]].image_id for i in kept],
+                                              camera_ids=[dbim[names[i]].camera_id for i in kept])
+            opts = pycolmap.IncrementalPipelineOptions()
+            opts.num_threads = cfg.num_threads
+            opts.random_seed = cfg.seed
+            opts.mapper.random_seed = cfg.seed
+            opts.triangulation.random_seed = cfg.seed
+            opts.min_num_matches = cfg.min_num_matches
+            t = time.perf_counter()
+            (work / "model").mkdir()
+            tri = pycolmap.triangulate_points(rec, db, images, work / "model", clear_points=True, options=opts,
+                                              refine_intrinsics=False)
+            stats["triangulate_seconds"] = round(time.perf_counter() - t, 2)
+    except Exception as e:  # noqa: BLE001 - pycolmap's errors: the import goes on without points, and says so
+        stats["reason"] = f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+        logger.warning("sfm import: triangulating points failed (%s); the poses are imported without points",
+                       stats["reason"])
+        shutil.rmtree(work, ignore_errors=True)
+        return reconstruction_from_cameras(cams), stats
+    stats.update(status="done", n_points=int(tri.num_points3D()),
+                 mean_track_length=round(float(tri.compute_mean_track_length()), 3),
+                 mean_reprojection_error_px=round(float(tri.compute_mean_reprojection_error()), 3))
+    # the same model at the poses' own size and names: keypoints scaled back, points and tracks kept
+    pos = {dbim[names[i]].image_id: k for k, i in enumerate(kept)}
+    kps = [None] * len(cams)
+    for iid, k in pos.items():
+        i = kept[k]
+        xy = np.array([p.xy for p in tri.image(iid).points2D], np.float64).reshape(-1, 2)
+        kps[i] = xy / [sx[i], sy[i]]
+    final = reconstruction_from_cameras(cams, keypoints=kps)
+    new_id = {iid: kept[k] + 1 for iid, k in pos.items()}
+    seen: set[int] = set()
+    for p in tri.points3D.values():
+        els = [pycolmap.TrackElement(new_id[e.image_id], e.point2D_idx) for e in p.track.elements]
+        seen.update(e.image_id for e in els)
+        final.add_point3D(p.xyz, pycolmap.Track(els), p.color)
+    final.update_point_3d_errors()
+    stats["n_images_with_points"] = len(seen)
+    stats["seconds"] = round(time.perf_counter() - t0, 2)
+    shutil.rmtree(work, ignore_errors=True)
+    logger.info("sfm import: %d points triangulated from %d photos with the known poses (track %.2f, %.2f px) in "
+                "%.1f s", stats["n_points"], len(kept), stats["mean_track_length"],
+                stats["mean_reprojection_error_px"], stats["seconds"])
+    return final, stats
 
 
 # ------------------------------------------------------------------ subset export
@@ -723,7 +1008,7 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
     observations in its track; reprojection errors are recomputed.
 
     Args:
-        sparse_dir: source model folder (binary or text), e.g. ``RUN/sfm/sparse/0``.
+        sparse_dir: source model folder (binary or text), e.g. ``RUN/sfm/sparse/0``, or a ``pycolmap.Reconstruction``.
         keep_names: image names of the source model to keep (unknown names: ``ValueError``).
         out_dir: folder written (created): ``cameras.bin images.bin points3D.bin`` (+ rigs/frames).
         rename: optional source name -> name written in the new model (e.g. the original photo's).
@@ -735,13 +1020,14 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
             points in common (COLMAP's fewest verified matches of a pair, 15 by default).
 
     Returns:
-        {"n_images", "n_cameras", "n_points3D", "n_points3D_source", "components"}: ``components``,
+        {"n_images", "n_cameras", "n_points3D", "n_points3D_source", "n_images_with_points" (kept images
+        observing at least one kept point), "components"}: ``components``,
         the sizes of the groups of kept images connected through shared points (largest first;
         one group: the subset is one connected set that 3DGS / NeRF tools can register as a whole).
     """
     import pycolmap
 
-    src = pycolmap.Reconstruction(str(sparse_dir))
+    src = pycolmap.Reconstruction(str(sparse_dir)) if isinstance(sparse_dir, (str, Path)) else sparse_dir
     rename, sizes = rename or {}, sizes or {}
     by_name = {src.image(i).name: i for i in src.reg_image_ids()}
     missing = [n for n in keep_names if n not in by_name]
@@ -769,11 +1055,13 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
         rec.add_image_with_trivial_frame(out_im, im.cam_from_world())
         keep_ids.add(iid)
     shared: dict[tuple[int, int], int] = {}
+    seeing: set[int] = set()
     for p in src.points3D.values():
         els = [e for e in p.track.elements if e.image_id in keep_ids]
         ids = sorted({e.image_id for e in els})
         if len(ids) >= min_track:
             rec.add_point3D(p.xyz, pycolmap.Track(els), p.color)
+            seeing.update(ids)
             for a in range(len(ids)):
                 for b in range(a + 1, len(ids)):
                     shared[(ids[a], ids[b])] = shared.get((ids[a], ids[b]), 0) + 1
@@ -785,7 +1073,7 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
     logger.info("subset model: %d images, %d of %d points -> %s", rec.num_reg_images(), rec.num_points3D(),
                 src.num_points3D(), out_dir)
     return {"n_images": rec.num_reg_images(), "n_cameras": rec.num_cameras(), "n_points3D": rec.num_points3D(),
-            "n_points3D_source": src.num_points3D(), "components": components}
+            "n_points3D_source": src.num_points3D(), "n_images_with_points": len(seeing), "components": components}
 
 
 def covisible_groups(nodes: list[int], edges: list[tuple[int, int]]) -> list[int]:

@@ -14,6 +14,8 @@ ON_SPLIT = ("largest", "each", "stop")
 """``SfmConfig.on_split`` choices."""
 MAPPERS = ("auto", "incremental", "global")
 """``SfmConfig.mapper`` choices."""
+TRIANGULATE = ("auto", "off")
+"""``SfmConfig.triangulate`` choices."""
 MIN_PART = 10
 """``on_split = 'each'``: the fewest registered photos a part needs to be curated on its own."""
 
@@ -105,10 +107,15 @@ class SfmConfig:
     """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""
     # --- outputs
     dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
-    on_split: str = "largest"         # when SfM splits the capture into separate models: largest curates the
-    #                                   largest one, with a warning; each also curates every other part of 10 or
-    #                                   more photos in RUN/parts/<k> (the budget shared by size, each part its own
-    #                                   scene); stop stops
+    triangulate: str = "auto"
+    """Known poses (--poses) that come without 3D points (a transforms.json, a cameras.json, a COLMAP model
+    without points): auto triangulates points from the photos with the poses held fixed (SIFT features and
+    matches as SfM makes them, at the working size of --max-size), so the run and the export's sparse/0
+    carry the point cloud 3DGS starts from; off imports the poses alone, without points."""
+    on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
+    #                                   'largest' curates the largest part with a loud warning; 'each' also curates
+    #                                   every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
+    #                                   size; each part is its own scene, in its own frame); 'stop' stops
     normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
     # --- execution (not in the stage key)
     num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
@@ -116,7 +123,7 @@ class SfmConfig:
 
     def __post_init__(self) -> None:
         choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT,
-                   "mapper": MAPPERS}
+                   "mapper": MAPPERS, "triangulate": TRIANGULATE}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:
                 raise ValueError(f"sfm: {k.replace('_', ' ')} must be one of {ok}, got {getattr(self, k)!r}")

@@ -20,7 +20,8 @@ from curate.core.stage import hash_files, stage_key, write_json_atomic
 
 logger = logging.getLogger(__name__)
 
-_NOT_IN_KEY = ("num_threads", "progress", "on_split")
+_NOT_IN_KEY = ("num_threads", "progress", "on_split", "triangulate")
+"""SfmConfig fields that do not change what SfM computes (``triangulate`` is for imports only)."""
 
 
 def refuse_inside(out: Path, photos: Path) -> None:

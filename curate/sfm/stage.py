@@ -82,6 +82,39 @@ def split_warning(run_dir: Path, each: bool = False) -> str | None:
             f"{len(lost)} are left out of the selection, the export and the evaluation: {name_ranges(lost)}")
 
 
+def import_warning(run_dir: Path) -> str | None:
+    """A warning about an import of known poses (``curate run PHOTOS --poses POSES``): when fewer than
+    half of the poses found a photo in the photo folder, or fewer than half of the folder's photos have a
+    pose (:data:`curate.sfm.poses.MIN_MATCHED_FRACTION`: the folder is probably not the capture the poses
+    describe), or when no 3D points could be triangulated for poses that came without them; None otherwise."""
+    from curate.core.stage import read_stage
+    from curate.sfm.poses import MIN_MATCHED_FRACTION
+    rec = read_stage(Path(run_dir) / "sfm") or {}
+    if rec.get("mode") != "import":
+        return None
+    st = rec.get("stats") or {}
+    out = []
+    m = st.get("pose_match")
+    if m:
+        n, k = m["n_poses"], m["n_matched"]
+        if k < MIN_MATCHED_FRACTION * n:
+            out.append(f"only {k} of the {n} poses of {rec.get('source')} found a photo in {m['folder']} "
+                       f"({n - k} left out, e.g. {name_ranges(m['poses_without_photo'], 3)}): is this the capture "
+                       "the poses describe?")
+        if m.get("n_photos") and m["n_photos"] - m["n_unposed"] < MIN_MATCHED_FRACTION * m["n_photos"]:
+            out.append(f"only {m['n_photos'] - m['n_unposed']} of the {m['n_photos']} photos in {m['folder']} have a "
+                       f"pose in {rec.get('source')} ({m['n_unposed']} left out, e.g. "
+                       f"{name_ranges(m['photos_without_pose'], 3)}): is this the capture the poses describe?")
+    tri = st.get("triangulation") or {}
+    if tri.get("status") == "failed":
+        out.append(f"no 3D points could be triangulated from the photos with the known poses ({tri.get('reason')}; "
+                   f"see {Path(run_dir) / 'sfm' / 'colmap.log'}): the export's sparse/0 has none")
+    elif tri.get("status") == "done" and tri.get("n_points", 0) == 0:
+        out.append(f"triangulating the photos with the known poses found no 3D points ({tri.get('n_pairs_verified', 0)} "
+                   "verified image pairs): the export's sparse/0 has none")
+    return "; ".join(out) or None
+
+
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path | None = None,
         poses: str | Path | None = None) -> StageResult:
     """SfM on ``photos`` or, with ``poses`` (a COLMAP model or transforms.json), an import.
@@ -107,4 +140,18 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
             raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part, "
                              "--on-split each curates every part)")
         log.warning("sfm: %s", warn)
-    return StageResult("sfm", d, ran, time.perf_counter() - t0, f"{n} cameras registered", warning=warn)
+    summary = f"{n} cameras registered"
+    if poses:
+        from curate.core.stage import read_stage
+        st = (read_stage(d) or {}).get("stats") or {}
+        tri = st.get("triangulation") or {}
+        summary += f" (imported, of {st['n_poses']} poses)" if st.get("n_poses", n) != n else " (imported)"
+        if tri.get("status") == "done":
+            summary += f", {tri['n_points']} points triangulated in {tri['seconds']:.0f}s"
+        elif st.get("n_points"):
+            summary += f", {st['n_points']} points"
+        imp = import_warning(run_dir)
+        if imp is not None:
+            log.warning("sfm: %s", imp)
+            warn = imp if warn is None else f"{warn}; {imp}"
+    return StageResult("sfm", d, ran, time.perf_counter() - t0, summary, warning=warn)

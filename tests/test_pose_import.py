@@ -1,0 +1,279 @@
+"""Known poses with a photo folder: each pose finds its photo there, or is left out and listed; every
+command reads the same pose sources; poses without points get points triangulated with the poses fixed."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from curate.cli import main
+from curate.core.transforms_json import read_transforms, write_transforms
+
+from test_export import ring, write_photos
+
+pycolmap = pytest.importorskip("pycolmap")
+from curate.sfm.colmap import SfmConfig, import_poses, reconstruction_from_cameras  # noqa: E402
+from curate.sfm.io import load_sfm  # noqa: E402
+from curate.sfm.poses import match_photos  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "data_samples" / "room_walk"
+FAST = ["--no-evaluate", "--method", "medoids", "--budget", "3", "--res", "8", "--triangulate", "off"]
+
+
+def capture(root: Path, n: int = 12) -> tuple[Path, object]:
+    """``root``: images/img_XX.png (noise), transforms.json (file paths images/...), sparse/0 (COLMAP model,
+    names img_XX.png, the usual layout beside images/), cameras.json (names images/img_XX.png)."""
+    from curate.core.cameras import Cameras
+    c = ring(n)
+    cams = Cameras(c.c2w, c.fx, c.fy, c.cx, c.cy, c.width, c.height, c.dist,
+                   tuple(f"images/img_{i:02d}.png" for i in range(n)))
+    write_photos(root, cams)
+    write_transforms(root / "transforms.json", cams)
+    bare = Cameras(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.dist,
+                   tuple(Path(nm).name for nm in cams.names))
+    (root / "sparse" / "0").mkdir(parents=True)
+    reconstruction_from_cameras(bare).write(root / "sparse" / "0")
+    cams.save(root / "cameras.json")   # names images/img_XX.png, relative to its folder
+    return root, bare
+
+
+def one_line_error(capsys) -> str:
+    err = [ln for ln in capsys.readouterr().err.replace("\r", "\n").splitlines() if ln.startswith("curate ")]
+    assert len(err) == 1, err
+    return err[0]
+
+
+# ------------------------------------------------------------------ matching poses to a folder's photos
+def test_each_pose_finds_its_photo_by_path_else_by_its_unique_name(tmp_path):
+    f = tmp_path / "photos"
+    (f / "sub").mkdir(parents=True)
+    for n in ("a.jpg", "sub/b.jpg", "c.png", "d.jpg", "sub/d.jpg", "extra.jpg"):
+        (f / n).write_bytes(b"x")
+    (f / "clip.mp4").write_bytes(b"x")
+    names = ["a.jpg", "elsewhere/b.jpg", "r_c", "d.jpg", "x/e.jpg", "y/e.jpg", "missing.jpg"]
+    m = match_photos(names, [""] * len(names), f, recursive=True)
+    got = dict(zip(names, m.files))
+    assert got["a.jpg"] == str((f / "a.jpg").resolve())           # by its path in the folder
+    assert got["elsewhere/b.jpg"] == str((f / "sub/b.jpg").resolve())  # by its unique file name
+    assert got["d.jpg"] == str((f / "d.jpg").resolve())           # the path wins over two photos named d.jpg
+    assert got["r_c"] is None and got["missing.jpg"] is None
+    assert got["x/e.jpg"] is None and got["y/e.jpg"] is None       # no photo e.jpg
+    assert sorted(p.name for p in m.unposed) == ["c.png", "clip.mp4", "d.jpg", "extra.jpg"]
+    assert m.n_photos == 7 and m.how[names.index("elsewhere/b.jpg")] == "name"
+    # a Blender-synthetic name without extension is found with one; a base name shared by two poses is unclear
+    m = match_photos(["c", "x/extra.jpg", "y/extra.jpg"], [""] * 3, f)
+    assert m.files[0] == str((f / "c.png").resolve()) and m.files[1] is None and "2 poses" in m.how[1]
+    # two photos of the folder with the pose's name: unclear, left out with that reason
+    m = match_photos(["z/d.jpg"], [""], f, recursive=True)
+    assert m.files == [None] and "2 photos" in m.how[0]
+
+
+def test_a_photo_folder_of_another_capture_is_refused_naming_both(tmp_path, capsys):
+    cap, _ = capture(tmp_path / "cap")
+    other = tmp_path / "other"
+    other.mkdir()
+    for i in range(31):
+        shutil.copy(cap / "images" / "img_00.png", other / f"IMG_{i:04d}.png")
+    for cmd in ("run", "sfm"):
+        out = tmp_path / f"run_{cmd}"
+        assert main([cmd, str(other), "--poses", str(cap / "transforms.json"), "--out", str(out),
+                     *(FAST if cmd == "run" else [])]) == 2
+        err = one_line_error(capsys)
+        assert str(other) in err and str(cap / "transforms.json") in err
+        assert "images/img_00.png" in err and "IMG_0000.png" in err
+        assert not (out / "sfm" / "cameras.json").exists()
+
+
+def test_a_video_with_poses_is_refused(tmp_path, capsys):
+    cap, _ = capture(tmp_path / "cap")
+    video = tmp_path / "walk.mp4"
+    video.write_bytes(b"\x00\x00\x00\x18ftypmp42")
+    assert main(["run", str(video), "--poses", str(cap / "transforms.json"), "--out", str(tmp_path / "r"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert str(video) in err and "video" in err and "no names the poses could refer to" in err
+
+
+def test_a_folder_holding_a_fraction_of_the_posed_photos_curates_those_and_warns(tmp_path, capsys):
+    """5 photos and the 20 poses of their capture: the 5 are curated, the 15 poses without a photo and the
+    folder's photo without a pose are listed in images.json (and the report), and the run says so at its
+    end and atop the report."""
+    cap, _ = capture(tmp_path / "cap", n=20)
+    few = tmp_path / "few"
+    few.mkdir()
+    for i in range(5):
+        shutil.copy(cap / "images" / f"img_{i:02d}.png", few)
+    shutil.copy(cap / "images" / "img_00.png", few / "holiday.png")
+    out = tmp_path / "run"
+    assert main(["run", str(few), "--poses", str(cap / "transforms.json"), "--out", str(out), *FAST]) == 0
+    text = capsys.readouterr().out
+    cams = load_sfm(out).cameras
+    assert len(cams) == 5 and "5 cameras registered (imported, of 20 poses)" in text
+    assert "WARNING (sfm): only 5 of the 20 poses" in text and str(few) in text
+    recs = json.loads((out / "sfm" / "images.json").read_text())["photos"]
+    left = {r["rel"]: r["reason"] for r in recs if r["status"] == "skipped"}
+    assert len(left) == 16 and "no pose in" in left["holiday.png"]
+    assert left["images/img_19.png"].startswith("pose without a photo: no photo images/img_19.png")
+    rep = json.loads((out / "report.json").read_text())
+    assert len(rep["sfm"]["skipped"]) == 16
+    export = json.loads((out / "export" / "stage.json").read_text())
+    assert "only 5 of the 20 poses" in export["warning"]
+    # the pose file's own photos were never used: every chosen photo is one of the folder's
+    assert all(Path(i["original"]).parent == few.resolve()
+               for i in json.loads((out / "export" / "export.json").read_text())["images"])
+
+
+def test_a_photo_folder_with_most_photos_posed_goes_on_quietly(tmp_path, capsys):
+    """A COLMAP model that left 2 of 12 photos out: the 10 are curated, the 2 listed, no loud warning."""
+    cap, bare = capture(tmp_path / "cap")
+    model = tmp_path / "model"
+    model.mkdir()
+    reconstruction_from_cameras(bare[list(range(10))]).write(model)
+    out = tmp_path / "run"
+    assert main(["run", str(cap / "images"), "--poses", str(model), "--out", str(out), *FAST]) == 0
+    text = capsys.readouterr().out
+    assert len(load_sfm(out).cameras) == 10 and "WARNING (sfm)" not in text
+    recs = json.loads((out / "sfm" / "images.json").read_text())["photos"]
+    assert sorted(r["rel"] for r in recs if r["status"] == "skipped") == ["img_10.png", "img_11.png"]
+
+
+# ------------------------------------------------------------------ every command, the same sources
+def test_run_and_select_accept_the_same_pose_sources(tmp_path, capsys):
+    """Each source, with the photo folder and without one (its own image paths, or the images/ beside a
+    COLMAP model): `run --poses` curates the 12 cameras, `select` chooses from them with the photos found."""
+    cap, bare = capture(tmp_path / "cap")
+    colmap_only = tmp_path / "colmap_scene"   # a folder holding sparse/0 and images/ (no transforms.json)
+    shutil.copytree(cap / "sparse", colmap_only / "sparse")
+    shutil.copytree(cap / "images", colmap_only / "images")
+    sources = [cap / "transforms.json", cap, cap / "sparse" / "0", colmap_only, cap / "cameras.json"]
+    for k, src in enumerate(sources):
+        sel = tmp_path / f"sel{k}"
+        assert main(["select", str(src), "--budget", "3", "--out", str(sel), "--method", "medoids", "--res", "8"]) == 0
+        chosen, files = read_transforms(sel / "transforms.json")
+        assert len(chosen) == 3 and all(Path(f).is_file() for f in files), src
+        run = tmp_path / f"run{k}"
+        for ph in ([str(cap / "images")], []):
+            capsys.readouterr()
+            assert main(["run", *ph, "--poses", str(src), "--out", str(run), *FAST]) == 0, capsys.readouterr().err
+            cams = load_sfm(run).cameras
+            assert len(cams) == 12 and np.allclose(np.sort(cams.centres, 0), np.sort(bare.centres, 0)), src
+            assert len(list((run / "export" / "images").iterdir())) == 3
+
+
+# ------------------------------------------------------------------ points for known poses
+def walk(dst: Path, frames: range) -> Path:
+    """Frames of the sample walk in ``dst/images`` and their poses in ``dst/transforms.json``."""
+    tj = json.loads((SAMPLE / "transforms.json").read_text())
+    tj["frames"] = [tj["frames"][i] for i in frames]
+    (dst / "images").mkdir(parents=True)
+    for f in tj["frames"]:
+        shutil.copy2(SAMPLE / f["file_path"], dst / f["file_path"])
+    (dst / "transforms.json").write_text(json.dumps(tj))
+    return dst
+
+
+def test_points_are_triangulated_for_known_poses_and_exported(tmp_path):
+    """16 frames of the rendered walk, at a working size below theirs (200 of 320 px): points with tracks
+    in RUN/sfm/sparse/0 and points.npy, the poses and intrinsics untouched, keypoints at the photos' own
+    size (the points reproject within a pixel there), and the export keeps the points its images see."""
+    from curate.export.subset import export_subset
+    from curate.sfm.colmap import cameras_from_reconstruction
+    cap = walk(tmp_path / "cap", range(0, 32, 2))
+    ref, _ = read_transforms(cap / "transforms.json")
+    run = tmp_path / "run"
+    import_poses(SfmConfig(progress=False, max_image_size=200), cap / "transforms.json", run, photos=cap / "images")
+    st = json.loads((run / "sfm" / "stage.json").read_text())["stats"]
+    tri = st["triangulation"]
+    assert tri["status"] == "done" and tri["working_max_side"] == 200 and tri["camera_mode"] == "single"
+    assert tri["n_points"] >= 300 and tri["mean_track_length"] >= 3 and tri["mean_reprojection_error_px"] < 1.0
+    rec = pycolmap.Reconstruction(str(run / "sfm" / "sparse" / "0"))
+    cams, xyz, _, err = cameras_from_reconstruction(rec)
+    assert rec.num_points3D() == tri["n_points"] == st["n_points"] == len(np.load(run / "sfm" / "points.npy"))
+    assert np.allclose(np.sort(xyz, 0), np.sort(np.load(run / "sfm" / "points.npy"), 0), atol=1e-5)
+    by = {n: i for i, n in enumerate(ref.names)}
+    idx = [by[n] for n in cams.names]
+    assert np.allclose(cams.c2w, ref.c2w[idx], atol=1e-6)
+    for k in ("fx", "fy", "cx", "cy", "width", "height"):
+        assert np.allclose(getattr(cams, k), getattr(ref, k)[idx]), k
+    assert rec.compute_mean_reprojection_error() < 320 / 200 * 1.0 and np.all(np.isfinite(err))
+    assert all(len(p.track.elements) >= 2 for p in rec.points3D.values())
+    assert not (run / "sfm" / "triangulation").exists()   # the working copies are gone
+    # unchanged photos, poses and options: the stage is skipped, its record untouched
+    record = (run / "sfm" / "stage.json").read_bytes()
+    import_poses(SfmConfig(progress=False, max_image_size=200), cap / "transforms.json", run, photos=cap / "images")
+    assert (run / "sfm" / "stage.json").read_bytes() == record
+    # the export: the chosen images and the points two of them see
+    chosen = list(ref.names[:8])
+    export_subset(run, chosen, run / "export")
+    model = json.loads((run / "export" / "export.json").read_text())["model"]
+    assert 0 < model["n_points3D"] <= tri["n_points"] and model["n_images_with_points"] == 8
+    assert sum(model["components"]) == 8 and model["components"][0] >= 7   # linked through shared points
+
+
+def test_triangulation_is_skipped_when_off_or_when_the_source_has_points(tmp_path):
+    cap = walk(tmp_path / "cap", range(0, 12))
+    off = tmp_path / "off"
+    import_poses(SfmConfig(progress=False, triangulate="off"), cap / "transforms.json", off, photos=cap / "images")
+    st = json.loads((off / "sfm" / "stage.json").read_text())["stats"]
+    assert st["triangulation"]["status"] == "off" and st["n_points"] == 0
+    on = tmp_path / "on"
+    import_poses(SfmConfig(progress=False), cap / "transforms.json", on, photos=cap / "images")
+    n = json.loads((on / "sfm" / "stage.json").read_text())["stats"]["n_points"]
+    assert n > 0
+    # a COLMAP model with points (the one just written) is imported as it is, with its points
+    again = tmp_path / "again"
+    import_poses(SfmConfig(progress=False), on / "sfm" / "sparse" / "0", again, photos=cap)
+    st = json.loads((again / "sfm" / "stage.json").read_text())["stats"]
+    assert st["triangulation"]["status"] == "source" and st["n_points"] == n and st["pose_match"]["n_matched"] == 12
+    # the same model with two photos missing from the folder: the points the other ten see are kept
+    part = tmp_path / "part"
+    shutil.copytree(cap, part)
+    for f in sorted((part / "images").iterdir())[:2]:
+        f.unlink()
+    again2 = tmp_path / "again2"
+    import_poses(SfmConfig(progress=False), on / "sfm" / "sparse" / "0", again2, photos=part)
+    st = json.loads((again2 / "sfm" / "stage.json").read_text())["stats"]
+    rec = pycolmap.Reconstruction(str(again2 / "sfm" / "sparse" / "0"))
+    assert rec.num_reg_images() == 10 and 0 < st["n_points"] == rec.num_points3D() <= n
+
+
+def test_no_points_from_the_photos_is_said_in_the_sfm_and_export_stages(tmp_path, capsys):
+    """Noise photos: no verified matches, no points; the run goes on and says the export has no points."""
+    cap, _ = capture(tmp_path / "cap")
+    out = tmp_path / "run"
+    fast = [a for a in FAST if a not in ("--triangulate", "off")]
+    assert main(["run", str(cap / "images"), "--poses", str(cap / "transforms.json"), "--out", str(out), *fast]) == 0
+    text = capsys.readouterr().out
+    st = json.loads((out / "sfm" / "stage.json").read_text())["stats"]
+    assert st["triangulation"]["status"] == "done" and st["triangulation"]["n_points"] == 0
+    assert "WARNING (sfm): triangulating the photos with the known poses found no 3D points" in text
+    assert "WARNING (export): the export has no 3D points: 3DGS needs an initial point cloud" in text
+    export = json.loads((out / "export" / "stage.json").read_text())
+    assert "the export has no 3D points" in export["warning"]   # atop the report
+
+
+def test_points_warning_says_why():
+    from curate.export.stage import points_warning
+    assert points_warning({"n_points3D": 500}) is None
+    off = points_warning({"n_points3D": 0}, {"mode": "import", "stats": {"triangulation": {"status": "off"}}})
+    assert off.startswith("the export has no 3D points: 3DGS needs an initial point cloud") and "--triangulate auto" in off
+    few = points_warning({"n_points3D": 12, "n_points3D_source": 900}, {"mode": "sfm", "stats": {}})
+    assert few.startswith("the export has only 12 3D points") and "larger budget" in few
+
+
+@pytest.mark.slow
+def test_fox_poses_get_points_that_fit_them(tmp_path):
+    """The fox's published poses (transforms.json with OPENCV distortion) and its photos: thousands of
+    points, tracks of several photos, sub-pixel reprojection at the working size."""
+    from test_ingest import need
+    src = need("fox") / "transforms.json"
+    run = tmp_path / "run"
+    import_poses(SfmConfig(progress=False, max_image_size=480), src, run)
+    tri = json.loads((run / "sfm" / "stage.json").read_text())["stats"]["triangulation"]
+    assert tri["status"] == "done" and tri["n_points"] >= 2000, tri
+    assert tri["mean_track_length"] >= 3 and tri["mean_reprojection_error_px"] < 1.5, tri
+    assert tri["n_images_with_points"] >= 0.95 * tri["n_images"]
