@@ -53,8 +53,9 @@ def verdict(rep: dict) -> dict:
         paired = rep.get("paired") or {}
         est = rep.get("estimate") or {}
         pr = (f" (Estimated as cross-validation does: with every {est['holdout_every']}th photo held out "
-              f"({est['n_holdout']}), the same method chose {est['budget']} of the {est['n_pool']} left; the same "
-              f"field was trained on each subset and scored on the held-out photos.)"
+              f"({est['n_holdout']}), the same method chose {est['budget']} of the {est['n_pool']} left"
+              + (f", {est['shared_with_export']} of them exported too" if est.get("shared_with_export") is not None
+                 else "") + "; the same field was trained on each subset and scored on the held-out photos.)"
               if est.get("budget") else "")
         parts, short = [], []
         for key, words in RIVALS:
