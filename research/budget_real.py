@@ -32,6 +32,8 @@ import numpy as np
 
 DEFAULT_FRACTIONS = (0.07, 0.12, 0.2, 0.35, 0.55)
 """Budgets as fractions of the photos left after the hold-out (rounded, at least 3)."""
+OBJECT_FRACTIONS = DEFAULT_FRACTIONS + (0.75,)
+"""An object capture of 40-60 photos needs most of them: its curve goes further."""
 
 
 def scene_run(scene: str, out: Path, runs: dict[str, Path]):
@@ -119,7 +121,8 @@ def main(argv=None) -> None:
     ap.add_argument("--scenes", default="office,fox,templering,skull,office_mp4")
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--run", action="append", default=[], help="SCENE=RUN: a curate sfm run folder for SCENE")
-    ap.add_argument("--fractions", default=",".join(map(str, DEFAULT_FRACTIONS)))
+    ap.add_argument("--fractions", default=",".join(map(str, DEFAULT_FRACTIONS)), help="a walk's budgets")
+    ap.add_argument("--fractions-object", default=",".join(map(str, OBJECT_FRACTIONS)), help="an object's budgets")
     ap.add_argument("--folds-object", default="0,3", help="hold-out folds of an object capture (every 7th)")
     ap.add_argument("--folds-walk", default="0", help="hold-out folds of a walk (every 14th)")
     ap.add_argument("--iters", type=int, default=EvalConfig().iters)
@@ -128,7 +131,6 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     runs = {k: Path(v) for k, v in (r.split("=", 1) for r in args.run)}
     ev = EvalConfig(iters=args.iters, max_side=args.max_side, workers=args.workers)
-    fr = [float(x) for x in args.fractions.split(",") if x]
     for scene in [s for s in args.scenes.split(",") if s]:
         run = scene_run(scene, args.out, runs)
         from curate.select.select import capture_kind
@@ -136,6 +138,7 @@ def main(argv=None) -> None:
         walk = capture_kind(load_sfm(run).cameras)[0] == "walk"
         every = 14 if walk else 7
         folds = [int(x) for x in (args.folds_walk if walk else args.folds_object).split(",") if x]
+        fr = [float(x) for x in (args.fractions if walk else args.fractions_object).split(",") if x]
         measure(scene, run, args.out, ev, fr, every, folds)
 
 
