@@ -123,7 +123,7 @@ def main(argv=None) -> None:
     ap.add_argument("--run", action="append", default=[], help="SCENE=RUN: a curate sfm run folder for SCENE")
     ap.add_argument("--fractions", default=",".join(map(str, DEFAULT_FRACTIONS)), help="a walk's budgets")
     ap.add_argument("--fractions-object", default=",".join(map(str, OBJECT_FRACTIONS)), help="an object's budgets")
-    ap.add_argument("--folds-object", default="0,3", help="hold-out folds of an object capture (every 7th)")
+    ap.add_argument("--folds-object", default="0", help="hold-out folds of an object capture (every 7th)")
     ap.add_argument("--folds-walk", default="0", help="hold-out folds of a walk (every 14th)")
     ap.add_argument("--iters", type=int, default=EvalConfig().iters)
     ap.add_argument("--max-side", type=int, default=EvalConfig().max_side)
