@@ -8,13 +8,14 @@ Per room (livingroom, office, kitchen) and deficiency:
 * ``turn``: standing at one spot and turning on it (the first spot of the ``turn`` walk, before it walks on);
 * ``corridor``: a pass back and forth along the room's long side (:data:`CORRIDOR_FRAMES` frames).
 
-The deficient capture is rendered (:data:`SIZE`, 5 frames a second), imported as a run folder
-(``curate run --poses ... --no-evaluate``, as a user would) and ``curate suggest --add K`` is run on it with its
-defaults: it trains its field on the capture (``--field-iters`` = the evaluation's iterations) and places K
-poses. Then the same field (:class:`curate.field.model.FieldConfig` defaults, ``--iters`` iterations, one seed,
+The deficient capture is rendered (:data:`SIZE`, 5 frames a second) and made a run folder as ``curate run
+PHOTOS --no-evaluate`` makes it after SfM: its known poses imported, with stand-ins for its SfM points
+(:func:`sfm_points`: random pixels back-projected with the renderer's depth, 1 cm of noise), from which the
+occupancy stage builds the occupancy as for a real capture. ``curate suggest --add K`` is run on it with its
+defaults and places K poses. Then the same field (:class:`curate.field.model.FieldConfig` defaults, ``--iters`` iterations, one seed,
 one box: the capture's :func:`curate.field.train.default_box`) is trained on
 
-* ``base``: the deficient capture alone (the field ``curate suggest`` trained on it: the same settings);
+* ``base``: the deficient capture alone;
 * ``suggest``: the capture + the K suggested poses (rendered);
 * ``random``: the capture + K poses drawn uniformly among the *same* feasible poses the suggestions were
   chosen from (``--random-draws`` draws, each view's PSNR averaged over them);
@@ -57,6 +58,7 @@ CORRIDOR_FRAMES = 80
 TURN_SPOTS = 3
 N_TEST = 40
 FULL_FRAMES = 140
+POINTS_PER_FRAME = 300
 ARMS = ("base", "suggest", "random", "continue", "full")
 
 
@@ -94,8 +96,28 @@ def test_views(world, n: int, seed: int = 7):
     return draw_acceptable(np.random.default_rng(seed), lo + 0.05, hi - 0.05, n, pc, *scene_oracle(world))
 
 
-def render(world, cams) -> list[np.ndarray]:
-    return [world.render(cams[i])[0][0] for i in range(len(cams))]
+def render(world, cams, depth: bool = False):
+    """[N] uint8 images (and [N] z-depth maps with ``depth``) of ``cams`` in ``world``."""
+    out = [world.render(cams[i]) for i in range(len(cams))]
+    rgb = [o[0][0] for o in out]
+    return (rgb, [o[1][0] for o in out]) if depth else rgb
+
+
+def sfm_points(cams, depths, per_frame: int = POINTS_PER_FRAME, noise: float = 0.01, seed: int = 0) -> np.ndarray:
+    """[P, 3] stand-ins for a capture's SfM points: ``per_frame`` random pixels of each frame back-projected with
+    the renderer's depth, plus Gaussian noise of ``noise`` (what COLMAP triangulates on these textured surfaces,
+    without its outliers)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, z in enumerate(depths):
+        h, w = z.shape
+        u, v = rng.uniform(0, w, per_frame), rng.uniform(0, h, per_frame)
+        zz = z[v.astype(int), u.astype(int)].astype(float)
+        ok = np.isfinite(zz) & (zz > 0)
+        xc = np.stack([(u - cams.cx[k]) / cams.fx[k] * zz, (v - cams.cy[k]) / cams.fy[k] * zz, zz], 1)[ok]
+        out.append(xc @ cams.rotations[k].T + cams.centres[k])
+    p = np.concatenate(out)
+    return (p + rng.normal(0, noise, p.shape)).astype(np.float32)
 
 
 def train_eval(cams, imgs, tests, test_imgs, box, iters: int, seed: int = 0) -> list[float]:
@@ -107,8 +129,9 @@ def train_eval(cams, imgs, tests, test_imgs, box, iters: int, seed: int = 0) -> 
     return [v["psnr"] for v in evaluate(fld, tests, test_imgs)["per_view"]]
 
 
-def make_run(base, imgs, d: Path) -> Path:
-    """A run folder of the capture, as ``curate run PHOTOS --poses transforms.json --no-evaluate`` makes it."""
+def make_run(base, imgs, depths, d: Path) -> Path:
+    """A run folder of the capture, as ``curate run PHOTOS --no-evaluate`` makes it after SfM: the known poses
+    imported, with :func:`sfm_points` as its sparse points (the occupancy comes from them, as for a real capture)."""
     from PIL import Image
     from curate.config import RunConfig
     from curate.core.transforms_json import write_transforms
@@ -122,7 +145,10 @@ def make_run(base, imgs, d: Path) -> Path:
     for r, im in zip(rel, imgs):
         Image.fromarray(im).save(cap / r)
     write_transforms(cap / "transforms.json", base, rel)
-    pipeline(RunConfig(budget="15%", run_evaluation=False), cap, run, poses=cap / "transforms.json", until="select")
+    cfg = RunConfig(budget="15%", run_evaluation=False)
+    pipeline(cfg, cap, run, poses=cap / "transforms.json", until="sfm")
+    np.save(run / "sfm" / "points.npy", sfm_points(base, depths))
+    pipeline(cfg, cap, run, poses=cap / "transforms.json", until="select")     # sfm: unchanged, skipped
     return run
 
 
@@ -144,10 +170,9 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
     tests = test_views(world, N_TEST)
     t0 = time.perf_counter()
     test_imgs = [im.astype(np.float32) / 255 for im in render(world, tests)]
-    base_imgs = render(world, base)
-    run = make_run(base, base_imgs, d)
-    cfg = SuggestConfig(add=args.add, field_iters=args.iters, field_side=max(SIZE), seed=args.seed,
-                        nodes=args.nodes)
+    base_imgs, base_depths = render(world, base, depth=True)
+    run = make_run(base, base_imgs, base_depths, d)
+    cfg = SuggestConfig(add=args.add, seed=args.seed, nodes=args.nodes)
     t1 = time.perf_counter()
     with runfolder.claimed(run, must_exist=True):
         res = sst.run(cfg, run, progress=False)
@@ -155,8 +180,8 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
     sugg = Cameras(np.array([s["c2w"] for s in rec["suggestions"]]), *rec["envelope"]["intrinsics"])
     # the feasible set the suggestions were drawn from, for the random arm (same field, same envelope)
     inp = sst.read_run(run)
-    occ, nodes = sst.field_occupancy_grid(sst.find_field(run), inp)
-    pl, feas, *_ = sst.suggest(cfg, inp, occ, nodes)
+    assert inp.occupancy_usable(), f"{run}: the occupancy from the points is not usable"
+    pl, feas, *_ = sst.suggest(cfg, inp)
     assert np.allclose(pl.cams.c2w, sugg.c2w), "the stage's suggestions differ from a re-run of its computation"
     suggest_s = time.perf_counter() - t1
     randoms = [feas.draw(np.random.default_rng(1000 + r), args.add) for r in range(args.random_draws)]
@@ -164,11 +189,11 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
     cont = cont_pool[idx]
     full, _ = hand_held_walk(FULL_FRAMES, "loop", seed=args.walk_seed + 100, width=SIZE[0], height=SIZE[1], fps=FPS,
                              room=world.interior)
-    box = default_box(inp.cams)              # the suggest field's box: every arm's
+    box = default_box(base)                  # one box for every arm: the capture's
     extra = {"suggest": [sugg], "random": randoms, "continue": [cont], "full": [full], "base": [None]}
     arms = list(ARMS)
     if args.frontier_arm:   # the same placement over the surface and the frontier of the observed free space
-        pl2 = sst.suggest(replace(cfg, nodes="surface+frontier"), inp, occ, nodes)[0]
+        pl2 = sst.suggest(replace(cfg, nodes="surface+frontier"), inp)[0]
         extra["frontier"] = [pl2.cams]
         arms.append("frontier")
     per_arm: dict[str, list[list[float]]] = {}
@@ -182,13 +207,7 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
             cams = base if add is None else Cameras.concat([base, add])
             imgs = base_imgs + ([] if add is None else render(world, add))
             ts = time.perf_counter()
-            if add is None:     # the capture alone: the field curate suggest trained on it, with the same settings
-                from curate.field.metrics import evaluate
-                from curate.field.model import RadianceField
-                fld = RadianceField.load(run / sst.FIELD_STAGE / "field.pt")
-                psnr = [v["psnr"] for v in evaluate(fld, tests, test_imgs)["per_view"]]
-            else:
-                psnr = train_eval(cams, imgs, tests, test_imgs, box, args.iters, args.seed)
+            psnr = train_eval(cams, imgs, tests, test_imgs, box, args.iters, args.seed)
             f.write_text(json.dumps({"psnr": psnr, "n_train": len(cams), "seconds": time.perf_counter() - ts}))
             per_arm[arm].append(psnr)
             print(f"  {room}-{kind} {arm}[{r}]: {np.mean(psnr):.2f} dB ({len(cams)} views, "
@@ -265,8 +284,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     rows = []
-    for room in [r for r in args.rooms.split(",") if r]:
-        for kind in [k for k in args.deficiencies.split(",") if k]:
+    for kind in [k for k in args.deficiencies.split(",") if k]:         # every room of a deficiency first
+        for room in [r for r in args.rooms.split(",") if r]:
             c = cell(room, kind, out, args)
             (out / f"{room}-{kind}" / "cell.json").write_text(json.dumps(c))
             s = summarise(c)

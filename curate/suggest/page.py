@@ -90,7 +90,7 @@ def floor_plan_svg(rec: dict, inp, pl, used: np.ndarray) -> str:
     for cm in cmaps:
         cm.set_bad("#efefef")
     sd = np.array([x["view_dir"] for x in rec["suggestions"]]).reshape(-1, 3)
-    L = 0.07 * max(ext_a, ext_b)
+    L = 0.1 * max(ext_a, ext_b)
     for i_ax, (ax, m, title) in enumerate(zip(axs, maps, ("how thin your capture is now",
                                                           f"what the {len(s_xyz)} suggested photos add"))):
         im = ax.imshow(np.ma.masked_invalid(m), extent=extent, origin="upper", cmap=cmaps[i_ax], vmin=ranges[i_ax][0],
@@ -116,12 +116,15 @@ def floor_plan_svg(rec: dict, inp, pl, used: np.ndarray) -> str:
                     zorder=5, label="suggestion (arrow: where it looks)" if i == 0 and i_ax == 0 else None)
             ax.text(s_xyz[i, a], s_xyz[i, b], str(i + 1), color="white", fontsize=8.5 if i_ax == 0 else 7,
                     ha="center", va="center", fontweight="bold", zorder=6)
-        ax.set_title(title, pad=24 if i_ax == 0 else 6)
+        ax.set_title(title)
         ax.set_xlabel("xyz"[a])
         ax.set_xlim(view[0], view[1])
         ax.set_ylim(view[2], view[3])
-    axs[0].set_ylabel("xyz"[b])
-    axs[0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.04), ncol=4, frameon=False, fontsize=8.5)
+    for ax in axs:
+        ax.set_ylabel("xyz"[b])
+    pos = axs[1].get_position()          # the legend under the small map, where the figure has room
+    fig.legend(*axs[0].get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(pos.x0, pos.y0 - 0.07),
+               ncol=1, frameon=False, fontsize=9)
     return _svg(fig)
 
 

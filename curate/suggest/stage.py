@@ -8,8 +8,10 @@ drawn on the page) and a trained field when there is one (``occupancy/field.pt``
 
 When the run's occupancy cannot place cameras (imported poses without points and no field: every node counts as
 occupied), or previews are asked for (``--field train``) and the run has no field, a field is trained on every
-registered frame into ``RUN/suggest_field`` (its own stage: a re-run with another ``--add`` reuses it) and the
-occupancy and surface nodes are taken from its density, as the occupancy stage does.
+registered frame into ``RUN/suggest_field`` (its own stage: a re-run with another ``--add`` reuses it), and without a
+usable occupancy the occupancy and surface nodes are taken from its density as the occupancy stage does
+(:func:`field_occupancy_grid`). A field trained briefly on few frames leaves floaters (haze in front of the
+cameras) that this marks as occupied: the suggestions then keep away from them, and look at them.
 
 Writes ``suggestions.json`` (the poses, per suggestion its walking instruction from the nearest frame, the
 energy gain, preview file; the envelope, timings), ``transforms.json``, ``images.txt`` + ``cameras.txt``,
@@ -192,20 +194,25 @@ def train_suggest_field(cfg: SuggestConfig, run_dir: Path, inp: RunInputs, force
     return d / "field.pt"
 
 
-def field_occupancy_grid(field_path: Path, inp: RunInputs) -> tuple[np.ndarray, np.ndarray]:
-    """(occupied [R,R,R], surface nodes [R,R,R]) from a field's density on the run's grid."""
+def field_occupancy_grid(field_path: Path, inp: RunInputs) -> RunInputs:
+    """The run's inputs with the occupancy of a field's density on the run's grid (as the occupancy stage refines
+    it: :func:`curate.occupancy.masks.refine_occupancy`, mode 'field') and its surface band as nodes."""
+    from dataclasses import replace
     from curate.core.grid import NodeGrid
     from curate.field.model import RadianceField
     from curate.occupancy.masks import RefineConfig, refine_occupancy
     fld = RadianceField.load(field_path)
     occ = refine_occupancy(fld, NodeGrid(inp.box_min, inp.box_max, inp.res), cfg=RefineConfig(mode="field")).mask
-    return occ, surface_band(occ, 1)
+    if not occ.any():
+        raise ValueError(f"{field_path}: the field's density marks no occupied node; nothing to place cameras by")
+    return replace(inp, occ=occ, nodes_mask=surface_band(occ, 1))
 
 
 # ------------------------------------------------------------------ the stage
-def suggest(cfg: SuggestConfig, inp: RunInputs, occ: np.ndarray, nodes_mask: np.ndarray, progress: bool = False):
-    """(placement, feasibility, free space, node mask used, frontier mask) for a capture: the stage's computation
-    without its files (used by the validation harness too)."""
+def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
+    """(placement, feasibility, free space, node mask used, frontier mask) for a capture and its occupancy
+    (``inp.occ``, ``inp.nodes_mask``): the stage's computation without its files (the validation harness's too)."""
+    occ, nodes_mask = inp.occ, inp.nodes_mask
     from curate.suggest.candidates import Feasibility, capture_envelope
     from curate.suggest.freespace import cast_free_space
     from curate.suggest.place import place_cameras
@@ -250,14 +257,12 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
                     inp.keys + ([_key(field.parent)] if field is not None else []))
     if begin_stage(d, key, force):
         return StageResult(STAGE, d, False, time.perf_counter() - t0)
-    occ, nodes_mask, occ_source = inp.occ, inp.nodes_mask, "occupancy/occupancy.npz"
+    occ_source = "occupancy/occupancy.npz"
     if not usable:
-        occ, nodes_mask = field_occupancy_grid(field, inp)
-        occ_source = f"the density of {field.relative_to(run_dir)}"
-        if not nodes_mask.any():
-            raise ValueError(f"{field}: the field's density marks no occupied node; nothing to place cameras by")
+        inp = field_occupancy_grid(field, inp)
+        occ_source = f"the density of {field.relative_to(run_dir).as_posix()}"
     t1 = time.perf_counter()
-    pl, feas, fs, used, front = suggest(cfg, inp, occ, nodes_mask, progress)
+    pl, feas, fs, used, front = suggest(cfg, inp, progress)
     place_s = time.perf_counter() - t1
     sugg = pl.cams
     if len(sugg) == 0:
