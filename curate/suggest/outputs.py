@@ -1,6 +1,7 @@
-"""The suggestions in the formats tools read: NeRF ``transforms.json`` and COLMAP text (``images.txt`` with its
-``cameras.txt``), in the world frame of ``RUN/sfm/cameras.json`` (COLMAP's frame after SfM, the poses' frame
-after an import). The photos do not exist yet: each pose is named ``suggest_01.jpg``, ``suggest_02.jpg``...
+"""The suggestions in the formats tools read: NeRF ``transforms.json`` and COLMAP text (``images.txt``, ``cameras.txt``).
+
+In the world frame of ``RUN/sfm/cameras.json`` (COLMAP's frame after SfM, the poses' frame after an import).
+The photos do not exist yet: each pose is named ``suggest_01.jpg``, ``suggest_02.jpg``...
 in the order placed, so that a tool driving a camera (a robot, a rendering script) can take them.
 """
 
