@@ -317,3 +317,36 @@ def test_suggest_command_refuses_what_is_not_a_run_folder(tmp_path):
     (tmp_path / "empty").mkdir()
     p = _curate("suggest", str(tmp_path / "empty"), "--add", "0", check=False)
     assert p.returncode == 2 and "Traceback" not in p.stderr
+
+
+def test_frontier_is_unobserved_space_touching_observed_free_space():
+    from curate.suggest.stage import frontier, surface_band
+    free = np.zeros((6, 6, 6), bool)
+    free[1:3, 1:3, 1:3] = True
+    occ = np.zeros_like(free)
+    occ[3, 1:3, 1:3] = True                                    # a wall on one side of the free block
+    f = frontier(free, occ)
+    assert f[0, 1, 1] and f[1, 0, 1] and f[1, 1, 3]            # beside the free block, unknown
+    assert not f[3, 1, 1] and not f[1, 1, 1] and not f[5, 5, 5]   # occupied, free, far away
+    assert not f[0, 0, 1]                                      # diagonal only: not a 6-neighbour
+    solid = np.zeros((8, 8, 8), bool)
+    solid[2:6, 2:6, 2:6] = True
+    shell = surface_band(solid, 0)
+    assert shell.sum() == 4 ** 3 - 2 ** 3 and not shell[3, 3, 3]   # the cube's outer layer
+    assert surface_band(solid, 1)[1, 3, 3] and not surface_band(np.zeros_like(solid), 1).any()
+
+
+def test_frame_labels_name_video_frames_by_time():
+    from curate.suggest.stage import frame_labels
+    rec = {"photos": [{"working": "v_000001.200.jpg", "rel": "v_000001.200.jpg",
+                       "extra": {"video_rel": "walk.mp4", "time": 1.2}},
+                      {"working": "", "rel": "images/a.jpg", "extra": {}}]}
+    assert frame_labels(["v_000001.200.jpg", "images/a.jpg", "other.png"], rec) == \
+        ["walk.mp4 at 1.2 s", "a.jpg", "other.png"]
+
+
+def test_read_run_names_what_is_missing(tmp_path):
+    from curate.suggest.stage import read_run
+    (tmp_path / "sfm").mkdir()
+    with pytest.raises(FileNotFoundError, match="cameras.json"):
+        read_run(tmp_path)
