@@ -157,6 +157,9 @@ def _how(rec: dict) -> str:
     env, t = rec["envelope"], rec["timing"]
     u = "m" if rec["units"] == "m" else "units"
     p = env["pitch_deg"]
+    cfg = rec.get("config") or {}
+    hp, pp = cfg.get("height_percentiles", (5, 95)), cfg.get("pitch_percentiles", (5, 95))
+    cp, vp = cfg.get("clearance_percentile", 10), cfg.get("view_percentile", 10)
     rows = [("capture", f"{rec['n_capture']} registered frames (every one counts as already taken)"),
             ("objective", f"the paper's energy over {rec['n_nodes']} nodes"
              + (f" ({rec['n_frontier']} of them unobserved voxels at the edge of the seen free space)"
@@ -164,11 +167,12 @@ def _how(rec: dict) -> str:
              + f"; occupancy from {rec['occupancy']}"),
             ("where", f"in the {rec['free_voxels']} voxels the capture's rays crossed as free space; "
                       f"{rec['feasible_voxels']} of them at the capture's heights and clear of occupied nodes"),
-            ("heights", f"{env['heights'][0]:.2f} to {env['heights'][1]:.2f} {u} along the capture's up (its 5th to "
-                        "95th percentile)"),
-            ("pitches", f"{p[0]:+.0f}° to {p[1]:+.0f}° (the capture's 5th to 95th percentile), no roll"),
-            ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes; nothing occupied nearer "
-                          f"than {env['view_margin']:.2f} {u} in view"),
+            ("heights", f"{env['heights'][0]:.2f} to {env['heights'][1]:.2f} {u} along the capture's up (its "
+                        f"{hp[0]:g}th to {hp[1]:g}th percentile)"),
+            ("pitches", f"{p[0]:+.0f}° to {p[1]:+.0f}° (the capture's {pp[0]:g}th to {pp[1]:g}th percentile), no roll"),
+            ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes (the capture's {cp:g}th "
+                          f"percentile, at least one voxel); nothing occupied nearer than {env['view_margin']:.2f} {u} "
+                          f"in view (the {vp:g}th percentile of the nearest surfaces it saw, at least one voxel)"),
             ("placement", f"greedy, as Algorithm 1: {int(np.median(rec['n_candidates'])) if rec['n_candidates'] else 0} "
                           "feasible random candidates per photo, each scored by the energy of the capture, the "
                           "photos placed before it and itself"),

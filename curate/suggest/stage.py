@@ -284,7 +284,8 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
                         frontier=front.ravel()[flat])
     timing = pl.timing()
     gains = pl.gains
-    rec = {"run": str(run_dir), "add": cfg.add, "placed": len(sugg), "units": inp.units,
+    from curate.core.stage import config_dict
+    rec = {"run": str(run_dir), "config": config_dict(cfg), "add": cfg.add, "placed": len(sugg), "units": inp.units,
            "occupancy": occ_source, "nodes": cfg.nodes, "n_nodes": int(len(flat)),
            "n_frontier": int(front.sum()), "n_capture": len(inp.cams), "chosen": inp.chosen,
            "field": str(field.relative_to(run_dir)) if field is not None else None,
