@@ -21,7 +21,9 @@ one box: the capture's :func:`curate.field.train.default_box`) is trained on
   chosen from (``--random-draws`` draws, each view's PSNR averaged over them);
 * ``continue``: the capture + K frames evenly spaced along the walk's own continuation (the next half of the
   capture's length, the same trajectory generator): what filming on the same way gives;
-* ``full``: the capture + one whole hand-held loop of the room (:data:`FULL_FRAMES`): a complete re-shoot.
+* ``full``: the capture + one whole hand-held loop of the room (:data:`FULL_FRAMES`): a complete re-shoot
+  (``--full-scaled``: also ``full_scaled``, the same photos trained for as many iterations per photo as the
+  suggest arm gets, so that the longer capture is not short of training).
 
 Every field is scored on the same :data:`N_TEST` free-viewpoint test views per room, drawn at random in the
 room's free space off every path (the harness's protocol: centre free, nothing nearer than 0.3 m, pitch within
@@ -104,9 +106,9 @@ def render(world, cams, depth: bool = False):
 
 
 def sfm_points(cams, depths, per_frame: int = POINTS_PER_FRAME, noise: float = 0.01, seed: int = 0) -> np.ndarray:
-    """[P, 3] stand-ins for a capture's SfM points: ``per_frame`` random pixels of each frame back-projected with
-    the renderer's depth, plus Gaussian noise of ``noise`` (what COLMAP triangulates on these textured surfaces,
-    without its outliers)."""
+    """[P, 3] stand-ins for a capture's SfM points: ``per_frame`` random image points of each frame back-projected
+    with the renderer's depth of the pixel each falls in, plus Gaussian noise of ``noise`` (what COLMAP
+    triangulates on these textured surfaces, without its outliers)."""
     rng = np.random.default_rng(seed)
     out = []
     for k, z in enumerate(depths):
@@ -196,6 +198,11 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
         pl2 = sst.suggest(replace(cfg, nodes="surface+frontier"), inp)[0]
         extra["frontier"] = [pl2.cams]
         arms.append("frontier")
+    if args.full_scaled:    # the full capture with as many passes over each photo as the suggest arm gets
+        extra["full_scaled"] = [full]
+        arms.append("full_scaled")
+    iters = {a: args.iters for a in arms}
+    iters["full_scaled"] = int(round(args.iters * (len(base) + len(full)) / (len(base) + len(sugg))))
     per_arm: dict[str, list[list[float]]] = {}
     for arm in arms:
         per_arm[arm] = []
@@ -207,8 +214,9 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
             cams = base if add is None else Cameras.concat([base, add])
             imgs = base_imgs + ([] if add is None else render(world, add))
             ts = time.perf_counter()
-            psnr = train_eval(cams, imgs, tests, test_imgs, box, args.iters, args.seed)
-            f.write_text(json.dumps({"psnr": psnr, "n_train": len(cams), "seconds": time.perf_counter() - ts}))
+            psnr = train_eval(cams, imgs, tests, test_imgs, box, iters[arm], args.seed)
+            f.write_text(json.dumps({"psnr": psnr, "n_train": len(cams), "iters": iters[arm],
+                                     "seconds": time.perf_counter() - ts}))
             per_arm[arm].append(psnr)
             print(f"  {room}-{kind} {arm}[{r}]: {np.mean(psnr):.2f} dB ({len(cams)} views, "
                   f"{time.perf_counter() - ts:.0f}s)", flush=True)
@@ -239,6 +247,10 @@ def summarise(c: dict) -> dict:
             out[f"frontier-{o}"] = {k: (r(v) if isinstance(v, float) else v) for k, v in d.items()}
     out["gap_closed"] = {a: (r((m[a] - m["base"]) / gap) if gap > 1e-6 else None)
                          for a in ("suggest", "random", "continue", "frontier") if a in m}
+    if "full_scaled" in m:      # against the full capture trained as long per photo as the suggest arm
+        gs = m["full_scaled"] - m["base"]
+        out["gap_closed_scaled"] = {a: (r((m[a] - m["base"]) / gs) if gs > 1e-6 else None)
+                                    for a in ("suggest", "random", "continue", "frontier") if a in m}
     out["beats_both"] = bool(out["suggest-random"]["lo"] > 0 and out["suggest-continue"]["lo"] > 0)
     out["suggest_inside_solid"] = c["suggest_inside_solid"]
     out["ms_per_camera"] = r(c["suggest_timing"]["ms_per_camera"])
@@ -247,18 +259,31 @@ def summarise(c: dict) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    """Markdown table of the summaries."""
-    head = ("| room | deficiency | base frames | base | + suggested | + random feasible | + continued path | full | "
-            "suggest − random (95% CI) | suggest − continue (95% CI) | gap closed: suggest / random / continue |")
-    lines = [head, "|" + "|".join(["---"] * 11) + "|"]
+    """Markdown table of the summaries (columns for the optional arms only when a row has them)."""
+    ci = lambda d: f"{d['mean']:+.2f} ({d['lo']:+.2f} to {d['hi']:+.2f})"  # noqa: E731
+    fr = any("frontier" in s["mean"] for s in rows)
+    fs = any("full_scaled" in s["mean"] for s in rows)
+    cols = ["room", "deficiency", "base frames", "base", "+ suggested", "+ random feasible", "+ continued path", "full"]
+    cols += ["full, scaled iterations"] if fs else []
+    cols += ["+ suggested, frontier nodes"] if fr else []
+    cols += ["suggest − random (95% CI)", "suggest − continue (95% CI)"]
+    cols += ["frontier − suggest (95% CI)"] if fr else []
+    cols += ["gap closed: suggest / random / continue"]
+    cols += ["gap closed, scaled full"] if fs else []
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join(["---"] * len(cols)) + "|"]
+    g3 = lambda g: " / ".join("—" if g.get(a) is None else f"{g[a]:.2f}" for a in ("suggest", "random", "continue"))  # noqa: E731
+    num = lambda m, a: f"{m[a]:.2f}" if a in m else "—"  # noqa: E731
     for s in rows:
         m = s["mean"]
-        ci = lambda d: f"{d['mean']:+.2f} ({d['lo']:+.2f} to {d['hi']:+.2f})"  # noqa: E731
-        g = s["gap_closed"]
-        gs = " / ".join("—" if g[a] is None else f"{g[a]:.2f}" for a in ("suggest", "random", "continue"))
-        lines.append(f"| {s['room']} | {s['deficiency']} | {s['n_base']} | {m['base']:.2f} | {m['suggest']:.2f} | "
-                     f"{m['random']:.2f} | {m['continue']:.2f} | {m['full']:.2f} | {ci(s['suggest-random'])} | "
-                     f"{ci(s['suggest-continue'])} | {gs} |")
+        cells = [s["room"], s["deficiency"], str(s["n_base"]), num(m, "base"), num(m, "suggest"), num(m, "random"),
+                 num(m, "continue"), num(m, "full")]
+        cells += [num(m, "full_scaled")] if fs else []
+        cells += [num(m, "frontier")] if fr else []
+        cells += [ci(s["suggest-random"]), ci(s["suggest-continue"])]
+        cells += [ci(s["frontier-suggest"]) if "frontier-suggest" in s else "—"] if fr else []
+        cells += [g3(s["gap_closed"])]
+        cells += [g3(s["gap_closed_scaled"]) if "gap_closed_scaled" in s else "—"] if fs else []
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -273,6 +298,8 @@ def main(argv=None) -> int:
                     help="curate suggest's --nodes")
     ap.add_argument("--frontier-arm", action="store_true", help="also the suggestions with --nodes surface+frontier "
                     "(arm 'frontier')")
+    ap.add_argument("--full-scaled", action="store_true", help="also the full capture trained for as many passes "
+                    "per photo as the suggest arm (arm 'full_scaled': iterations x its photos / the suggest arm's)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the trainings and of curate suggest")
     ap.add_argument("--walk-seed", type=int, default=1)
     ap.add_argument("--retrain", action="store_true", help="ignore cached arms")
