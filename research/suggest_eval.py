@@ -154,6 +154,14 @@ def make_run(base, imgs, depths, d: Path) -> Path:
     return run
 
 
+def poses_tag(cams) -> str:
+    """A short hash of an arm's added poses (None: the capture alone), so a cached arm is reused only for them."""
+    import hashlib
+    if cams is None:
+        return "none"
+    return hashlib.sha1(np.round(cams.c2w, 6).tobytes()).hexdigest()[:12]
+
+
 def cell(room: str, kind: str, out: Path, args) -> dict:
     """Every arm of one (room, deficiency) cell; cached per arm in ``out/<room>-<kind>/arms``."""
     from curate.core import runfolder
@@ -177,7 +185,7 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
     cfg = SuggestConfig(add=args.add, seed=args.seed, nodes=args.nodes)
     t1 = time.perf_counter()
     with runfolder.claimed(run, must_exist=True):
-        res = sst.run(cfg, run, progress=False)
+        res = sst.run(cfg, run, force=True, progress=False)   # always this code's suggestions
     rec = json.loads((run / "suggest" / "suggestions.json").read_text())
     sugg = Cameras(np.array([s["c2w"] for s in rec["suggestions"]]), *rec["envelope"]["intrinsics"])
     # the feasible set the suggestions were drawn from, for the random arm (same field, same envelope)
@@ -208,14 +216,18 @@ def cell(room: str, kind: str, out: Path, args) -> dict:
         per_arm[arm] = []
         for r, add in enumerate(extra[arm]):
             f = arms_dir / f"{arm}_{r}.json"
+            tag = poses_tag(add)
             if f.is_file() and not args.retrain:
-                per_arm[arm].append(json.loads(f.read_text())["psnr"])
-                continue
+                rec_arm = json.loads(f.read_text())
+                if rec_arm.get("poses") == tag:          # the same added photos: the cached result stands
+                    per_arm[arm].append(rec_arm["psnr"])
+                    continue
+                print(f"  {room}-{kind} {arm}[{r}]: its added poses changed: retraining", flush=True)
             cams = base if add is None else Cameras.concat([base, add])
             imgs = base_imgs + ([] if add is None else render(world, add))
             ts = time.perf_counter()
             psnr = train_eval(cams, imgs, tests, test_imgs, box, iters[arm], args.seed)
-            f.write_text(json.dumps({"psnr": psnr, "n_train": len(cams), "iters": iters[arm],
+            f.write_text(json.dumps({"psnr": psnr, "poses": tag, "n_train": len(cams), "iters": iters[arm],
                                      "seconds": time.perf_counter() - ts}))
             per_arm[arm].append(psnr)
             print(f"  {room}-{kind} {arm}[{r}]: {np.mean(psnr):.2f} dB ({len(cams)} views, "

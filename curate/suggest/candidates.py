@@ -1,9 +1,10 @@
 """Feasible poses for a new photo: where and how the capture's own hand-held camera could stand and look.
 
-The capture's *envelope* (:func:`capture_envelope`) is read from its cameras: the up direction (their mean
-image up), the range of their heights along it and of their pitches (percentiles), their intrinsics, and how
-close they went to things (the distance from each centre to the nearest occupied node, and the nearest surface
-each one saw). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an observed-free, unoccupied
+The capture's *envelope* (:func:`capture_envelope`) is read from its cameras: the up direction
+(:func:`up_vector`), the range of their heights along it and of their pitches (percentiles), their intrinsics,
+and how close they went to things (the distance from each centre to the nearest occupied node, and the nearest
+surface each one saw; at most :data:`MAX_CLEARANCE_SHARE` and :data:`MAX_VIEW_MARGIN_SHARE` of the typical
+viewing distance, at least one voxel). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an observed-free, unoccupied
 voxel (:mod:`curate.suggest.freespace`), at a height and pitch within the envelope, no nearer to an occupied
 node than the envelope's clearance, and nothing occupied lies in its view nearer than the envelope's view
 margin. Candidates (:meth:`Feasibility.draw`) are uniform over the feasible volume, with a uniform yaw, a pitch
@@ -18,6 +19,12 @@ import numpy as np
 
 from curate.core.cameras import Cameras, look_at
 from curate.suggest.freespace import FreeSpace, voxel_index, voxel_size
+
+
+MAX_CLEARANCE_SHARE = 0.25
+"""The clearance never exceeds this share of the capture's typical viewing distance (``Envelope.look_depth``)."""
+MAX_VIEW_MARGIN_SHARE = 0.5
+"""The view margin never exceeds this share of the capture's typical viewing distance."""
 
 
 def up_vector(cams: Cameras) -> np.ndarray:
@@ -86,7 +93,7 @@ def occupied_points(occ: np.ndarray, box_min, box_max) -> np.ndarray:
 def capture_envelope(cams: Cameras, fs: FreeSpace, occ: np.ndarray, box_min, box_max,
                      clearance_percentile: float = 10.0, view_percentile: float = 10.0,
                      height_percentiles=(5.0, 95.0), pitch_percentiles=(5.0, 95.0)) -> Envelope:
-    """The envelope of ``cams`` (module docstring); clearance and view margin are never below one voxel."""
+    """The envelope of ``cams`` (module docstring)."""
     from scipy.spatial import cKDTree
     if len(cams) == 0:
         raise ValueError("a capture without cameras has no envelope")
@@ -97,12 +104,16 @@ def capture_envelope(cams: Cameras, fs: FreeSpace, occ: np.ndarray, box_min, box
     pts = occupied_points(occ, box_min, box_max)
     clear = cKDTree(pts).query(cams.centres)[0] if len(pts) else np.full(len(cams), np.inf)
     fin = clear[np.isfinite(clear)]
-    clearance = max(float(np.percentile(fin, clearance_percentile)) if fin.size else vmax, vmax)
-    near = fs.nearest_surface()
-    near = near[np.isfinite(near)]
-    view_margin = max(float(np.percentile(near, view_percentile)) if near.size else vmax, vmax)
     md = fs.median_depth[np.isfinite(fs.median_depth)]
     look = float(np.median(md)) if md.size else float(np.linalg.norm(np.subtract(box_max, box_min))) / 4
+    near = fs.nearest_surface()
+    near = near[np.isfinite(near)]
+    # a capture taken from one spot keeps its distance to everything, which says nothing of how close its user
+    # could go: the margins never exceed a share of the typical viewing distance (and never go below a voxel)
+    clearance = max(min(float(np.percentile(fin, clearance_percentile)) if fin.size else vmax,
+                        MAX_CLEARANCE_SHARE * look), vmax)
+    view_margin = max(min(float(np.percentile(near, view_percentile)) if near.size else vmax,
+                          MAX_VIEW_MARGIN_SHARE * look), vmax)
     ref = int(np.argsort(cams.fx, kind="stable")[len(cams) // 2])   # a typical camera of the capture
     intr = (float(cams.fx[ref]), float(cams.fy[ref]), float(cams.cx[ref]), float(cams.cy[ref]),
             int(cams.width[ref]), int(cams.height[ref]))

@@ -28,10 +28,11 @@ class SuggestConfig:
     has seen)."""
     clearance_percentile: float = 10.0
     """A suggested camera keeps at least the distance to the nearest occupied node that this percentile of the
-    capture's own cameras keep (never less than one voxel): no closer to things than the user went."""
+    capture's own cameras keep (never less than one voxel, never more than a quarter of the capture's typical
+    viewing distance): no closer to things than the user went."""
     view_percentile: float = 10.0
     """Nothing occupied may lie in a suggested view nearer than this percentile of the capture's own nearest
-    seen surfaces (never less than one voxel)."""
+    seen surfaces (never less than one voxel, never more than half the capture's typical viewing distance)."""
     height_percentiles: tuple[float, float] = (5.0, 95.0)
     """Suggested camera heights (along the capture's up direction) stay within this percentile range of the
     capture's camera heights: heights a hand-held camera takes."""

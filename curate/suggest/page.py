@@ -171,8 +171,9 @@ def _how(rec: dict) -> str:
                         f"{hp[0]:g}th to {hp[1]:g}th percentile)"),
             ("pitches", f"{p[0]:+.0f}° to {p[1]:+.0f}° (the capture's {pp[0]:g}th to {pp[1]:g}th percentile), no roll"),
             ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes (the capture's {cp:g}th "
-                          f"percentile, at least one voxel); nothing occupied nearer than {env['view_margin']:.2f} {u} "
-                          f"in view (the {vp:g}th percentile of the nearest surfaces it saw, at least one voxel)"),
+                          f"percentile, at least one voxel, at most a quarter of its typical viewing distance); nothing "
+                          f"occupied nearer than {env['view_margin']:.2f} {u} in view (the {vp:g}th percentile of the "
+                          "nearest surfaces it saw, at least one voxel, at most half the typical viewing distance)"),
             ("placement", f"greedy, as Algorithm 1: {int(np.median(rec['n_candidates'])) if rec['n_candidates'] else 0} "
                           "feasible random candidates per photo, each scored by the energy of the capture, the "
                           "photos placed before it and itself"),
