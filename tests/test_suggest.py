@@ -350,3 +350,20 @@ def test_read_run_names_what_is_missing(tmp_path):
     (tmp_path / "sfm").mkdir()
     with pytest.raises(FileNotFoundError, match="cameras.json"):
         read_run(tmp_path)
+
+
+def test_a_capture_from_one_spot_does_not_forbid_going_nearer_than_it_stood(room):
+    from curate.suggest.candidates import MAX_CLEARANCE_SHARE, MAX_VIEW_MARGIN_SHARE
+    s, g, occ, walk, fs, env = room
+    yaw = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    spot = np.array([2.6, 2.0, 1.5])                           # mid-room: far from everything
+    turn = Cameras(look_at(np.tile(spot, (24, 1)), spot + np.stack([np.cos(yaw), np.sin(yaw), -0.1 + 0 * yaw], 1)),
+                   69.3, 69.3, 40, 30, 80, 60)
+    fs1 = cast_free_space(turn, occ, g.box_min, g.box_max, probe=(16, 12))
+    e1 = capture_envelope(turn, fs1, occ, g.box_min, g.box_max)
+    from scipy.spatial import cKDTree
+    stood = cKDTree(g.all_nodes()[occ.ravel()]).query(spot)[0]
+    assert e1.clearance <= MAX_CLEARANCE_SHARE * e1.look_depth + 1e-12 < stood
+    assert e1.view_margin <= MAX_VIEW_MARGIN_SHARE * e1.look_depth + 1e-12
+    feas = Feasibility(occ, g.box_min, g.box_max, fs1.free, e1)
+    assert len(feas.draw(np.random.default_rng(0), 50)) == 50

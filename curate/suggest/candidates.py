@@ -7,8 +7,9 @@ surface each one saw; at most :data:`MAX_CLEARANCE_SHARE` and :data:`MAX_VIEW_MA
 viewing distance, at least one voxel). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an observed-free, unoccupied
 voxel (:mod:`curate.suggest.freespace`), at a height and pitch within the envelope, no nearer to an occupied
 node than the envelope's clearance, and nothing occupied lies in its view nearer than the envelope's view
-margin. Candidates (:meth:`Feasibility.draw`) are uniform over the feasible volume, with a uniform yaw, a pitch
-uniform in the envelope's range and no roll (the image's x axis level).
+margin. Candidates (:meth:`Feasibility.draw`) are drawn in the feasible voxels (each equally likely, the position
+uniform across the voxel and the height uniform in the envelope's range), with a uniform yaw, a pitch uniform in
+the envelope's range and no roll (the image's x axis level).
 """
 
 from __future__ import annotations
@@ -202,6 +203,8 @@ class Feasibility:
             m = 2 * (n - total) + 16
             cell = self.cells[rng.integers(0, len(self.cells), m)]
             c = self.node_xyz(cell) + rng.uniform(-0.5, 0.5, (m, 3)) * self.vox
+            # the height drawn in the envelope's range (a range of zero width too: a capture on a tripod)
+            c += env.up[None, :] * (rng.uniform(env.heights[0], env.heights[1], m) - c @ env.up)[:, None]
             yaw = rng.uniform(-np.pi, np.pi, m)
             pitch = rng.uniform(env.pitches[0], env.pitches[1], m)
             cams = make_cameras(c, yaw, pitch, env)
