@@ -239,12 +239,21 @@ SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen"))
             Opt("--train-between", "train_between", parse=int),
             Opt("--seed", "seed", parse=int)]
 
+SUGGEST = [Opt("--add", "add", parse=int, metavar="K"),
+           Opt("--candidates", "n_candidates", parse=int),
+           Opt("--nodes", "nodes", choices=("surface", "surface+frontier")),
+           Opt("--field", "field", choices=("auto", "train", "none")),
+           Opt("--field-iters", "field_iters", parse=int),
+           Opt("--field-size", "field_side", parse=int),
+           Opt("--preview-size", "preview_side", parse=int),
+           Opt("--seed", "seed", parse=int)]
+
 # the options each command reads (a run folder's stage commands: only what their stage uses)
 COMMAND_OPTS: dict[str, list[Opt]] = {
     "run": RUN, "batch": RUN, "sfm": SFM, "score": ENERGY + GRID,
     "select": BUDGET + METHOD + ENERGY + GRID,
     "occupancy": GRID + TRAIN, "evaluate": EVAL + BUDGET_CHECK, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
-    "report": [], "simulate": SIMULATE,
+    "report": [], "simulate": SIMULATE, "suggest": SUGGEST,
 }
 
 
@@ -546,6 +555,24 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+@_claims("run", must_exist=True)
+def cmd_suggest(args) -> int:
+    """``curate suggest RUN --add K``: where to shoot next (:mod:`curate.suggest.stage`)."""
+    from curate.suggest.config import SuggestConfig
+    from curate.suggest.stage import run as suggest
+    try:
+        cfg = apply_options(SuggestConfig(), args, SUGGEST)
+        res = suggest(cfg, Path(args.run), args.force, progress=not args.json)
+    except (FileNotFoundError, ValueError, RuntimeError) as e:
+        raise CliError(str(e))
+    if args.json:
+        print(json.dumps({"out": str(res.path), "ran": res.ran, "suggestions": str(res.path / "suggestions.json"),
+                          "page": str(res.path / "suggest.html"), "seconds": round(res.seconds, 2)}))
+    else:
+        print(res.line(), flush=True)
+    return 0
+
+
 def cmd_run(args) -> int:
     from curate.pipeline import run
     cfg = run_config(args)
@@ -617,6 +644,7 @@ COMMANDS = {
     "report": "write RUN/report.json and RUN/report.html",
     "batch": "curate many photo folders (locally or on a Ray cluster), with a summary",
     "simulate": "compare camera placements in a synthetic room (the paper's experiment)",
+    "suggest": "where to shoot next: K new camera poses that most improve a run's capture",
 }
 
 EXAMPLES = """examples:
@@ -649,6 +677,10 @@ DESCRIPTIONS = {
     "simulate": "Place cameras in a procedural room with the energy (progressive, Algorithm 1), at random, on a "
                 "hemisphere and by farthest-view sampling; render, train the same field on each and report PSNR "
                 "on three test sets.",
+    "suggest": "Propose K new camera poses for a run folder by the paper's energy, placed greedily as in its "
+               "Algorithm 1 among hand-held poses in the space the capture observed as free. Writes RUN/suggest/: "
+               "suggest.html (floor plan, numbered suggestions with walking instructions from the nearest frame and, "
+               "with a field, previews), suggestions.json, transforms.json, images.txt and cameras.txt.",
 }
 
 
@@ -656,6 +688,9 @@ def _base_for(command: str):
     if command == "simulate":
         from curate.simulate.experiment import SimulateConfig
         return SimulateConfig()
+    if command == "suggest":
+        from curate.suggest.config import SuggestConfig
+        return SuggestConfig()
     from curate.config import RunConfig
     return RunConfig()
 
@@ -717,6 +752,9 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
                        help="with --executor ray: 'auto' or HOST:PORT of a running cluster (default: a local instance)")
         s.add_argument("--jobs", type=int, default=0, metavar="N",
                        help="folders at once (default: one per core, capped by memory; ray: the cluster's CPUs)")
+    elif name == "suggest":
+        s.add_argument("run", help="run folder (of `curate run`)")
+        s.add_argument("--json", action="store_true", help="print one JSON object")
     elif name == "simulate":
         s.add_argument("--out", required=True, metavar="DIR", help="output folder (report.json, report.html, renders)")
         s.add_argument("--json", action="store_true", help="print one JSON object")
@@ -727,7 +765,7 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
     if name in ("run", "sfm", "select", "batch"):
         s.add_argument("--adopt", action="store_true", help=_ADOPT)
     s.set_defaults(func={"sfm": cmd_sfm, "score": cmd_score, "select": cmd_select, "run": cmd_run,
-                         "batch": cmd_batch, "simulate": cmd_simulate}.get(name, cmd_stage))
+                         "batch": cmd_batch, "simulate": cmd_simulate, "suggest": cmd_suggest}.get(name, cmd_stage))
 
 
 def _command_of(argv: list[str]) -> str | None:

@@ -15,6 +15,7 @@ from curate.core.options import NO_CONST, Opt, apply_options, get_path
 NOT_CONFIG = {"-h", "--help", "--out", "--poses", "--force", "--json", "--list", "--executor", "--ray-address",
               "--jobs", "--adopt"}
 POSITIONAL = {"sfm": [], "run": [], "score": ["x.json"], "select": ["x.json"], "batch": [], "occupancy": ["RUN"],
+              "suggest": ["RUN"],
               "evaluate": ["RUN"], "export": ["RUN"], "report": ["RUN"], "simulate": []}
 REQUIRED = {"sfm": ["--out", "o"], "run": ["--out", "o"], "batch": ["--out", "o"], "simulate": ["--out", "o"]}
 
