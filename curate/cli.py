@@ -246,6 +246,7 @@ SUGGEST = [Opt("--add", "add", parse=int, metavar="K"),
            Opt("--field-iters", "field_iters", parse=int),
            Opt("--field-size", "field_side", parse=int),
            Opt("--preview-size", "preview_side", parse=int),
+           Opt("--metres", "metres"),
            Opt("--seed", "seed", parse=int)]
 
 # the options each command reads (a run folder's stage commands: only what their stage uses)

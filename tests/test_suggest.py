@@ -281,9 +281,9 @@ def test_suggest_command_end_to_end_on_the_sample_walk(tmp_path):
     from curate.core.transforms_json import read_transforms
     run = tmp_path / "run"
     _curate("run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--no-evaluate",
-            "--budget", "12", "--res", "16", "--out", str(run))
+            "--budget", "12", "--res", "16", "--triangulate", "off", "--out", str(run))   # no points: a field
     out = json.loads(_curate("suggest", str(run), "--add", "3", "--candidates", "150", "--field-iters", "60",
-                             "--field-size", "64", "--preview-size", "48", "--json").stdout)
+                             "--field-size", "64", "--preview-size", "48", "--metres", "--json").stdout)
     assert out["ran"] is True
     d = run / "suggest"
     rec = json.loads((d / "suggestions.json").read_text())
@@ -303,10 +303,11 @@ def test_suggest_command_end_to_end_on_the_sample_walk(tmp_path):
     from curate.simulate.synthetic import make_scene
     assert not make_scene("livingroom", 0).occupied(cams.centres).any()
     again = json.loads(_curate("suggest", str(run), "--add", "3", "--candidates", "150", "--field-iters", "60",
-                               "--field-size", "64", "--preview-size", "48", "--json").stdout)
+                               "--field-size", "64", "--preview-size", "48", "--metres", "--json").stdout)
     assert again["ran"] is False                                                 # unchanged: skipped
     more = json.loads(_curate("suggest", str(run), "--add", "4", "--candidates", "150", "--field-iters", "60",
-                              "--field-size", "64", "--preview-size", "48", "--json").stdout)
+                              "--field-size", "64", "--preview-size", "48", "--json").stdout)   # in units now
+    assert json.loads((d / "suggestions.json").read_text())["units"] == "units"
     assert more["ran"] is True and len(json.loads((d / "suggestions.json").read_text())["suggestions"]) == 4
     assert json.loads((run / "suggest_field" / "stage.json").read_text())["key"]   # the field was reused, not retrained
 

@@ -209,6 +209,13 @@ def _first_screen(run: _Run) -> str:
         out.append(f'<div class="warnbox"><b>The other parts of the capture</b> (this report is part 0, the '
                    f'largest; --on-split each):<ul>{rows}</ul></div>')
     out.append(_verdict(run))
+    sug = read_json(run.dir / "suggest" / "suggestions.json")
+    if sug:
+        out.append(f'<p>Going back to film more? <a href="suggest/suggest.html">Where to shoot next</a>: '
+                   f'{esc(sug.get("placed", "?"))} suggested camera poses, with how to reach each from your capture.</p>')
+    else:
+        out.append(f'<p class="small">Going back to film more? <code>curate suggest {esc(run.dir)} --add 8</code> '
+                   "proposes where to stand and look, from this capture.</p>")
     out.append(f"<h2>The chosen photos</h2>{safe_section(_thumbnails, run)}")
     return "\n".join(out)
 

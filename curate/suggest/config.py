@@ -20,6 +20,10 @@ class SuggestConfig:
     add: int = 8
     """Camera poses to suggest (K), placed one at a time, each where it raises the energy of the capture
     plus the poses placed before it the most."""
+    metres: bool = False
+    """The poses are in metres (e.g. from a phone's AR session, a survey, or a rig you calibrated): distances
+    are given in metres and walking steps. Off: in the capture's own units (SfM does not know the scale, and
+    a transforms.json is often rescaled), with the captured path's length for scale."""
     n_candidates: int = 1000
     """Feasible random poses drawn and scored for each placed camera (Algorithm 1 of the paper: 1000)."""
     nodes: str = "surface"

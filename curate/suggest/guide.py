@@ -6,8 +6,9 @@ centres plus the distance between the points both look at ``look_depth`` ahead (
 *forward* is its viewing direction laid flat (orthogonal to the capture's up), *left* is ``up x forward``.
 The step is the suggestion's centre minus the frame's, split into forward / left / up; the turn is the angle
 between the two viewing directions laid flat (positive: to the left), the tilt the change of pitch (positive:
-up). Distances are in the capture's units: metres for known poses (imported), "units" after SfM, whose scale is
-arbitrary; in metres an instruction also counts steps of :data:`STEP_M`.
+up). Distances are in the capture's units ("units": SfM's scale is arbitrary, a transforms.json is often
+rescaled), or in metres when the user says the poses are (``--metres``); in metres an instruction also counts
+steps of :data:`STEP_M`.
 """
 
 from __future__ import annotations

@@ -185,15 +185,17 @@ def _how(rec: dict) -> str:
 def write_page(run_dir: Path, d: Path, rec: dict, inp, pl, used: np.ndarray) -> Path:
     """Write ``d/suggest.html``; returns its path."""
     from curate.core.stage import write_text_atomic
-    units = ("metres (known poses)" if rec["units"] == "m" else
-             "the capture's own units: SfM does not know the scale (one unit is whatever COLMAP made it)")
+    units = ("metres (--metres: your poses are in metres)" if rec["units"] == "m" else
+             "the capture's own units: SfM does not know the scale, and a pose file may be rescaled "
+             "(--metres if yours are in metres)")
     e0, e1 = rec["energy_before"], rec["energy"][-1] if rec["energy"] else rec["energy_before"]
     c = inp.cams.centres
     path_len = float(np.linalg.norm(np.diff(c, axis=0), axis=1).sum()) if len(c) > 1 else 0.0
     u = "m" if rec["units"] == "m" else "units"
     scale = (f" For scale: your captured path is {path_len:.1f} {u} long, and what you filmed was typically "
              f"{rec['envelope']['look_depth']:.1f} {u} away from the camera.")
-    head = (f"<h1>Where to shoot next</h1><p class=\"small\">{esc(run_dir)}</p>"
+    back = (' · <a href="../report.html">the run\'s report</a>' if (Path(run_dir) / "report.html").is_file() else "")
+    head = (f"<h1>Where to shoot next</h1><p class=\"small\">{esc(run_dir)}{back}</p>"
             f'<p class="verdict">{len(rec["suggestions"])} more photos, in the order of what they add: the energy '
             f"of the capture (Kopanas &amp; Drettakis 2023) rises from {e0:.1f} to {e1:.1f} "
             f"({100 * (e1 - e0) / max(abs(e0), 1e-9):+.1f}%).</p>"

@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -126,7 +126,7 @@ def read_run(run_dir: Path) -> RunInputs:
         paths = [""] * len(cams)
     keys = [_key(run_dir / s) for s in ("sfm", "occupancy", "select", "evaluate")]
     return RunInputs(cams, paths, frame_labels(list(cams.names), records),
-                     "m" if st.get("mode") == "import" else "units", occ, nodes, lo, hi, chosen, keys)
+                     "units", occ, nodes, lo, hi, chosen, keys)
 
 
 def surface_band(mask: np.ndarray, k: int = 1) -> np.ndarray:
@@ -244,6 +244,8 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     run_dir = Path(run_dir)
     d = run_dir / STAGE
     inp = read_run(run_dir)
+    if cfg.metres:
+        inp = replace(inp, units="m")
     usable = inp.occupancy_usable()
     field = find_field(run_dir)
     if field is not None and field.parent.name == FIELD_STAGE and _key(field.parent) != field_key(cfg, inp):
@@ -303,6 +305,9 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     finish_stage(d, key, {"suggest": cfg}, t0, outputs={"suggestions": "suggestions.json", "page": "suggest.html",
                                                         "transforms": "transforms.json", "colmap": "images.txt"},
                  seed=cfg.seed)
+    if (run_dir / "report.json").is_file():   # the run's report links the page
+        from curate.report.run_report import write_html
+        write_html(run_dir)
     return StageResult(STAGE, d, True, time.perf_counter() - t0,
                        f"{len(sugg)} poses suggested (energy {pl.energy_before:.1f} -> {pl.energy[-1]:.1f}, "
                        f"{timing['ms_per_camera']:.0f} ms per placed camera, {timing['ms_per_candidate']:.2f} ms per "
