@@ -6,7 +6,9 @@ rho(k) of the pool (the quantity the law reads). Then, per kind of capture (walk
 
 * each capture's own alpha (the law's shape, ``loss = alpha * rho ** p`` with the product's p;
   geometric mean of loss / rho ** p over its points losing at least 0.05 dB);
-* leaving each capture out: alpha from the other captures of its kind (geometric mean), the
+* leaving each capture out: alpha from the captures of its kind of *other scenes* (the highest,
+  as the product takes it, and their range; office.mp4 and the office walk are one scene; where no other real scene of the kind
+  exists, as for walks, the law fitted on the rendered walks, which never saw these captures), the
   budget it predicts for each tolerance on the capture's own curve, the budget measured for it
   (interpolated in log k between measured budgets) and the loss measured at the predicted budget;
 * the budget check (:mod:`curate.evaluate.check`) as the product runs it, emulated on the measured
@@ -29,6 +31,17 @@ import numpy as np
 
 MIN_LOSS = 0.05
 TOLS = (0.3, 0.5, 1.0)
+SAME_SCENE = {"office_mp4": "office"}
+"""Captures of one scene: never used to predict each other."""
+
+
+def render_alpha() -> dict:
+    """The walk law fitted on rendered walks (docs/evidence/budget_auto.json): kind -> (alpha, (low,
+    high)) with the range over its fits leaving one rendered walk out; the prediction for a real walk
+    when no other real walk scene exists."""
+    ev = json.loads((Path(__file__).resolve().parents[1] / "docs" / "evidence" / "budget_auto.json").read_text())
+    w = [v["power"][0] for k, v in ev["loso"].items() if k.startswith("walk") or k.startswith("office")]
+    return {"walk": (ev["product"]["walk"]["alpha"], (min(w), max(w)))}
 
 
 def load(out: Path) -> list[dict]:
@@ -109,23 +122,39 @@ def analyse(caps: list[dict], powers: dict) -> dict:
     for c in caps:
         c["alpha"] = capture_alpha(c, powers[c["kind"]])
         out["captures"].append({k: c[k] for k in ("scene", "kind", "n", "pool", "points", "alpha")})
+    renders = render_alpha()
     for kind in ("walk", "object"):
+        # the product's rule: the highest alpha seen on the real captures of the kind (and, for walks,
+        # the law of the rendered walks); the range, the lowest to the highest
         al = [c["alpha"] for c in caps if c["kind"] == kind and c["alpha"]]
+        if kind in renders:
+            al_all = al + [renders[kind][0], *renders[kind][1]]
+        else:
+            al_all = al
         if al:
-            out["product"][kind] = {"alpha": float(np.exp(np.mean(np.log(al)))), "p": powers[kind],
-                                    "range": [float(min(al)), float(max(al))], "captures": len(al)}
+            out["product"][kind] = {"alpha": round(max(al + ([renders[kind][0]] if kind in renders else [])), 2),
+                                    "p": powers[kind], "range": [round(min(al_all), 2), round(max(al_all), 2)],
+                                    "captures": [c["scene"] for c in caps if c["kind"] == kind and c["alpha"]]}
+    group = (lambda c: SAME_SCENE.get(c["scene"], c["scene"]))
     for c in caps:
         p = powers[c["kind"]]
-        others = [o["alpha"] for o in caps if o["kind"] == c["kind"] and o is not c and o["alpha"]]
-        if not others:
+        others = [o["alpha"] for o in caps if o["kind"] == c["kind"] and group(o) != group(c) and o["alpha"]]
+        if others:
+            # the product's rule: the highest alpha seen (an advice short of the photos a capture
+            # needs costs quality; one beyond it, a little training time)
+            a, span, source = max(others), (min(others), max(others)), "other real scenes"
+        elif c["kind"] in renders:
+            a, span = renders[c["kind"]]
+            source = "rendered walks"
+        else:
             continue
-        a = float(np.exp(np.mean(np.log(others))))
         for tol in TOLS:
             kp = predict(c["curve"], a, p, tol)
-            lo, hi = (predict(c["curve"], x, p, tol) for x in (min(others + [a]), max(others + [a])))
+            lo, hi = (predict(c["curve"], x, p, tol) for x in (min(span), max(span)))
             km, txt = measured_budget(c["points"], tol)
             chk = check_emulated(c, a, p, tol)
             out["loo"].append({"scene": c["scene"], "kind": c["kind"], "tol": tol, "pool": c["pool"], "alpha_loo": a,
+                               "alpha_from": source,
                                "predicted": kp, "range": [lo, hi], "measured": km, "measured_text": txt,
                                "loss_at_predicted": loss_at(c["points"], kp), "check": chk,
                                "loss_at_check": loss_at(c["points"], chk["advice"]) if chk and chk["advice"] else None})

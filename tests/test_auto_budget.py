@@ -117,14 +117,18 @@ def test_parse_auto():
         parse_budget("automatic")
 
 
-def test_constants_are_the_fit_in_the_evidence():
-    """The loss law in the product is the one research/budget_fit.py fitted and wrote to
-    docs/evidence/budget_auto.json (the model its rule chose for each capture kind)."""
+def test_constants_are_the_calibration_in_the_evidence():
+    """The loss law and its range in the product are the ones research/budget_real_fit.py calibrated
+    on real captures and wrote to docs/evidence/budget_real.json, and the advice's range holds the
+    point advice (the point is the range's high end: the conservative side)."""
     import json
     from pathlib import Path
 
-    from curate.select.auto_budget import LOSS_MODEL
-    ev = json.loads((Path(__file__).resolve().parents[1] / "docs" / "evidence" / "budget_auto.json").read_text())
-    assert set(ev["product"]) == set(LOSS_MODEL)
+    from curate.select.auto_budget import ALPHA_RANGE, LOSS_MODEL
+    ev = json.loads((Path(__file__).resolve().parents[1] / "docs" / "evidence" / "budget_real.json").read_text())
+    assert set(ev["product"]) == set(LOSS_MODEL) == set(ALPHA_RANGE)
     for kind, fit in ev["product"].items():
         assert LOSS_MODEL[kind] == pytest.approx((fit["alpha"], fit["p"]), abs=0.005)
+        assert ALPHA_RANGE[kind] == pytest.approx(tuple(fit["range"]), abs=0.005)
+        lo, hi = ALPHA_RANGE[kind]
+        assert lo < hi and lo <= LOSS_MODEL[kind][0] <= hi

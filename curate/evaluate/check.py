@@ -9,7 +9,7 @@ prediction. It fits the law's shape to them, ``loss = alpha * rho(k) ** p`` with
 and ``alpha`` this capture's (least squares in log, points losing at least :data:`MIN_LOSS`),
 and advises the fewest photos of the whole capture whose predicted loss is within the tolerance,
 on the whole capture's spacing curve. Its range: the same with ``alpha`` from each measured point
-alone (how far the points disagree with the law's shape). Validation: docs/selection-evidence.md,
+alone (how far the points disagree with the law's shape). Validation on real captures: docs/evaluation.md,
 "How many photos".
 """
 

@@ -7,13 +7,18 @@ views) predicts how much held-out PSNR a budget of k loses against every frame::
     loss(k) = alpha * rho(k) ** p        [dB],   (alpha, p) = LOSS_MODEL[kind]
 
 with ``kind`` the capture's kind (walk-through or object capture:
-:func:`curate.select.select.capture_kind`). The constants are fitted (least squares in
-log-log, points losing at least 0.05 dB) by
-``research/budget_fit.py`` on the evaluation harness's trained subsets (every method: the
-loss depends on a subset through its spacing); their validation, leaving each scene out, is
-in docs/selection-evidence.md ("How many photos: --budget auto"). The prediction is of the
-loss on views along the capture (the held-out protocol), at the harness's training
-settings; it is a rule of thumb with a measured error, not a guarantee.
+:func:`curate.select.select.capture_kind`). The constants are calibrated on real captures by
+``research/budget_real.py`` (the product's default selection and evaluation settings, learning
+curves at five or six budgets, two or three hold-out folds) and ``research/budget_real_fit.py``
+(docs/evidence/budget_real.json; docs/evaluation.md, "How many photos"): alpha per capture is
+fitted with the power p of ``research/budget_fit.py``'s fit on rendered walks; the product takes
+the *highest* alpha seen for the kind (an advice short of what a capture needs costs quality, one
+beyond it a little training time) and the lowest-to-highest spread as the advice's range. Objects:
+the fox, the skull, the templering; walks: the office walk and office.mp4 (one real scene) and
+the rendered walks. The prediction is of the loss on views along the capture (the held-out
+protocol), at the evaluation's training settings; it is a rule of thumb with a measured error, not
+a guarantee: the measured check of :mod:`curate.evaluate.check` runs on the capture itself when
+the run is evaluated.
 
 The choice is the smallest k in [2, K - 1] with loss(k) <= tolerance; when none is, K - 1
 with a note that the capture has little to spare.
@@ -25,13 +30,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-LOSS_MODEL = {"walk": (13.19, 1.47), "object": (18.55, 1.0)}
+LOSS_MODEL = {"walk": (13.19, 1.47), "object": (32.47, 1.0)}
 """(alpha, p) by capture kind: held-out PSNR lost, in dB, is alpha * rho ** p at relative spacing
-rho (fitted by research/budget_fit.py; docs/evidence/budget_auto.json)."""
+rho (docs/evidence/budget_real.json, "product")."""
 
-ALPHA_RANGE = {"walk": (13.19, 13.19), "object": (18.55, 18.55)}
-"""(low, high) alpha by capture kind: the spread of the captures the law was fitted on; the advice's
-range is the budgets these give (docs/selection-evidence.md, "How many photos")."""
+ALPHA_RANGE = {"walk": (9.37, 13.83), "object": (12.71, 32.47)}
+"""(low, high) alpha by capture kind: the spread over the captures the law was calibrated on; the
+advice's range is the budgets these give (docs/evidence/budget_real.json, "product")."""
 
 CURVE_POINTS = 120
 """The predicted curve is kept (selection.json, the report) at about this many budgets."""
