@@ -4,8 +4,13 @@ run folder's SfM kept each take, against the office's ground truth.
 ``make`` writes, under ``OUT``, one folder per case and a ``<case>.truth.json`` beside it (outside
 the folder, so curate does not see it) mapping each take's frames to office frames:
 
-* ``two_takes/``: ``walkA.mp4`` = office.mp4 frames 0..239, ``walkB.mp4`` = frames 372..140
-  (frames 140..372 played backwards: a second pass, the other way). They share frames 140..239.
+* ``two_takes/``: ``walkA.mp4`` = office.mp4 frames 0..139 and the even frames of 140..239;
+  ``walkB.mp4`` = frames 372..240 and the odd frames of 239..141 (played backwards: a second
+  pass, the other way). They overlap over frames 140..239, each with every other frame there (the
+  same frame in both takes would be dropped as a near-duplicate, which no real second pass has).
+* ``two_takes_apart/``: ``walkA.mp4`` = frames 0..199, ``walkB.mp4`` = frames 372..200 (backwards):
+  the takes meet only where the walk turned from one to the other (frames 199 and 200, far apart in
+  name order) and where it comes back to places it saw before.
 * ``three_takes/``: the same two and ``fox.mp4``, the fox photos (another scene) as a 10 fps
   video cropped to 540x360: a take that cannot join.
 * ``video_photos/``: ``walk.mp4`` = office.mp4 frames 0..186, and every 5th office JPEG of
@@ -66,35 +71,47 @@ def _fox_frames(fox: Path, size=(540, 360)) -> list[np.ndarray]:
     return out
 
 
-def make(office: Path, fox: Path, out: Path) -> dict:
-    """Write the three cases under ``out``; returns {case: truth} (also in ``out/<case>.truth.json``)."""
+CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos")
+
+
+def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
+    """Write ``cases`` under ``out``; returns {case: truth} (also in ``out/<case>.truth.json``)."""
     frames = _decode(office / "office.mp4")
     n = len(frames)
-    a = list(range(0, 240))
-    b = list(range(n - 1, 139, -1))
-    cases: dict = {}
-    d = out / "two_takes"
-    write_video([frames[i] for i in a], d / "walkA.mp4")
-    write_video([frames[i] for i in b], d / "walkB.mp4")
-    cases["two_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b}, "photos": {}}
-    d = out / "three_takes"
-    d.mkdir(parents=True, exist_ok=True)
-    for v in ("walkA.mp4", "walkB.mp4"):
-        shutil.copyfile(out / "two_takes" / v, d / v)
-    write_video(_fox_frames(fox), d / "fox.mp4")
-    cases["three_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b, "fox.mp4": None}, "photos": {}}
-    d = out / "video_photos"
-    half = (n + 1) // 2
-    write_video(frames[:half], d / "walk.mp4")
-    imgs = sorted((office / "images").iterdir())
-    photos = {}
-    for i in range(half, n, 5):
-        shutil.copyfile(imgs[i], d / imgs[i].name)
-        photos[imgs[i].name] = i
-    cases["video_photos"] = {"videos": {"walk.mp4": list(range(half))}, "photos": photos}
-    for k, v in cases.items():
+    a = list(range(0, 140)) + list(range(140, 240, 2))
+    b = list(range(n - 1, 239, -1)) + list(range(239, 140, -2))
+    done: dict = {}
+    if "two_takes" in cases or "three_takes" in cases:
+        d = out / "two_takes"
+        write_video([frames[i] for i in a], d / "walkA.mp4")
+        write_video([frames[i] for i in b], d / "walkB.mp4")
+        done["two_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b}, "photos": {}}
+    if "two_takes_apart" in cases:
+        d = out / "two_takes_apart"
+        a2, b2 = list(range(0, 200)), list(range(n - 1, 199, -1))
+        write_video([frames[i] for i in a2], d / "walkA.mp4")
+        write_video([frames[i] for i in b2], d / "walkB.mp4")
+        done["two_takes_apart"] = {"videos": {"walkA.mp4": a2, "walkB.mp4": b2}, "photos": {}}
+    if "three_takes" in cases:
+        d = out / "three_takes"
+        d.mkdir(parents=True, exist_ok=True)
+        for v in ("walkA.mp4", "walkB.mp4"):
+            shutil.copyfile(out / "two_takes" / v, d / v)
+        write_video(_fox_frames(fox), d / "fox.mp4")
+        done["three_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b, "fox.mp4": None}, "photos": {}}
+    if "video_photos" in cases:
+        d = out / "video_photos"
+        half = (n + 1) // 2
+        write_video(frames[:half], d / "walk.mp4")
+        imgs = sorted((office / "images").iterdir())
+        photos = {}
+        for i in range(half, n, 5):
+            shutil.copyfile(imgs[i], d / imgs[i].name)
+            photos[imgs[i].name] = i
+        done["video_photos"] = {"videos": {"walk.mp4": list(range(half))}, "photos": photos}
+    for k, v in done.items():
         (out / f"{k}.truth.json").write_text(json.dumps(v))
-    return cases
+    return done
 
 
 def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
@@ -154,6 +171,7 @@ def main(argv=None) -> dict:
     m.add_argument("--office", type=Path, required=True)
     m.add_argument("--fox", type=Path, required=True)
     m.add_argument("--out", type=Path, required=True)
+    m.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
     e = sub.add_parser("eval", help="how a run's SfM kept each take")
     e.add_argument("run", type=Path)
     e.add_argument("--truth", type=Path, default=None, help="<case>.truth.json written by make")
@@ -161,7 +179,7 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     if a.cmd == "make":
         res = {k: {"videos": {v: (len(f) if f else "no truth") for v, f in c["videos"].items()},
-                   "photos": len(c["photos"])} for k, c in make(a.office, a.fox, a.out).items()}
+                   "photos": len(c["photos"])} for k, c in make(a.office, a.fox, a.out, tuple(a.cases)).items()}
     else:
         res = evaluate(a.run, a.truth, a.office)
     print(json.dumps(res))
