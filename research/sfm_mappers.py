@@ -66,9 +66,10 @@ def truth_for(cams, truth, frame_of: dict):
                    names=tuple(truth.names[frame_of[n]] for n in cams.names)), truth
 
 
-def rematch(db: Path, tmp: Path, overrides: list[str], out: dict) -> Path:
+def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | None = None) -> Path:
     """A copy of ``db`` in ``tmp`` matched again by curate's matching step with SfmConfig
-    ``overrides`` (FIELD=VALUE); the matcher and seconds go into ``out``."""
+    ``overrides`` (FIELD=VALUE); the matcher and seconds go into ``out``. ``takes`` ({take: image
+    names}, from images.json) lets the step match across takes, as ``curate sfm`` does."""
     import dataclasses
     import shutil
 
@@ -92,8 +93,10 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict) -> Path:
     h.close()
     matcher = out.get("matcher") or "sequential"
     t = time.perf_counter()
-    _match(cfg, new, matcher)
-    out["rematch"] = {"overrides": over, "matcher": matcher, "match_seconds": round(time.perf_counter() - t, 1)}
+    info: dict = {}
+    _match(cfg, new, matcher, takes, info)
+    out["rematch"] = {"overrides": over, "matcher": matcher, "match_seconds": round(time.perf_counter() - t, 1),
+                      **info}
     print(json.dumps(out["rematch"]), flush=True)
     return new
 
@@ -122,7 +125,11 @@ def main(argv=None) -> dict:
     out = {"run": str(a.run), "n_kept": n_kept}
     with tempfile.TemporaryDirectory() as tmp:
         if a.rematch is not None:
-            db = rematch(db, Path(tmp), a.rematch, out)
+            takes: dict = {}
+            for r in recs:
+                if r.get("status") == "kept" and (r.get("extra") or {}).get("take"):
+                    takes.setdefault(r["extra"]["take"], []).append(r["working"])
+            db = rematch(db, Path(tmp), a.rematch, out, {t: sorted(v) for t, v in takes.items()})
         kept: dict = {}
         for kind in a.mappers.split(","):
             # each mapper on its own copy of the database (mappers write to it)

@@ -8,7 +8,9 @@ working copies) -> quality (``curate.sfm.quality``: sharpness, near-duplicates; 
 config) -> SIFT extraction (one shared camera when every photo comes from the same
 camera model at the same size, else one camera per photo) -> matching (exhaustive for
 small pools, sequential for ordered frames, spatial with GPS; loop detection with a
-vocabulary tree trained on the capture itself, never a download, so it works offline) ->
+vocabulary tree trained on the capture itself, never a download, so it works offline; with
+several takes, such as two videos or a video and photos, each take's frames are also matched
+with their most similar frames of the other takes, ``_match_across_takes``) ->
 mapping (``map_capture``: incremental, initial pair with >= ``init_min_num_inliers``
 verified inliers; when its largest model leaves more than 5% of the photos out, COLMAP's
 global mapper on the same matches, kept where it agrees with the incremental parts and holds
@@ -44,9 +46,11 @@ Run-folder contract, ``RUN/sfm/``:
 * ``normalization.json``: ``x_canonical = scale * (x - centre)`` maps the scene into
   [-1, 1]^3 (``curate.sfm.io.normalization``).
 * ``images.json``: per input file: original path, working name, status (``kept``,
-  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``. An import lists
-  each pose (its photo, or ``skipped``: no photo in the folder) and the folder's photos no pose
-  names (``skipped``).
+  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``, its take
+  (``extra.take``: its video, or ``photos`` / ``photos in a/b/`` for the photos of a folder).
+  ``stage.json``'s ``stats.takes`` counts per take its frames and those in the model. An import
+  lists each pose (its photo, or ``skipped``: no photo in the folder) and the folder's photos no
+  pose names (``skipped``).
 * ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database (an import's:
   of the triangulation, at the working size).
 * ``dense/fused.ply``: dense point cloud, only with CUDA (``dense='auto'``).
@@ -65,10 +69,10 @@ from pathlib import Path
 import numpy as np
 
 from curate.core.cameras import Cameras
-from curate.sfm.config import SfmConfig
+from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
-from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside,
-                              too_few_message, write_outputs)
+from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
+                             takes_not_joined, takes_of, too_few_message, write_outputs)
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 
 logger = logging.getLogger(__name__)
@@ -274,11 +278,16 @@ def _build_vocab_tree(db: Path, path: Path, seed: int, max_descriptors: int = 10
     return path
 
 
-def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
+def _match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | None = None,
+           stats: dict | None = None) -> None:
     """Match and verify the image pairs of ``matcher``; verification RANSAC is seeded by ``cfg.seed``.
 
     COLMAP's default verification seed (-1) draws a new one per run: the office walk then got
     a different set of verified pairs, and a different model, on every run.
+
+    ``takes`` ({take: image names}, :func:`curate.sfm.prep.takes_of`): with ``sequential`` and two or
+    more takes, the frames of each take are also matched with their most similar frames of the other
+    takes (:func:`_match_across_takes`; ``stats["cross_take"]`` says how many pairs).
     """
     import pycolmap
     mo = pycolmap.FeatureMatchingOptions()
@@ -295,14 +304,21 @@ def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
+        tree = None
         if cfg.loop_detection:  # with a vocabulary tree built from this capture's own features: offline
+            tree = _build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors)
             po.loop_detection = True
-            po.vocab_tree_path = str(_build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed,
-                                                         cfg.vocab_tree_descriptors))
+            po.vocab_tree_path = str(tree)
             po.loop_detection_period = cfg.loop_detection_period
             po.loop_detection_num_images = cfg.loop_detection_num_images
         pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
                                   device=dev)
+        if cfg.cross_take_matching and takes and len(takes) >= 2:
+            if tree is None:
+                tree = _build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors)
+            info = _match_across_takes(cfg, db, takes, tree, mo, vo, dev)
+            if stats is not None:
+                stats["cross_take"] = info
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
@@ -311,6 +327,75 @@ def _match(cfg: SfmConfig, db: Path, matcher: str) -> None:
                                device=dev)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
+
+
+def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], tree: Path, mo, vo, dev) -> dict:
+    """Match every ``cfg.cross_take_period``-th frame of each take with its ``cfg.cross_take_num_images``
+    most similar frames of each other take (:func:`curate.sfm.prep.cross_take_pairs`).
+
+    Sequential matching pairs neighbours in name order, which are frames of one take; its loop
+    detection ranks every frame against all others, so a frame's most similar ones are its own take's
+    neighbours and a second take seldom gets in. Here the ranking (COLMAP's vocabulary-tree retrieval with
+    the capture's own ``tree``, all frames indexed) is read to its end for each queried frame and only
+    the other takes' best frames are kept: (frames / period) x num_images x (takes - 1) pairs at most,
+    linear in the frames. Returns {"queries", "pairs", "new_pairs", "verified", "unlisted", "seconds"}.
+    """
+    import pycolmap
+
+    from curate.sfm.prep import cross_take_pairs
+    t0 = time.perf_counter()
+    take_of = {n: t for t, names in takes.items() for n in names}
+    dbh = pycolmap.Database.open(db)
+    try:
+        ids = {im.name: im.image_id for im in dbh.read_all_images() if im.name in take_of}
+        name_of = {i: n for n, i in ids.items()}
+        queries = [ids[n] for names in takes.values() for n in names[::cfg.cross_take_period] if n in ids]
+        opts = pycolmap.VocabTreePairingOptions()
+        opts.vocab_tree_path = str(tree)
+        opts.num_images = len(ids)          # the whole ranking: the other takes' best may rank after the own take
+        opts.num_threads = cfg.num_threads
+        with _stdout_to(db.parent / "colmap.log"):
+            gen = pycolmap.VocabTreePairGenerator(opts, dbh, queries)
+
+            def ranked():
+                while not gen.has_finished():
+                    block = gen.next()  # one queried frame: (query, candidate) pairs, most similar first
+                    if block:
+                        yield name_of.get(block[0][0]), [name_of.get(b) for _, b in block]
+            pairs = cross_take_pairs(((q, c) for q, c in ranked() if q is not None), take_of,
+                                     cfg.cross_take_num_images)
+        new = [(a, b) for a, b in pairs if not dbh.exists_matches(ids[a], ids[b])]
+    finally:
+        dbh.close()
+    # COLMAP's pair list separates names by spaces: a name holding one cannot be listed
+    listed = [(a, b) for a, b in new if not any(c.isspace() for c in a + b)]
+    if len(listed) < len(new):
+        logger.warning("sfm: %d of %d cross-take pairs left unmatched: COLMAP's pair list cannot name photos "
+                       "with spaces in their names", len(new) - len(listed), len(new))
+    before = _n_verified(db, cfg.min_num_matches)
+    if listed:
+        path = db.parent / "cross_take_pairs.txt"
+        path.write_text("".join(f"{a} {b}\n" for a, b in listed))
+        po = pycolmap.ImportedPairingOptions()
+        po.match_list_path = str(path)
+        pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+    info = {"queries": len(queries), "pairs": len(pairs), "new_pairs": len(new),
+            "verified": _n_verified(db, cfg.min_num_matches) - before, "unlisted": len(new) - len(listed),
+            "seconds": round(time.perf_counter() - t0, 2)}
+    logger.info("sfm: cross-take matching (%d takes): %d frames queried, %d new pairs, %d verified in %.1f s",
+                len(takes), info["queries"], info["new_pairs"], info["verified"], info["seconds"])
+    return info
+
+
+def _n_verified(db: Path, min_num_matches: int) -> int:
+    """How many image pairs of ``db`` have at least ``min_num_matches`` verified inliers."""
+    import pycolmap
+    dbh = pycolmap.Database.open(db)
+    try:
+        _, inliers = dbh.read_two_view_geometry_num_inliers()
+    finally:
+        dbh.close()
+    return int(sum(n >= min_num_matches for n in inliers))
 
 
 def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
@@ -569,7 +654,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
         logger.info("sfm: %s matching ...", matcher)
         t = time.perf_counter()
-        _match(cfg, db, matcher)
+        _match(cfg, db, matcher, takes_of(kept), stats)
         timings["match"] = round(time.perf_counter() - t, 2)
         dbh = pycolmap.Database.open(db)
         _, inliers = dbh.read_two_view_geometry_num_inliers()
@@ -596,6 +681,12 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
                       for k, r in enumerate([best] + others)]
     shutil.rmtree(out / "mapper", ignore_errors=True)
+    in_model = {best.image(i).name for i in best.reg_image_ids()}
+    in_others = {r.image(i).name for r in models.values() if r is not best for i in r.reg_image_ids()}
+    stats["takes"] = take_counts(kept, in_model, in_others)
+    for t in takes_not_joined(stats["takes"], TAKE_MIN_FRACTION):
+        logger.warning("sfm: take %s: %d of %d frames in the model (%d in other models)", t["take"], t["n_in_model"],
+                       t["n_frames"], t["n_in_other_parts"])
     stats["mean_reprojection_error_px"] = float(best.compute_mean_reprojection_error())
     stats["mean_track_length"] = float(best.compute_mean_track_length())
     logger.info("sfm: %d / %d images registered, %d points, reprojection error %.2f px, mapping %.1f s",

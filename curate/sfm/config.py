@@ -18,6 +18,9 @@ TRIANGULATE = ("auto", "off")
 """``SfmConfig.triangulate`` choices."""
 MIN_PART = 10
 """``on_split = 'each'``: the fewest registered photos a part needs to be curated on its own."""
+TAKE_MIN_FRACTION = 0.1
+"""A take (a video, or the photos of one folder) of a capture of several takes with under this share of
+its frames in the model curate uses did not join the other takes: the SfM stage says so by name."""
 
 
 VIDEO_EXTS = {".mp4", ".mov", ".m4v", ".mkv", ".avi", ".webm"}
@@ -87,6 +90,11 @@ class SfmConfig:
     loop_detection_num_images: int = 30  # ... against its N most similar frames
     vocab_tree_descriptors: int = 100_000  # loop detection's vocabulary tree: trained on at most this many of the
     #                                   capture's descriptors (one word per ~40): its training time stays fixed
+    cross_take_matching: bool = True  # sequential, with two or more takes (videos; the photos of a folder): also
+    #                                   match frames with the most similar frames of the other takes (vocabulary
+    #                                   tree trained on the capture), so a second pass joins the first
+    cross_take_period: int = 2        # cross-take matching: query every N-th frame of each take
+    cross_take_num_images: int = 5    # ... against its N most similar frames of each other take
     spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
     guided_matching: bool = False     # COLMAP's guided matching (more matches, slower)
     # --- mapping
@@ -133,5 +141,7 @@ class SfmConfig:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1):
             raise ValueError("SfmConfig.min_registered_fraction must be in [0, 1]")
+        if self.cross_take_period < 1 or self.cross_take_num_images < 1:
+            raise ValueError("SfmConfig.cross_take_period and cross_take_num_images must be >= 1")
         if self.vocab_tree_descriptors < 256 * 40:
             raise ValueError("SfmConfig.vocab_tree_descriptors must be >= 10240 (256 visual words)")

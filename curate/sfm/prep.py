@@ -52,6 +52,7 @@ def prepare_photos(cfg: SfmConfig, photos: Path, out: Path) -> tuple[list[PhotoR
     videos: list[dict] = []
     records = ingest(photos, out / "images", cfg.max_image_size, cfg.recursive, threads, on_image, cfg.progress,
                      video=cfg.video, video_summaries=videos)
+    assign_takes(records)
     t_ingest = round(time.perf_counter() - t, 2)
     t = time.perf_counter()
     good = [r for r in records if r.status == "kept"]
@@ -127,9 +128,92 @@ def looks_sequential(names: list[str]) -> bool:
     return len(prefixes) == 1 and all(b > a for a, b in zip(vals, vals[1:]))
 
 
+# ------------------------------------------------------------------ takes
+def take_name(rec: PhotoRecord | dict) -> str:
+    """The take a photo belongs to: a video frame's take is its video (path relative to the photo
+    folder, ``walk2.mp4``); a photo's is the folder it lies in: ``photos`` for the photo folder itself,
+    ``photos in a/b/`` for a sub-folder (``--recursive``). A video file itself (skipped) is its own take."""
+    extra = rec.extra if isinstance(rec, PhotoRecord) else (rec.get("extra") or {})
+    rel = rec.rel if isinstance(rec, PhotoRecord) else rec["rel"]
+    if extra.get("video_rel"):
+        return str(extra["video_rel"])
+    from curate.sfm.config import VIDEO_EXTS
+    if Path(rel).suffix.lower() in VIDEO_EXTS:
+        return rel
+    parent = Path(rel).parent.as_posix()
+    return "photos" if parent in ("", ".") else f"photos in {parent}/"
+
+
+def assign_takes(records: list[PhotoRecord]) -> None:
+    """Record each photo's take (:func:`take_name`) in ``extra["take"]`` (images.json)."""
+    for r in records:
+        r.extra["take"] = take_name(r)
+
+
+def takes_of(kept: list[PhotoRecord]) -> dict[str, list[str]]:
+    """{take: working names of its kept photos, in name order}; takes in order of their first photo."""
+    out: dict[str, list[str]] = {}
+    for r in sorted(kept, key=lambda r: r.working):
+        out.setdefault(r.extra.get("take") or take_name(r), []).append(r.working)
+    return out
+
+
+def take_is_ordered(recs: list[PhotoRecord]) -> bool:
+    """A take whose photos are in capture order by name: a video's frames, numbered photos, or under 3 photos."""
+    if all(r.extra.get("video") for r in recs):
+        return True
+    return len(recs) < 3 or looks_sequential(sorted(r.rel for r in recs))
+
+
+def cross_take_pairs(ranked, take_of: dict[str, str], per_take: int) -> list[tuple[str, str]]:
+    """The image pairs to match between takes, from a retrieval ranking.
+
+    Args:
+        ranked: iterable of (query name, candidate names, most similar first) (the vocabulary tree's
+            answer for each queried frame; the query itself may be among the candidates).
+        take_of: name -> take, for every name of ``ranked``.
+        per_take: how many of each query's most similar frames of *each other* take to keep.
+    Returns:
+        Unique pairs (a, b), a < b, sorted: for every query its ``per_take`` most similar frames of
+        every other take. Pairs within a take are never returned (sequential matching has those).
+    """
+    pairs: set[tuple[str, str]] = set()
+    for q, cands in ranked:
+        tq = take_of[q]
+        got: dict[str, int] = {}
+        for c in cands:
+            tc = take_of.get(c)
+            if tc is None or tc == tq or got.get(tc, 0) >= per_take:
+                continue
+            got[tc] = got.get(tc, 0) + 1
+            pairs.add((q, c) if q < c else (c, q))
+    return sorted(pairs)
+
+
+def take_counts(kept: list[PhotoRecord], in_model: set[str], in_other_parts: set[str]) -> list[dict]:
+    """Per take (:func:`takes_of` order): {"take", "kind" ('video' | 'photos'), "n_frames" (its kept photos),
+    "n_in_model" (in the model curate uses), "n_in_other_parts" (in the other models of a split)}."""
+    out = []
+    video = {r.extra.get("take") or take_name(r) for r in kept if r.extra.get("video")}
+    for t, names in takes_of(kept).items():
+        out.append({"take": t, "kind": "video" if t in video else "photos", "n_frames": len(names),
+                    "n_in_model": sum(n in in_model for n in names),
+                    "n_in_other_parts": sum(n in in_other_parts for n in names)})
+    return out
+
+
+def takes_not_joined(takes: list[dict], min_fraction: float) -> list[dict]:
+    """The takes of a capture of two or more that have under ``min_fraction`` of their frames in the model."""
+    if len(takes) < 2:
+        return []
+    return [t for t in takes if t["n_in_model"] < min_fraction * t["n_frames"]]
+
+
 def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     """'auto': exhaustive up to ``exhaustive_max_images``; beyond: spatial with GPS on most photos,
-    sequential for numbered frames and video frames, else exhaustive (slow but complete)."""
+    sequential when every take is in capture order (video frames, numbered photos: each take is
+    matched along itself, and with the other takes by :func:`cross_take_pairs`), else exhaustive
+    (slow but complete)."""
     if cfg.matcher != "auto":
         return cfg.matcher
     n = len(kept)
@@ -137,7 +221,10 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
         return "exhaustive"
     if sum(r.has_gps for r in kept) >= 0.9 * n:
         return "spatial"
-    if all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]):
+    by_take: dict[str, list[PhotoRecord]] = {}
+    for r in kept:
+        by_take.setdefault(r.extra.get("take") or take_name(r), []).append(r)
+    if looks_sequential([r.rel for r in kept]) or all(take_is_ordered(v) for v in by_take.values()):
         return "sequential"
     logger.warning("sfm: %d unordered photos without GPS: exhaustive matching (quadratic time)", n)
     return "exhaustive"

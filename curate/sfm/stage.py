@@ -46,12 +46,40 @@ def name_ranges(names: list[str], limit: int = 6) -> str:
     return ", ".join(parts[:limit]) + (f" and {len(parts) - limit} more" if len(parts) > limit else "")
 
 
+def take_warning(stats: dict) -> str | None:
+    """The takes (videos, the photos of a folder) of a capture of several that did not join the others:
+    each named with how many of its frames are in the model curate uses; None when every take joined.
+    ``stats``: the SfM stage's statistics (``takes``: :func:`curate.sfm.prep.take_counts`)."""
+    from curate.sfm.config import TAKE_MIN_FRACTION
+    from curate.sfm.prep import takes_not_joined
+    out = takes_not_joined(stats.get("takes") or [], TAKE_MIN_FRACTION)
+    if not out:
+        return None
+    names = ", ".join(t["take"] for t in out)
+    each = "; ".join(f"take {t['take']}: {t['n_in_model']} of {t['n_frames']} "
+                     f"{'frames' if t['kind'] == 'video' else 'photos'} in the model"
+                     + (f" ({t['n_in_other_parts']} in a model of their own)" if t["n_in_other_parts"] else "")
+                     for t in out)
+    return (f"{each}: {'it shares' if len(out) == 1 else 'they share'} too little with the other takes to be "
+            f"placed with them (film a stretch that overlaps another take, or curate {names} "
+            f"{'on its own' if len(out) == 1 else 'each on its own'})")
+
+
 def split_warning(run_dir: Path, each: bool = False) -> str | None:
     """A warning when SfM left kept photos out of the model curate uses (the capture split, or
-    photos that did not register): the models' sizes and which photos are lost; None when it kept all.
+    photos that did not register): the takes that did not join (:func:`take_warning`), the models'
+    sizes and which photos are lost; None when it kept all.
     ``each`` (``--on-split each``): the other parts of >= 10 photos are curated in ``RUN/parts``."""
     from curate.core.stage import read_stage
     st = (read_stage(Path(run_dir) / "sfm") or {}).get("stats", {})
+    takes = take_warning(st)
+    rest = _split_text(st, run_dir, each)
+    if takes is None or rest is None:
+        return takes or rest
+    return f"{takes}. {rest[0].upper()}{rest[1:]}"
+
+
+def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
     if each and len(sizes := st.get("model_sizes") or []) > 1:
         from curate.sfm.config import MIN_PART
         own = [n for n in sizes[1:] if n >= MIN_PART]

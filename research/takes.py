@@ -1,0 +1,190 @@
+"""Several takes of one place (issue 36, part 3): test captures cut from the office walk, and how a
+run folder's SfM kept each take, against the office's ground truth.
+
+``make`` writes, under ``OUT``, one folder per case and a ``<case>.truth.json`` beside it (outside
+the folder, so curate does not see it) mapping each take's frames to office frames:
+
+* ``two_takes/``: ``walkA.mp4`` = office.mp4 frames 0..139 and the even frames of 140..239;
+  ``walkB.mp4`` = frames 372..240 and the odd frames of 239..141 (played backwards: a second
+  pass, the other way). They overlap over frames 140..239, each with every other frame there (the
+  same frame in both takes would be dropped as a near-duplicate, which no real second pass has).
+* ``two_takes_apart/``: ``walkA.mp4`` = frames 0..199, ``walkB.mp4`` = frames 372..200 (backwards):
+  the takes meet only where the walk turned from one to the other (frames 199 and 200, far apart in
+  name order) and where it comes back to places it saw before.
+* ``three_takes/``: the same two and ``fox.mp4``, the fox photos (another scene) as a 10 fps
+  video cropped to 540x360: a take that cannot join.
+* ``video_photos/``: ``walk.mp4`` = office.mp4 frames 0..186, and every 5th office JPEG of
+  frames 187..372 as photos. They share nothing but what the walk sees twice.
+
+``eval`` reads ``RUN/sfm`` (``images.json``, ``cameras.json``, ``stage.json``) and prints one JSON
+object: the models' sizes, per take its frames and how many are in the kept model, the matching
+and mapping seconds, and the median / max rotation error of the kept frames with ground truth
+after one similarity alignment of all of them (:func:`research.align.pose_errors`).
+
+    python3 -m research.takes make --office ../shared/data/office --fox ../shared/data/fox --out /tmp/takes
+    nice -n 10 python3 -m curate sfm /tmp/takes/two_takes --out /tmp/takes_runs/two
+    python3 -m research.takes eval /tmp/takes_runs/two --truth /tmp/takes/two_takes.truth.json \
+        --office ../shared/data/office
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+FPS = 10
+
+
+def _decode(video: Path) -> list[np.ndarray]:
+    """Every frame of ``video`` as [H, W, 3] uint8, in decoding order."""
+    import av
+    with av.open(str(video)) as c:
+        return [f.to_ndarray(format="rgb24") for f in c.decode(c.streams.video[0])]
+
+
+def write_video(frames: list[np.ndarray], path: Path, crf: int = 23) -> None:
+    """``frames`` ([H, W, 3] uint8, one size) as an H.264 video at 10 fps."""
+    import av
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with av.open(str(path), mode="w", format="mp4") as c:
+        s = c.add_stream("libx264", rate=FPS)
+        s.width, s.height, s.pix_fmt = frames[0].shape[1], frames[0].shape[0], "yuv420p"
+        s.options = {"crf": str(crf), "preset": "medium"}
+        for rgb in frames:
+            for pkt in s.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")):
+                c.mux(pkt)
+        for pkt in s.encode():
+            c.mux(pkt)
+
+
+def _fox_frames(fox: Path, size=(540, 360)) -> list[np.ndarray]:
+    """The fox photos (sorted), each centre-cropped to the aspect of ``size`` and resized to it."""
+    from PIL import Image, ImageOps
+    out = []
+    for p in sorted((fox / "images").iterdir()):
+        with Image.open(p) as im:
+            out.append(np.asarray(ImageOps.fit(ImageOps.exif_transpose(im).convert("RGB"), size, Image.LANCZOS)))
+    return out
+
+
+CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos")
+
+
+def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
+    """Write ``cases`` under ``out``; returns {case: truth} (also in ``out/<case>.truth.json``)."""
+    frames = _decode(office / "office.mp4")
+    n = len(frames)
+    a = list(range(0, 140)) + list(range(140, 240, 2))
+    b = list(range(n - 1, 239, -1)) + list(range(239, 140, -2))
+    done: dict = {}
+    if "two_takes" in cases or "three_takes" in cases:
+        d = out / "two_takes"
+        write_video([frames[i] for i in a], d / "walkA.mp4")
+        write_video([frames[i] for i in b], d / "walkB.mp4")
+        done["two_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b}, "photos": {}}
+    if "two_takes_apart" in cases:
+        d = out / "two_takes_apart"
+        a2, b2 = list(range(0, 200)), list(range(n - 1, 199, -1))
+        write_video([frames[i] for i in a2], d / "walkA.mp4")
+        write_video([frames[i] for i in b2], d / "walkB.mp4")
+        done["two_takes_apart"] = {"videos": {"walkA.mp4": a2, "walkB.mp4": b2}, "photos": {}}
+    if "three_takes" in cases:
+        d = out / "three_takes"
+        d.mkdir(parents=True, exist_ok=True)
+        for v in ("walkA.mp4", "walkB.mp4"):
+            shutil.copyfile(out / "two_takes" / v, d / v)
+        write_video(_fox_frames(fox), d / "fox.mp4")
+        done["three_takes"] = {"videos": {"walkA.mp4": a, "walkB.mp4": b, "fox.mp4": None}, "photos": {}}
+    if "video_photos" in cases:
+        d = out / "video_photos"
+        half = (n + 1) // 2
+        write_video(frames[:half], d / "walk.mp4")
+        imgs = sorted((office / "images").iterdir())
+        photos = {}
+        for i in range(half, n, 5):
+            shutil.copyfile(imgs[i], d / imgs[i].name)
+            photos[imgs[i].name] = i
+        done["video_photos"] = {"videos": {"walk.mp4": list(range(half))}, "photos": photos}
+    for k, v in done.items():
+        (out / f"{k}.truth.json").write_text(json.dumps(v))
+    return done
+
+
+def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
+    """How ``RUN/sfm`` kept each take, and the rotation errors of the kept frames with ground truth."""
+    from curate.core.cameras import Cameras
+    from curate.sfm.io import load_sfm
+    sfm = run / "sfm"
+    st = json.loads((sfm / "stage.json").read_text())
+    stats = st["stats"]
+    recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+    cams = load_sfm(run).cameras
+    reg = set(cams.names)
+
+    def take_of(r):
+        return (r.get("extra") or {}).get("video_rel") or "photos"
+    takes: dict = {}
+    for r in recs:
+        t = takes.setdefault(take_of(r), [0, 0])
+        t[0] += 1
+        t[1] += r["working"] in reg
+    out = {"run": str(run), "matcher": stats.get("matcher"), "mapper": stats.get("mapper"),
+           "model_sizes": stats.get("model_sizes"), "n_kept": stats.get("n_kept"),
+           "takes": {k: f"{v[1]} of {v[0]}" for k, v in takes.items()},
+           "takes_stats": stats.get("takes"), "n_pairs_matched": stats.get("n_pairs_matched"),
+           "timings": {k: st["timings"].get(k) for k in ("extract", "match", "map")},
+           "seconds": st.get("seconds")}
+    if truth_json is not None and office is not None:
+        from research.align import pose_errors
+        from research.datasets import load_office
+        truth = load_office(office)
+        tj = json.loads(truth_json.read_text())
+        gt_of = {}
+        for r in recs:
+            e = r.get("extra") or {}
+            if e.get("video"):
+                idx = tj["videos"].get(e["video_rel"])
+                if idx is not None:
+                    gt_of[r["working"]] = idx[e["frame"]]
+            elif r["rel"] in tj["photos"]:
+                gt_of[r["working"]] = tj["photos"][r["rel"]]
+        keep = [i for i, nm in enumerate(cams.names) if nm in gt_of]
+        if len(keep) >= 3:
+            sub = cams[keep]
+            est = Cameras(sub.c2w, sub.fx, sub.fy, sub.cx, sub.cy, sub.width, sub.height,
+                          names=tuple(truth.names[gt_of[nm]] for nm in sub.names))
+            e = pose_errors(est, truth)
+            out.update({"n_with_truth": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], 2),
+                        "rotation_deg_max": round(e["rotation_deg_max"], 2),
+                        "centre_rel_median": round(e["centre_rel_median"], 4)})
+    return out
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    m = sub.add_parser("make", help="write the test captures")
+    m.add_argument("--office", type=Path, required=True)
+    m.add_argument("--fox", type=Path, required=True)
+    m.add_argument("--out", type=Path, required=True)
+    m.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
+    e = sub.add_parser("eval", help="how a run's SfM kept each take")
+    e.add_argument("run", type=Path)
+    e.add_argument("--truth", type=Path, default=None, help="<case>.truth.json written by make")
+    e.add_argument("--office", type=Path, default=None)
+    a = ap.parse_args(argv)
+    if a.cmd == "make":
+        res = {k: {"videos": {v: (len(f) if f else "no truth") for v, f in c["videos"].items()},
+                   "photos": len(c["photos"])} for k, c in make(a.office, a.fox, a.out, tuple(a.cases)).items()}
+    else:
+        res = evaluate(a.run, a.truth, a.office)
+    print(json.dumps(res))
+    return res
+
+
+if __name__ == "__main__":
+    main()
