@@ -13,6 +13,11 @@ the folder, so curate does not see it) mapping each take's frames to office fram
   name order) and where it comes back to places it saw before.
 * ``three_takes/``: the same two and ``fox.mp4``, the fox photos (another scene) as a 10 fps
   video cropped to 540x360: a take that cannot join.
+* ``sessions/`` (``--cases sessions``, rendered, no office): a hand-held walk of kind ``two_sessions``
+  through the synthetic living room (:func:`curate.simulate.walks.hand_held_walk`, 320x240, 10 fps,
+  motion blur), cut at its middle into ``session1.mp4`` (a loop) and ``session2.mp4`` (a second,
+  lower loop the other way round, started elsewhere): a second pass that sees the room from
+  elsewhere, not the same frames. Ground truth: ``sessions.cameras.json``.
 * ``video_photos/``: ``walk.mp4`` = office.mp4 frames 0..186, and every 5th office JPEG of
   frames 187..372 as photos. They share nothing but what the walk sees twice.
 
@@ -71,7 +76,37 @@ def _fox_frames(fox: Path, size=(540, 360)) -> list[np.ndarray]:
     return out
 
 
-CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos")
+CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos", "sessions")
+
+
+def _render_chunk(args):
+    """Rendered, motion-blurred uint8 frames of cameras ``idx`` of the sessions walk (worker process)."""
+    n, idx = args
+    from curate.simulate.synthetic import make_scene
+    from curate.simulate.walks import hand_held_walk, motion_blur
+    scene = make_scene("livingroom", 0)
+    cams, omega = hand_held_walk(n, "two_sessions", seed=0, width=320, height=240, room=scene.interior, fps=FPS)
+    rgb, _ = scene.render(cams[list(idx)])
+    return [motion_blur(im, omega[i], float(cams.fx[i]), FPS / 120) for i, im in zip(idx, rgb)]
+
+
+def make_sessions(out: Path, n: int = 300, jobs: int = 2) -> dict:
+    """``out/sessions/session{1,2}.mp4`` and ``out/sessions.cameras.json`` (the rendered poses)."""
+    from multiprocessing import Pool
+
+    from curate.simulate.synthetic import make_scene
+    from curate.simulate.walks import hand_held_walk
+    scene = make_scene("livingroom", 0)
+    cams, _ = hand_held_walk(n, "two_sessions", seed=0, width=320, height=240, room=scene.interior, fps=FPS)
+    with Pool(jobs) as pool:
+        frames = [f for part in pool.map(_render_chunk, [(n, list(range(a, min(a + 20, n)))) for a in range(0, n, 20)])
+                  for f in part]
+    h = n // 2
+    write_video(frames[:h], out / "sessions" / "session1.mp4")
+    write_video(frames[h:], out / "sessions" / "session2.mp4")
+    cams.save(out / "sessions.cameras.json")
+    return {"videos": {"session1.mp4": list(range(h)), "session2.mp4": list(range(h, n))}, "photos": {},
+            "cameras": str(out / "sessions.cameras.json")}
 
 
 def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
@@ -109,6 +144,8 @@ def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
             shutil.copyfile(imgs[i], d / imgs[i].name)
             photos[imgs[i].name] = i
         done["video_photos"] = {"videos": {"walk.mp4": list(range(half))}, "photos": photos}
+    if "sessions" in cases:
+        done["sessions"] = make_sessions(out)
     for k, v in done.items():
         (out / f"{k}.truth.json").write_text(json.dumps(v))
     return done
@@ -135,14 +172,15 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     out = {"run": str(run), "matcher": stats.get("matcher"), "mapper": stats.get("mapper"),
            "model_sizes": stats.get("model_sizes"), "n_kept": stats.get("n_kept"),
            "takes": {k: f"{v[1]} of {v[0]}" for k, v in takes.items()},
-           "takes_stats": stats.get("takes"), "n_pairs_matched": stats.get("n_pairs_matched"),
+           "cross_take": stats.get("cross_take"), "n_pairs_matched": stats.get("n_pairs_matched"),
+           "n_pairs_verified": stats.get("n_pairs_verified"), "mappers_tried": stats.get("mappers_tried"),
            "timings": {k: st["timings"].get(k) for k in ("extract", "match", "map")},
            "seconds": st.get("seconds")}
-    if truth_json is not None and office is not None:
+    tj = json.loads(truth_json.read_text()) if truth_json is not None else {}
+    if tj and (office is not None or tj.get("cameras")):
         from research.align import pose_errors
         from research.datasets import load_office
-        truth = load_office(office)
-        tj = json.loads(truth_json.read_text())
+        truth = Cameras.load(tj["cameras"]) if tj.get("cameras") else load_office(office)
         gt_of = {}
         for r in recs:
             e = r.get("extra") or {}
