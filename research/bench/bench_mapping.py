@@ -1,0 +1,425 @@
+#!/usr/bin/env python
+"""Benchmark SfM's mapping against the pool size: photo folders of 1,000-3,000 frames and a 300-photo object.
+
+    python3 -m research.bench.bench_mapping --walk 1000 2000 3000 --object 300 [--mappers incremental global]
+
+Renders (once, cached under ``--work``, resumable frame by frame):
+
+* one long hand-held loop walk through the synthetic living room
+  (:func:`curate.simulate.walks.hand_held_walk`, 640x480, 10 frames a second, motion blur, as in
+  :mod:`research.bench.bench_capture`) as numbered JPEG photos ``frame_00000.jpg``...; the pool of
+  size N is a folder of hard links to its first N frames (photos, not a video: no ``--max-frames``
+  cap; ``--matcher auto`` picks sequential matching for numbered photos);
+* an object capture (:func:`object_orbit`): ``--object`` photos of 800x533 taken hand-held in three
+  rings around the coffee table of the same room, named ``IMG_0001.jpg``... as a phone names them.
+
+For each pool it runs ``curate sfm POOL --out RUN`` in a child process that times each SfM stage
+(wall and CPU seconds of the process, all threads: the machine is shared, so CPU seconds are the
+steadier figure) and records its peak memory, then maps the same matches again with each mapper of
+``--mappers`` (``incremental``, ``global``, ``hierarchical``; each in its own child process on a copy
+of the database, as :mod:`research.sfm_mappers` does), with each mapper's seconds, peak memory,
+registered fraction and pose errors against the rendered poses (median / max rotation, median
+centre error relative to the extent, after a similarity alignment). Every result is cached as
+JSON under ``--work/results``: a killed benchmark resumes where it stopped, and the smaller
+pools finish first. Prints one JSON line per result and, last, ``{"results": [...]}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+FPS = 10.0
+EXPOSURE_S = 1 / 120
+WORK = Path("/tmp/curate_bench_mapping")
+
+
+# ------------------------------------------------------------------ rendering
+def object_orbit(n: int = 300, seed: int = 0, width: int = 800, height: int = 533, fov_deg: float = 65.0,
+                 target=(2.5, 2.55, 0.5)):
+    """[n] cameras of a hand-held object capture: three rings around ``target`` (the living room's
+    coffee table) at 0.95, 1.3 and 1.65 m, 0.95-1.25 m from it, a photo every ~3.6 degrees, each
+    aimed at the object with a few centimetres of aim error and a little roll; photos named
+    ``IMG_0001.jpg``... Deterministic from (n, seed)."""
+    from curate.core.cameras import Cameras, look_at
+    rng = np.random.default_rng(seed)
+    rings = [(0.95, 1.25), (1.3, 1.1), (1.65, 0.95)]                       # (height, radius)
+    per = np.diff(np.linspace(0, n, len(rings) + 1).round().astype(int))
+    c, t = [], []
+    tgt = np.asarray(target, float)
+    for k, ((h, r), m) in enumerate(zip(rings, per)):
+        a = np.linspace(0, 2 * np.pi, m, endpoint=False) + 0.4 * k + rng.normal(0, 0.01, m)
+        rr = r + rng.normal(0, 0.03, m)
+        c.append(np.stack([tgt[0] + rr * np.cos(a), tgt[1] + rr * np.sin(a), h + rng.normal(0, 0.03, m)], 1))
+        t.append(tgt + rng.normal(0, 0.04, (m, 3)))
+    c, t = np.concatenate(c), np.concatenate(t)
+    c2w = look_at(c, t)
+    roll = rng.normal(0, 0.03, n)
+    cr, sr = np.cos(roll), np.sin(roll)
+    Rz = np.zeros((n, 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = cr, -sr, sr, cr, 1.0
+    c2w[:, :3, :3] = c2w[:, :3, :3] @ Rz
+    fx = width / 2 / np.tan(np.radians(fov_deg) / 2)
+    return Cameras(c2w, fx, fx, width / 2, height / 2, width, height,
+                   names=tuple(f"IMG_{i + 1:04d}.jpg" for i in range(n)))
+
+
+def capture_cameras(kind: str, n: int, seed: int = 0):
+    """(Cameras [n], angular speed [n] radians a frame or None) of capture ``kind`` ('walk' or 'object')."""
+    if kind == "walk":
+        from curate.simulate.synthetic import make_scene
+        from curate.simulate.walks import hand_held_walk
+        cams, omega = hand_held_walk(n, "loop", seed=seed, room=make_scene("livingroom", seed).interior, fps=FPS)
+        from curate.core.cameras import Cameras
+        return Cameras(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height,
+                       names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
+    return object_orbit(n, seed), None
+
+
+def _render_chunk(args):
+    """Render cameras ``idx`` of capture (kind, n, seed) into ``folder`` as JPEGs (in a worker process)."""
+    kind, n, seed, folder, idx = args
+    from PIL import Image
+
+    from curate.simulate.synthetic import make_scene
+    from curate.simulate.walks import motion_blur
+    scene = make_scene("livingroom", seed)
+    cams, omega = capture_cameras(kind, n, seed)
+    for i in idx:
+        rgb, _ = scene.render(cams[int(i)])
+        img = rgb[0] if omega is None else motion_blur(rgb[0], omega[i], float(cams.fx[i]), FPS * EXPOSURE_S)
+        dst = Path(folder) / cams.names[i]
+        Image.fromarray(img).save(str(dst) + ".part.jpg", quality=92)
+        os.replace(str(dst) + ".part.jpg", dst)
+    return len(idx)
+
+
+def render(work: Path, kind: str, n: int, upto: int, seed: int = 0, jobs: int = 2) -> Path:
+    """Folder of the capture ``kind`` of ``n`` frames with (at least) its first ``upto`` frames rendered;
+    frames already there are kept, so a killed rendering resumes. ``truth.npy``: [n, 4, 4] c2w."""
+    from multiprocessing import Pool
+    folder = work / "frames" / f"{kind}_livingroom_s{seed}_n{n}"
+    folder.mkdir(parents=True, exist_ok=True)
+    cams, _ = capture_cameras(kind, n, seed)
+    np.save(folder / "truth.npy", cams.c2w)
+    todo = [i for i in range(min(upto, n)) if not (folder / cams.names[i]).is_file()]
+    if not todo:
+        return folder
+    chunks = [(kind, n, seed, str(folder), todo[a:a + 10]) for a in range(0, len(todo), 10)]
+    t, done = time.perf_counter(), 0
+    with Pool(jobs) as pool:
+        for k in pool.imap(_render_chunk, chunks):
+            done += k
+            print(f"{folder.name}: rendered {done}/{len(todo)} ({time.perf_counter() - t:.0f} s)", file=sys.stderr,
+                  flush=True)
+    return folder
+
+
+def pool_folder(work: Path, frames: Path, n: int) -> Path:
+    """A folder of hard links to the first ``n`` photos of ``frames`` (the pool of size n)."""
+    names = sorted(p.name for p in frames.glob("*.jpg") if not p.name.endswith(".part.jpg"))[:n]
+    if len(names) < n:
+        raise RuntimeError(f"{frames}: {len(names)} frames rendered, {n} needed")
+    dst = work / "pools" / f"{frames.name}_first{n}"
+    dst.mkdir(parents=True, exist_ok=True)
+    for nm in names:
+        if not (dst / nm).exists():
+            os.link(frames / nm, dst / nm)
+    return dst
+
+
+def truth_cameras(frames: Path, kind: str):
+    """Ground-truth Cameras of a rendered capture folder (names as the photos)."""
+    from curate.core.cameras import Cameras
+    c2w = np.load(frames / "truth.npy")
+    cams, _ = capture_cameras(kind, len(c2w), int(frames.name.split("_s")[1].split("_")[0]))
+    assert np.allclose(cams.c2w, c2w)
+    return cams
+
+
+# ------------------------------------------------------------------ child processes
+def _timed(cmd: list[str], log: Path) -> dict:
+    """Run ``cmd`` (nice as the parent), its stderr to ``log``; its seconds, exit code and peak resident memory
+    (MB, of the process; COLMAP runs in it)."""
+    t = time.perf_counter()
+    with open(log, "w") as err:
+        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, ru = os.wait4(p.pid, 0)
+    rc = os.waitstatus_to_exitcode(status)
+    tail = log.read_text(errors="replace").strip().splitlines()[-3:]
+    return {"wall_s": round(time.perf_counter() - t, 1), "rc": rc, "peak_rss_mb": round(ru.ru_maxrss / 1024, 1),
+            "cpu_s": round(ru.ru_utime + ru.ru_stime, 1), **({"stderr_tail": tail} if rc else {})}
+
+
+def _clock() -> tuple[float, float]:
+    return time.perf_counter(), time.process_time()
+
+
+def _since(t0: tuple[float, float]) -> dict:
+    w, c = _clock()
+    return {"wall_s": round(w - t0[0], 2), "cpu_s": round(c - t0[1], 2)}
+
+
+def sfm_child(photos: str, run: str, out_json: str, extra: list[str]) -> int:
+    """``curate sfm PHOTOS --out RUN EXTRA...`` in this process, each SfM step timed (wall and CPU seconds of
+    the process, all its threads) by wrapping curate.sfm.colmap's steps; the times go to ``out_json``."""
+    import curate.sfm.colmap as C
+    from curate.cli import main
+    steps: dict = {}
+
+    def wrap(name, fn):
+        def f(*a, **k):
+            t0 = _clock()
+            try:
+                return fn(*a, **k)
+            finally:
+                steps.setdefault(name, []).append(_since(t0))
+        return f
+
+    for name, attr in (("ingest", "prepare_photos"), ("extract", "_extract"), ("match", "_match"), ("map", "map_capture"),
+                       ("map_incremental", "_map"), ("map_global", "_map_global")):
+        setattr(C, attr, wrap(name, getattr(C, attr)))
+    t0 = _clock()
+    rc = main(["sfm", photos, "--out", run, *extra])
+    Path(out_json).write_text(json.dumps({"rc": rc, "total": _since(t0), "steps": steps}))
+    return int(rc or 0)
+
+
+def map_hierarchical(cfg, db: Path, images: Path, out: Path):
+    """{id: Reconstruction} of COLMAP's hierarchical mapper (overlapping clusters of <= 500 images, each
+    mapped incrementally, then merged), with curate's incremental options (seed, initial pair)."""
+    import pycolmap
+    o = pycolmap.HierarchicalPipelineOptions()
+    o.num_threads = cfg.num_threads
+    io = o.incremental_options
+    io.num_threads, io.random_seed, io.min_num_matches = cfg.num_threads, cfg.seed, cfg.min_num_matches
+    io.mapper.random_seed, io.triangulation.random_seed = cfg.seed, cfg.seed
+    io.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    io.ba_refine_principal_point = False
+    out.mkdir(parents=True, exist_ok=True)
+    return pycolmap.hierarchical_mapping(db, images, out, options=o)
+
+
+def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> int:
+    """Map the matches of ``RUN/sfm/database.db`` (a copy) again with ``kind`` ('incremental', 'global',
+    'hierarchical', 'auto': curate's map_capture); sizes, seconds and pose errors go to ``out_json``."""
+    import shutil
+    import tempfile
+
+    import pycolmap
+
+    import curate.sfm.colmap as C
+    from curate.sfm.config import SfmConfig
+    sfm = Path(run) / "sfm"
+    n_kept = json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"]
+    cfg = SfmConfig(progress=False)
+    rec: dict = {"mapper": kind, "n_kept": n_kept}
+    with tempfile.TemporaryDirectory(dir=str(Path(run).parent)) as tmp:
+        db = Path(tmp) / "database.db"
+        shutil.copy2(sfm / "database.db", db)
+        pycolmap.set_random_seed(cfg.seed)
+        t0 = _clock()
+        with C.colmap_log(Path(tmp) / "colmap.log"):
+            if kind == "incremental":
+                models = C._map(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, False)
+            elif kind == "global":
+                models = C._map_global(cfg, db, sfm / "images", Path(tmp) / "m")
+            elif kind == "hierarchical":
+                models = map_hierarchical(cfg, db, sfm / "images", Path(tmp) / "m")
+            elif kind == "auto":
+                stats: dict = {}
+                models = C.map_capture(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, stats)
+                rec["auto"] = stats
+            else:
+                raise ValueError(kind)
+        rec["map"] = _since(t0)
+        rec.update(model_record(models, n_kept, truth, capture))
+    Path(out_json).write_text(json.dumps(rec))
+    return 0
+
+
+def model_record(models: dict, n_kept: int, truth: str, capture: str) -> dict:
+    """Sizes, registered fraction, points and pose errors (against the rendered poses) of a mapper's models."""
+    from curate.sfm.colmap import cameras_from_reconstruction
+    from research.align import pose_errors
+    sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+    rec: dict = {"model_sizes": sizes, "registered_fraction": round(sizes[0] / n_kept, 4) if sizes else 0.0}
+    if not sizes:
+        return rec
+    best = max(models.values(), key=lambda r: r.num_reg_images())
+    rec["n_points3D"] = int(best.num_points3D())
+    rec["mean_reprojection_error_px"] = round(float(best.compute_mean_reprojection_error()), 3)
+    cams = cameras_from_reconstruction(best, warn=False)[0]
+    rec.update(pose_record(cams, truth_cameras(Path(truth), capture)))
+    return rec
+
+
+def pose_record(cams, truth) -> dict:
+    from research.align import pose_errors
+    e = pose_errors(cams, truth)
+    rd = np.asarray(e["rotation_deg"])
+    return {"n_matched": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], 3),
+            "rotation_deg_max": round(e["rotation_deg_max"], 3), "n_over_5deg": int((rd > 5).sum()),
+            "centre_rel_median": round(e["centre_rel_median"], 5), "centre_rel_max": round(e["centre_rel_max"], 5)}
+
+
+# ------------------------------------------------------------------ the benchmark
+def run_sfm(work: Path, name: str, photos: Path, frames: Path, capture: str, extra: list[str], force: bool) -> dict:
+    """``curate sfm`` of one pool (cached): stage times (wall, CPU), peak memory, kept / registered, pose errors."""
+    res = work / "results" / f"{name}.sfm.json"
+    if res.is_file() and not force:
+        return json.loads(res.read_text())
+    run = work / "runs" / name
+    if run.exists():
+        import shutil
+        shutil.rmtree(run)
+    steps = work / "results" / f"{name}.steps.json"
+    proc = _timed([sys.executable, "-m", "research.bench.bench_mapping", "--sfm-child", str(photos), str(run),
+                   str(steps), *extra], work / "results" / f"{name}.sfm.log")
+    rec: dict = {"name": name, "what": "sfm", "photos": str(photos), "options": extra, "process": proc}
+    if proc["rc"] == 0:
+        from curate.sfm.io import load_sfm
+        st = json.loads((run / "sfm" / "stage.json").read_text())
+        s = st["stats"]
+        rec.update({"n_photos": len(list(photos.glob("*.jpg"))), "n_kept": s["n_kept"], "matcher": s["matcher"],
+                    "mapper": s.get("mapper"), "mappers_tried": s.get("mappers_tried"),
+                    "n_registered": s.get("n_registered"), "registered_fraction": s.get("registered_fraction"),
+                    "model_sizes": s.get("model_sizes"), "n_pairs_verified": s.get("n_pairs_verified"),
+                    "n_points3D": s.get("n_points"), "stage_timings": st.get("timings"),
+                    "stage_seconds": st.get("seconds"), "steps": json.loads(steps.read_text())["steps"]})
+        rec.update(pose_record(load_sfm(run).cameras, truth_cameras(frames, capture)))
+    res.write_text(json.dumps(rec, indent=1))
+    return rec
+
+
+def run_map(work: Path, name: str, kind: str, frames: Path, capture: str, force: bool, tag: str = "") -> dict:
+    """One mapper on the matches of ``name``'s SfM run (cached)."""
+    res = work / "results" / f"{name}.map_{kind}{tag}.json"
+    if res.is_file() and not force:
+        return json.loads(res.read_text())
+    tmp = work / "results" / f"{name}.map_{kind}{tag}.child.json"
+    proc = _timed([sys.executable, "-m", "research.bench.bench_mapping", "--map-child", str(work / "runs" / name),
+                   kind, str(tmp), str(frames), capture], work / "results" / f"{name}.map_{kind}{tag}.log")
+    rec = {"name": name, "what": f"map_{kind}{tag}", "process": proc}
+    if proc["rc"] == 0:
+        rec.update(json.loads(tmp.read_text()))
+    res.write_text(json.dumps(rec, indent=1))
+    return rec
+
+
+def fit_exponent(n, t) -> float | None:
+    """Least-squares slope of log(t) against log(n): t ~ n^k (None under two sizes)."""
+    n, t = np.asarray(n, float), np.asarray(t, float)
+    if len(n) < 2 or np.any(t <= 0):
+        return None
+    return round(float(np.polyfit(np.log(n), np.log(t), 1)[0]), 3)
+
+
+def summarize(work: Path, tag: str = "") -> dict:
+    """Per pool: SfM's steps (CPU and wall seconds), peak memory, the mappers' times and errors, and the
+    growth exponents of SfM before (the incremental mapper) and after (curate's --mapper auto, mapped again
+    on the same matches) over the walk's pool sizes."""
+    res = work / "results"
+    rows = []
+    for f in sorted(res.glob("*.sfm.json")):
+        r = json.loads(f.read_text())
+        if r["process"]["rc"]:
+            rows.append({"name": r["name"], "error": r["process"].get("stderr_tail")})
+            continue
+        steps = {k: {"cpu_s": round(sum(x["cpu_s"] for x in v), 1), "wall_s": round(sum(x["wall_s"] for x in v), 1)}
+                 for k, v in r["steps"].items()}
+        row = {"name": r["name"], "n_photos": r["n_photos"], "n_kept": r["n_kept"], "matcher": r["matcher"],
+               "sfm_peak_rss_mb": r["process"]["peak_rss_mb"], "sfm_process_cpu_s": r["process"]["cpu_s"],
+               "sfm_process_wall_s": r["process"]["wall_s"], "steps": steps,
+               "incremental": {k: r.get(k) for k in ("model_sizes", "registered_fraction", "rotation_deg_median",
+                                                      "rotation_deg_max", "n_over_5deg", "centre_rel_median",
+                                                      "n_points3D")}}
+        row["incremental"].update(steps["map"])
+        pre = sum(steps[k]["cpu_s"] for k in ("ingest", "extract", "match") if k in steps)
+        row["before_cpu_s"] = round(pre + steps["map"]["cpu_s"], 1)
+        row["map_share_before"] = round(steps["map"]["cpu_s"] / row["before_cpu_s"], 3)
+        for g in sorted(res.glob(f"{r['name']}.map_*.json")):
+            if g.name.endswith(".child.json"):
+                continue
+            m = json.loads(g.read_text())
+            key = m["what"].removeprefix("map_")
+            if m["process"]["rc"]:
+                row[key] = {"error": m["process"].get("stderr_tail")}
+                continue
+            row[key] = {**m["map"], "peak_rss_mb": m["process"]["peak_rss_mb"],
+                        **{k: m.get(k) for k in ("model_sizes", "registered_fraction", "rotation_deg_median",
+                                                 "rotation_deg_max", "n_over_5deg", "centre_rel_median",
+                                                 "n_points3D", "auto")}}
+        after = row.get("auto" + tag)
+        if after and "cpu_s" in after:
+            row["after_cpu_s"] = round(pre + after["cpu_s"], 1)
+            row["map_share_after"] = round(after["cpu_s"] / row["after_cpu_s"], 3)
+        rows.append(row)
+    walks = sorted((r for r in rows if r["name"].startswith("walk_") and "error" not in r), key=lambda r: r["n_kept"])
+    n = [r["n_kept"] for r in walks]
+    fits = {"sizes": n, "sfm_before_cpu": fit_exponent(n, [r["before_cpu_s"] for r in walks])}
+    for k in ("ingest", "extract", "match", "map"):
+        fits[f"{k}_cpu"] = fit_exponent(n, [r["steps"].get(k, {}).get("cpu_s", 0) for r in walks])
+    for k in ("global", "hierarchical", "auto" + tag):
+        have = [r for r in walks if k in r and "cpu_s" in r[k]]
+        if len(have) == len(walks):
+            fits[f"map_{k}_cpu"] = fit_exponent(n, [r[k]["cpu_s"] for r in have])
+    if all("after_cpu_s" in r for r in walks):
+        fits["sfm_after_cpu"] = fit_exponent(n, [r["after_cpu_s"] for r in walks])
+    return {"rows": rows, "growth_exponents": fits}
+
+
+def main(argv=None) -> int:
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv[:1] == ["--sfm-child"]:
+        return sfm_child(argv[1], argv[2], argv[3], argv[4:])
+    if argv[:1] == ["--map-child"]:
+        return map_child(*argv[1:6])
+    if argv[:1] == ["--summary"]:   # --summary [WORK [TAG]]: the table of the cached results, as JSON
+        print(json.dumps(summarize(Path(argv[1]) if len(argv) > 1 else WORK, argv[2] if len(argv) > 2 else ""),
+                         indent=1))
+        return 0
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--walk", type=int, nargs="*", default=[1000, 2000, 3000], help="pool sizes of the walk")
+    ap.add_argument("--walk-frames", type=int, default=3000, help="frames of the whole walk (pools are its prefixes)")
+    ap.add_argument("--object", type=int, nargs="*", default=[300], help="photos of each object capture")
+    ap.add_argument("--mappers", nargs="*", default=["global", "hierarchical"],
+                    help="mappers to run again on each pool's matches (the SfM run itself maps with --sfm-mapper)")
+    ap.add_argument("--object-mappers", nargs="*", default=["global"], help="--mappers of the object captures")
+    ap.add_argument("--sfm-mapper", default="incremental", help="--mapper of the `curate sfm` runs")
+    ap.add_argument("--tag", default="", help="suffix of the mapper results' names (to keep a rerun apart)")
+    ap.add_argument("--work", type=Path, default=WORK, help="renders, pools, run folders and results")
+    ap.add_argument("--jobs", type=int, default=2, help="rendering processes")
+    ap.add_argument("--force", action="store_true", help="run again (renders stay cached)")
+    a = ap.parse_args(argv)
+    (a.work / "results").mkdir(parents=True, exist_ok=True)
+    out = []
+    todo = [("object", n, n) for n in a.object] + [("walk", a.walk_frames, n) for n in sorted(a.walk)]
+    for capture, total, n in todo:
+        frames = render(a.work, capture, total, n, jobs=a.jobs)
+        photos = pool_folder(a.work, frames, n)
+        name = f"{capture}_{n}"
+        r = run_sfm(a.work, name, photos, frames, capture, ["--mapper", a.sfm_mapper], a.force)
+        out.append(r)
+        print(json.dumps(r), flush=True)
+        if r["process"]["rc"]:
+            continue
+        for kind in (a.object_mappers if capture == "object" else a.mappers):
+            m = run_map(a.work, name, kind, frames, capture, a.force, a.tag)
+            out.append(m)
+            print(json.dumps(m), flush=True)
+    print(json.dumps({"results": out}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
