@@ -43,17 +43,18 @@ def test_each_photo_knows_its_take():
     assert t["walk.mp4"] == [recs[0].working] and t["photos in a/b/"] == ["a__b__IMG_2.jpg"]
 
 
-def test_video_and_numbered_photos_are_matched_in_order_not_exhaustively():
-    """Beyond the exhaustive limit, two videos, or a video and numbered photos, are matched
-    sequentially (each take along itself; across takes by retrieval); a video and unordered photos
-    still get exhaustive matching."""
+def test_videos_are_matched_in_order_and_a_video_with_photos_exhaustively():
+    """Beyond the exhaustive limit, two videos are matched sequentially (each take along itself;
+    across takes by retrieval); a video with photos, numbered or not, gets exhaustive matching
+    (matched sequentially, office.mp4's first half with every 5th photo of the second split and
+    left every photo out; exhaustive matching kept 30 of 38)."""
     cfg = SfmConfig(exhaustive_max_images=10)
     a = [frame("a.mp4", 0.1 * i, i) for i in range(12)]
     b = [frame("b.mp4", 0.1 * i, i) for i in range(12)]
     numbered = [photo(f"{i:05d}.jpg") for i in range(200, 260, 5)]
     unordered = [photo(n) for n in ("kitchen.jpg", "sofa.jpg", "door.jpg", "window.jpg")]
-    for recs, want in [(a + b, "sequential"), (a + numbered, "sequential"), (a + unordered, "exhaustive"),
-                       (a[:5] + b[:5], "exhaustive")]:
+    for recs, want in [(a + b, "sequential"), (numbered, "sequential"), (a + numbered, "exhaustive"),
+                       (a + unordered, "exhaustive"), (a[:5] + b[:5], "exhaustive")]:
         assign_takes(recs)
         assert choose_matcher(cfg, recs) == want
 

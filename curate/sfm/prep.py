@@ -158,13 +158,6 @@ def takes_of(kept: list[PhotoRecord]) -> dict[str, list[str]]:
     return out
 
 
-def take_is_ordered(recs: list[PhotoRecord]) -> bool:
-    """A take whose photos are in capture order by name: a video's frames, numbered photos, or under 3 photos."""
-    if all(r.extra.get("video") for r in recs):
-        return True
-    return len(recs) < 3 or looks_sequential(sorted(r.rel for r in recs))
-
-
 def cross_take_pairs(ranked, take_of: dict[str, str], per_take: int) -> list[tuple[str, str]]:
     """The image pairs to match between takes, from a retrieval ranking.
 
@@ -211,9 +204,9 @@ def takes_not_joined(takes: list[dict], min_fraction: float) -> list[dict]:
 
 def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     """'auto': exhaustive up to ``exhaustive_max_images``; beyond: spatial with GPS on most photos,
-    sequential when every take is in capture order (video frames, numbered photos: each take is
-    matched along itself, and with the other takes by :func:`cross_take_pairs`), else exhaustive
-    (slow but complete)."""
+    sequential for video frames (one video or several: each take is matched along itself, and with
+    the other takes by :func:`cross_take_pairs`) and numbered photos, else exhaustive (slow but
+    complete: a video with photos)."""
     if cfg.matcher != "auto":
         return cfg.matcher
     n = len(kept)
@@ -221,10 +214,11 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
         return "exhaustive"
     if sum(r.has_gps for r in kept) >= 0.9 * n:
         return "spatial"
-    by_take: dict[str, list[PhotoRecord]] = {}
-    for r in kept:
-        by_take.setdefault(r.extra.get("take") or take_name(r), []).append(r)
-    if looks_sequential([r.rel for r in kept]) or all(take_is_ordered(v) for v in by_take.values()):
+    # Video frames, or numbered photos: sequential (several videos: each along itself, and with the
+    # others by cross-take retrieval). A video with photos stays exhaustive: matched sequentially, the
+    # office video with every 5th office photo of the other half split and left all the photos out
+    # (docs/sfm.md, "Several takes of one place"), where exhaustive matching kept 30 of 38.
+    if all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]):
         return "sequential"
     logger.warning("sfm: %d unordered photos without GPS: exhaustive matching (quadratic time)", n)
     return "exhaustive"
