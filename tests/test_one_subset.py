@@ -120,6 +120,21 @@ def test_the_verdict_names_both_rivals_with_intervals_and_the_coverage():
     assert v["against"] == {"random": "ahead of", "fvs": "level with"}
 
 
+def test_the_budget_advice_says_its_range_and_whether_it_was_measured_on_the_capture():
+    """`--budget auto` without the evaluation: the range and a warning that the rule was fitted on other
+    captures; with the check: the measured advice, and the command when the export holds too few."""
+    from curate.report.verdict import verdict
+    auto = {"budget": 60, "low": 48, "high": 62, "tolerance_db": 0.5}
+    rep = {"n_candidates": 160, "selection": {"chosen": list(range(60)), "budget_auto": auto}}
+    hm = verdict(rep)["how_many"]
+    assert hm.startswith("How many: --budget auto predicted 60 (48 to 62) for 0.5 dB from the poses alone")
+    assert "fitted on other captures" in hm and "measured on this capture" not in hm
+    rep.update(run_dir="RUN", budget_check={"budget": 90, "low": 75, "high": 110, "tolerance_db": 0.5})
+    hm = verdict(rep)["how_many"]
+    assert "measured on this capture, about 90 (75 to 110) come within 0.5 dB" in hm
+    assert "`curate select RUN --budget 90`" in hm and "fitted on other captures" not in hm
+
+
 def test_coverage_counts_what_the_chosen_see_of_what_the_capture_sees():
     from types import SimpleNamespace
     from curate.select.stage import coverage

@@ -99,6 +99,9 @@ def verdict(rep: dict) -> dict:
                             "takes more"
         elif chk and chk.get("high") is not None:
             how_many += f"; measured on this capture, {chk['high']} or fewer suffice"
+        elif not chk:
+            how_many += (" (a rule fitted on other captures; on a real phone video it once advised a third of what "
+                         "was needed: the evaluation measures it on this capture)")
         how_many += "."
     return {"exported": exported, "coverage": coverage, "quality": quality, "short": short_line, "against": against,
             "how_many": how_many}
