@@ -685,8 +685,8 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     in_others = {r.image(i).name for r in models.values() if r is not best for i in r.reg_image_ids()}
     stats["takes"] = take_counts(kept, in_model, in_others)
     for t in takes_not_joined(stats["takes"], TAKE_MIN_FRACTION):
-        logger.warning("sfm: take %s: %d of %d frames in the model (%d in other models)", t["take"], t["n_in_model"],
-                       t["n_frames"], t["n_in_other_parts"])
+        logger.info("sfm: take %s: %d of %d frames in the model (%d in other models)", t["take"], t["n_in_model"],
+                    t["n_frames"], t["n_in_other_parts"])
     stats["mean_reprojection_error_px"] = float(best.compute_mean_reprojection_error())
     stats["mean_track_length"] = float(best.compute_mean_track_length())
     logger.info("sfm: %d / %d images registered, %d points, reprojection error %.2f px, mapping %.1f s",
