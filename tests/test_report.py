@@ -181,11 +181,11 @@ def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):
     assert body.index("warnbox") < body.index("<dl") and "video hall.mp4</dt><dd>50 frames decoded" in body
 
 
-@pytest.mark.parametrize("kind, says, not_says", [("walk", "eight synthetic walks", "skull"),
-                                                   ("object", "the skull", "eight synthetic walks")])
+@pytest.mark.parametrize("kind, says, not_says", [("walk", "on the office", "skull"),
+                                                   ("object", "the skull", "on the office")])
 def test_budget_auto_section_states_the_check_for_its_kind(kind, says, not_says):
-    """The "How many photos" section says how the law was checked for the capture's kind (a walk's
-    left-out walks, an object's unseen object), the chosen point and the note."""
+    """The "How many photos" section says how the law was checked for the capture's kind (the real
+    walk it was not fitted on; the real objects, each left out), the chosen point and the note."""
     from types import SimpleNamespace
     from curate.report.run_report import _budget_auto
     auto = {"budget": 12, "pool": 40, "tolerance_db": 0.5, "kind": kind, "predicted_loss_db": 0.45,
