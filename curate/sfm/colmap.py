@@ -9,8 +9,8 @@ config) -> SIFT extraction (one shared camera when every photo comes from the sa
 camera model at the same size, else one camera per photo) -> matching (exhaustive for
 small pools, sequential for ordered frames, spatial with GPS; loop detection with a
 vocabulary tree trained on the capture itself, never a download, so it works offline; with
-several takes, such as two videos or a video and photos, each take's frames are also matched
-with their most similar frames of the other takes, ``_match_across_takes``) ->
+several videos, each video's frames are also matched with their most similar frames of the
+other videos, ``_match_across_takes``; a video with photos is matched exhaustively) ->
 mapping (``map_capture``: incremental, initial pair with >= ``init_min_num_inliers``
 verified inliers; when its largest model leaves more than 5% of the photos out, COLMAP's
 global mapper on the same matches, kept where it agrees with the incremental parts and holds
