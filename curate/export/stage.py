@@ -77,11 +77,12 @@ def points_warning(model: dict, sfm: dict | None = None) -> str | None:
 
 def connectivity_warning(model: dict) -> str | None:
     """A warning when the exported images do not form one set connected through shared SfM points
-    (a tool that re-registers them, or 3DGS initialised from the points, sees separate pieces);
-    None when they do, or when the poses came without points (nothing to judge by)."""
+    (their poses are exported whole, but a tool that registers the subset again sees separate
+    pieces); None when they do, or when the poses came without points (nothing to judge by)."""
     comps = model.get("components") or []
     if model.get("n_points3D_source", 0) == 0 or len(comps) <= 1:
         return None
     return (f"the {sum(comps)} exported images form {len(comps)} groups that share no SfM points "
-            f"(sizes {', '.join(map(str, comps[:8]))}{', ...' if len(comps) > 8 else ''}): a larger budget "
-            "links them; COLMAP or 3DGS given this subset alone may see separate pieces")
+            f"(sizes {', '.join(map(str, comps[:8]))}{', ...' if len(comps) > 8 else ''}): their poses are "
+            "exported whole, but a tool that registers this subset again (COLMAP) sees separate pieces; a larger "
+            "budget links them")
