@@ -7,8 +7,9 @@ rho(k) of the pool (the quantity the law reads). Then, per kind of capture (walk
 * each capture's own alpha (the law's shape, ``loss = alpha * rho ** p`` with the product's p;
   geometric mean of loss / rho ** p over its points losing at least 0.05 dB);
 * leaving each capture out: alpha from the captures of its kind of *other scenes* (the highest,
-  as the product takes it, and their range; office.mp4 and the office walk are one scene; where no other real scene of the kind
-  exists, as for walks, the law fitted on the rendered walks, which never saw these captures), the
+  as the product takes it, and their range; office.mp4 and the office walk are one scene; where
+  no other real scene of the kind exists, as for walks, the law fitted on the rendered walks,
+  which never saw these captures), the
   budget it predicts for each tolerance on the capture's own curve, the budget measured for it
   (interpolated in log k between measured budgets) and the loss measured at the predicted budget;
 * the budget check (:mod:`curate.evaluate.check`) as the product runs it, emulated on the measured
