@@ -372,7 +372,7 @@ def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], t
     if len(listed) < len(new):
         logger.warning("sfm: %d of %d cross-take pairs left unmatched: COLMAP's pair list cannot name photos "
                        "with spaces in their names", len(new) - len(listed), len(new))
-    before = _n_verified(db, cfg.min_num_matches)
+    before = _pair_counts(db, cfg.min_num_matches)[1]
     if listed:
         path = db.parent / "cross_take_pairs.txt"
         path.write_text("".join(f"{a} {b}\n" for a, b in listed))
@@ -380,34 +380,42 @@ def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], t
         po.match_list_path = str(path)
         pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
     info = {"queries": len(queries), "pairs": len(pairs), "new_pairs": len(new),
-            "verified": _n_verified(db, cfg.min_num_matches) - before, "unlisted": len(new) - len(listed),
+            "verified": _pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
             "seconds": round(time.perf_counter() - t0, 2)}
     logger.info("sfm: cross-take matching (%d takes): %d frames queried, %d new pairs, %d verified in %.1f s",
                 len(takes), info["queries"], info["new_pairs"], info["verified"], info["seconds"])
     return info
 
 
-def _n_verified(db: Path, min_num_matches: int) -> int:
-    """How many image pairs of ``db`` have at least ``min_num_matches`` verified inliers."""
+def _pair_counts(db: Path, min_num_matches: int) -> tuple[int, int]:
+    """(image pairs of ``db`` with a two-view geometry, those with at least ``min_num_matches`` verified inliers)."""
     import pycolmap
     dbh = pycolmap.Database.open(db)
     try:
         _, inliers = dbh.read_two_view_geometry_num_inliers()
     finally:
         dbh.close()
-    return int(sum(n >= min_num_matches for n in inliers))
+    return len(inliers), int(sum(n >= min_num_matches for n in inliers))
 
 
-def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
+def _seeded_pipeline_options(cfg: SfmConfig):
+    """COLMAP's incremental pipeline options with ``cfg``'s threads, seed (mapper and triangulation) and
+    minimum matches: what mapping and the triangulation of known poses share."""
     import pycolmap
-    from tqdm import tqdm
-
     opts = pycolmap.IncrementalPipelineOptions()
     opts.num_threads = cfg.num_threads
     opts.random_seed = cfg.seed
     opts.mapper.random_seed = cfg.seed
     opts.triangulation.random_seed = cfg.seed
     opts.min_num_matches = cfg.min_num_matches
+    return opts
+
+
+def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
+    import pycolmap
+    from tqdm import tqdm
+
+    opts = _seeded_pipeline_options(cfg)
     opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
     opts.ba_refine_principal_point = False
     bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
@@ -656,13 +664,9 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         t = time.perf_counter()
         _match(cfg, db, matcher, takes_of(kept), stats)
         timings["match"] = round(time.perf_counter() - t, 2)
-        dbh = pycolmap.Database.open(db)
-        _, inliers = dbh.read_two_view_geometry_num_inliers()
-        dbh.close()
-        stats["n_pairs_matched"] = len(inliers)
-        stats["n_pairs_verified"] = int(sum(n >= cfg.min_num_matches for n in inliers))
+        stats["n_pairs_matched"], stats["n_pairs_verified"] = _pair_counts(db, cfg.min_num_matches)
         logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],
-                    len(inliers), timings["match"])
+                    stats["n_pairs_matched"], timings["match"])
         t = time.perf_counter()
         models = map_capture(cfg, db, images, out / "mapper", len(names), stats)
         timings["map"] = round(time.perf_counter() - t, 2)
@@ -1033,22 +1037,14 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
             t = time.perf_counter()
             _match(cfg, db, matcher)
             stats["match_seconds"] = round(time.perf_counter() - t, 2)
-            dbh = pycolmap.Database.open(db)
-            _, inliers = dbh.read_two_view_geometry_num_inliers()
-            dbh.close()
-            stats["n_pairs_verified"] = int(sum(n >= cfg.min_num_matches for n in inliers))
+            stats["n_pairs_verified"] = _pair_counts(db, cfg.min_num_matches)[1]
             sub = cams[kept]
             work_cams = Cameras(sub.c2w, np.array([wk[i][0] for i in kept]), np.array([wk[i][1] for i in kept]),
                                 np.array([wk[i][2] for i in kept]), np.array([wk[i][3] for i in kept]),
                                 ww[kept], hh[kept], sub.dist, tuple(names[i] for i in kept))
             rec = reconstruction_from_cameras(work_cams, image_ids=[dbim[names[i]].image_id for i in kept],
                                               camera_ids=[dbim[names[i]].camera_id for i in kept])
-            opts = pycolmap.IncrementalPipelineOptions()
-            opts.num_threads = cfg.num_threads
-            opts.random_seed = cfg.seed
-            opts.mapper.random_seed = cfg.seed
-            opts.triangulation.random_seed = cfg.seed
-            opts.min_num_matches = cfg.min_num_matches
+            opts = _seeded_pipeline_options(cfg)
             t = time.perf_counter()
             (work / "model").mkdir()
             tri = pycolmap.triangulate_points(rec, db, images, work / "model", clear_points=True, options=opts,
