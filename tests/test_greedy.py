@@ -157,6 +157,10 @@ def check_fresh_candidates(NodeState, cfg, backend):
     for j in (0, 7, 39):
         ref = compute_energy(cams[list(range(10)) + [10 + j]], nodes, cfg).energy
         assert abs(s[j] - ref) <= 1e-9 * ref
+    # one step of the placement: the best fresh candidate is added and the state's energy becomes its score
+    k = st_.add_best_of(fi)
+    assert s[k] == s.max() and k == int(np.flatnonzero(s == s.max())[0])
+    assert abs(st_.energy()[0] - s[k]) <= 1e-9 * s[k]
 
 
 def test_compiled_and_numpy_steps_agree_on_a_larger_pool():

@@ -127,6 +127,14 @@ class NodeState:
         fg = pow_gamma(n1, self.cfg.gamma) - pow_gamma(n1 - 1, self.cfg.gamma)
         return gain, fg
 
+    def add_best_of(self, index: PairIndex) -> int:
+        """Add the candidate camera of ``index`` (a pair index over candidates, not over the state's cameras)
+        that raises the energy most, the lowest index on ties; returns it. One step of the paper's
+        progressive placement (Algorithm 1): ``curate simulate`` and ``curate suggest`` both take it."""
+        k = argmax_lowest(self.scores_of(index), np.ones(index.n_cams, bool))
+        self.add(*index.camera_pairs(k))
+        return k
+
     def add_compiled(self, nodes: np.ndarray, bins: np.ndarray, index: PairIndex | None = None,
                      SA: np.ndarray | None = None, SF: np.ndarray | None = None) -> None:
         """:meth:`add` by the compiled kernel; with ``index``, also updates the candidate

@@ -26,7 +26,7 @@ import numpy as np
 
 from curate.core.cameras import Cameras, look_at
 from curate.select.energy import EnergyConfig
-from curate.select.greedy import NodeState, argmax_lowest
+from curate.select.greedy import NodeState
 from curate.select.visibility import build_pair_index
 
 log = logging.getLogger(__name__)
@@ -148,9 +148,7 @@ def progressive_placement(nodes: np.ndarray, box: tuple, free_box: tuple, cfg: P
         if len(cands) == 0:
             log.warning("no acceptable candidate at step %d: stopping", step)
             break
-        idx = build_pair_index(cands, nodes, cfg.energy.bins)
-        k = argmax_lowest(state.scores_of(idx), np.ones(len(cands), bool))
-        state.add(*idx.camera_pairs(k))
+        k = state.add_best_of(build_pair_index(cands, nodes, cfg.energy.bins))
         placed.append(cands[k])
         e, a, f = state.energy()
         trace.energy.append(e)

@@ -16,7 +16,7 @@ import numpy as np
 
 from curate.core.cameras import Cameras
 from curate.select.energy import EnergyConfig, EnergyTerms, energy_from_hist
-from curate.select.greedy import NodeState, argmax_lowest
+from curate.select.greedy import NodeState
 from curate.select.visibility import build_pair_index
 from curate.suggest.candidates import Feasibility
 
@@ -96,9 +96,7 @@ def place_cameras(capture: Cameras, nodes: np.ndarray, feas: Feasibility, k: int
         td = time.perf_counter()
         if len(cands) == 0:
             break
-        idx = build_pair_index(cands, nodes, energy.bins)
-        best = argmax_lowest(state.scores_of(idx), np.ones(len(cands), bool))
-        state.add(*idx.camera_pairs(best))
+        best = state.add_best_of(build_pair_index(cands, nodes, energy.bins))
         te = time.perf_counter()
         placed.append(cands[best])
         e, a, f = state.energy()
