@@ -24,7 +24,7 @@ import numpy as np
 
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
-    """{model id: Reconstruction} of ``kind`` ('incremental', 'global' or 'auto': curate's
+    """{model id: Reconstruction} of ``kind`` ('incremental', 'global', 'hierarchical[:N]' or 'auto': curate's
     :func:`curate.sfm.colmap.map_capture`) on the matches of ``db``, and its seconds."""
     import pycolmap
     pycolmap.set_random_seed(seed)
@@ -47,6 +47,11 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
         stats: dict = {}
         models = map_capture(SfmConfig(progress=False, seed=seed), db, images, out, n, stats)
         print(json.dumps({"auto": {k: stats[k] for k in ("mapper", "mappers_tried") if k in stats}}), flush=True)
+    elif kind.startswith("hierarchical"):  # 'hierarchical' or 'hierarchical:N' (clusters of at most N photos)
+        from curate.sfm.config import SfmConfig
+        from research.bench.bench_mapping import map_hierarchical
+        models = map_hierarchical(SfmConfig(progress=False, seed=seed), db, images, out,
+                                  int(kind.split(":")[1]) if ":" in kind else 500)
     elif kind == "global":
         opts = pycolmap.GlobalPipelineOptions()
         models = pycolmap.global_mapping(db, images, out, options=opts)
@@ -101,14 +106,44 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | 
     return new
 
 
+def part_rows(glob: dict, parts: dict, truth, frame_of: dict) -> list[dict]:
+    """Per model of ``parts`` (largest first): its size, first and last video frame, the largest
+    ``glob`` model's orientation disagreement with it (median, 90th percentile, max, degrees) and,
+    with ``truth``, the part's own rotation error (median, max) after its own similarity alignment."""
+    from curate.core.cameras import rotation_disagreement
+    from curate.sfm.colmap import cameras_from_reconstruction
+    from research.align import pose_errors
+    g = cameras_from_reconstruction(max(glob.values(), key=lambda r: r.num_reg_images()), warn=False)[0]
+    gi = {n: k for k, n in enumerate(g.names)}
+    rows = []
+    for rec in sorted(parts.values(), key=lambda r: -r.num_reg_images()):
+        pc = cameras_from_reconstruction(rec, warn=False)[0]
+        both = np.array([(gi[n], k) for k, n in enumerate(pc.names) if n in gi]).reshape(-1, 2)
+        d = rotation_disagreement(g.rotations[both[:, 0]], pc.rotations[both[:, 1]])
+        fr = sorted(frame_of.get(n, -1) for n in pc.names)
+        row = {"photos": len(pc.names), "frames": [fr[0], fr[-1]]}
+        if len(d):
+            row.update({"disagreement_median": round(float(np.median(d)), 2),
+                        "disagreement_p90": round(float(np.percentile(d, 90)), 2),
+                        "disagreement_max": round(float(d.max()), 2)})
+        if truth is not None and len(pc.names) >= 3:
+            e = pose_errors(*truth_for(pc, truth, frame_of))
+            row.update({"rotation_deg_median": round(e["rotation_deg_median"], 2),
+                        "rotation_deg_max": round(e["rotation_deg_max"], 2)})
+        rows.append(row)
+    return rows
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
-    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto")
+    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N)")
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")
+    ap.add_argument("--parts", action="store_true", help="per incremental part: the global model's disagreement "
+                    "(median, 90th percentile, max) and the part's own error against the truth")
     ap.add_argument("--dump", type=Path, default=None, help="write each kept frame's pose error to this JSON file")
     a = ap.parse_args(argv)
     from curate.sfm.colmap import cameras_from_reconstruction
@@ -118,9 +153,10 @@ def main(argv=None) -> dict:
     db = sfm / "database.db"
     if not db.is_file():
         raise SystemExit(f"{db}: no database (run `curate sfm` first)")
-    n_kept = json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"]
+    n_kept = (json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"] if (sfm / "stage.json").is_file()
+              else sum(1 for _ in (sfm / "images").iterdir()))   # a stage stopped after matching
     truth = load_ground_truth(a.truth) if a.truth else None
-    recs = json.loads((sfm / "images.json").read_text()).get("photos", [])
+    recs = json.loads((sfm / "images.json").read_text()).get("photos", []) if (sfm / "images.json").is_file() else []
     frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
     out = {"run": str(a.run), "n_kept": n_kept}
     with tempfile.TemporaryDirectory() as tmp:
@@ -158,6 +194,8 @@ def main(argv=None) -> dict:
             from curate.sfm.colmap import part_agreement  # prefers the global model
             out["global"]["part_disagreement_deg"] = [d for d, _ in part_agreement(kept["global"],
                                                                                     kept["incremental"])]
+            if a.parts:
+                out["parts"] = part_rows(kept["global"], kept["incremental"], truth, frame_of)
     print(json.dumps(out))
     return out
 

@@ -359,3 +359,27 @@ def test_part_agreement_on_reconstructions():
     (d0, n0), (d1, n1), (d2, _) = part_agreement(glob, parts)
     assert d0 < 1e-3 and d1 > 5 and d2 is None
     assert n0 == set(sound.names) and n1 == set(bent.names)
+
+
+def test_a_part_bent_only_at_its_end_disagrees():
+    """office.mp4 without loop detection: the global model agreed with the median of the largest
+    incremental part (2.3 deg) and turned the first 10-15% of its frames by 12 deg. The check reads
+    the part's 90th percentile: a part with 15% of its frames turned by 12 deg does not agree; one
+    with a single stray frame still does."""
+    from scipy.spatial.transform import Rotation
+
+    from curate.sfm.colmap import part_agreement, reconstruction_from_cameras
+    ang = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(40, 1.0)], 1)
+    whole = Cameras(look_at(c, np.zeros((40, 3))), 500, 500, 320, 240, 640, 480,
+                    names=tuple(f"f{i:02d}.jpg" for i in range(40)))
+    glob = {0: reconstruction_from_cameras(whole)}
+
+    def turned(k):   # the part of all 40 cameras, its first k turned by 12 deg about the vertical
+        c2w = whole.c2w.copy()
+        c2w[:k, :3, :3] = Rotation.from_rotvec([0, 0, np.radians(12)]).as_matrix() @ c2w[:k, :3, :3]
+        return reconstruction_from_cameras(Cameras(c2w, 500, 500, 320, 240, 640, 480, names=whole.names))
+
+    (end, _), = part_agreement(glob, {0: turned(6)})
+    (stray, _), = part_agreement(glob, {0: turned(1)})
+    assert end > 3.0 and stray < 3.0

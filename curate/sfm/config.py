@@ -104,7 +104,8 @@ class SfmConfig:
     #                                   model kept where it holds more photos and agrees with every part
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
-    #                                   agrees with each (median orientation difference) within this many degrees
+    #                                   agrees with each within this many degrees (orientation difference, on
+    #                                   90% of the part's photos)
     min_num_matches: int = 15         # minimum verified matches for an image pair to count
     init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
     #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar

@@ -193,12 +193,14 @@ def sfm_child(photos: str, run: str, out_json: str, extra: list[str]) -> int:
     return int(rc or 0)
 
 
-def map_hierarchical(cfg, db: Path, images: Path, out: Path):
-    """{id: Reconstruction} of COLMAP's hierarchical mapper (overlapping clusters of <= 500 images, each
-    mapped incrementally, then merged), with curate's incremental options (seed, initial pair)."""
+def map_hierarchical(cfg, db: Path, images: Path, out: Path, cluster: int = 500):
+    """{id: Reconstruction} of COLMAP's hierarchical mapper (overlapping clusters of <= ``cluster`` images,
+    each mapped incrementally, then merged), with curate's incremental options (seed, initial pair).
+    Measured and not adopted (docs/sfm.md): its clusters split on office.mp4 and on the rendered walk."""
     import pycolmap
     o = pycolmap.HierarchicalPipelineOptions()
     o.num_threads = cfg.num_threads
+    o.clustering_options.leaf_max_num_images = cluster
     io = o.incremental_options
     io.num_threads, io.random_seed, io.min_num_matches = cfg.num_threads, cfg.seed, cfg.min_num_matches
     io.mapper.random_seed, io.triangulation.random_seed = cfg.seed, cfg.seed
