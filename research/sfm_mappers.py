@@ -52,6 +52,15 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
         from research.bench.bench_mapping import map_hierarchical
         models = map_hierarchical(SfmConfig(progress=False, seed=seed), db, images, out,
                                   int(kind.split(":")[1]) if ":" in kind else 500)
+    elif kind.startswith("subsample:"):  # the incremental mapper on every K-th photo only (research.large_pool_check)
+        from curate.sfm.colmap import _seeded_pipeline_options
+        from curate.sfm.config import SfmConfig
+        cfg = SfmConfig()
+        opts = _seeded_pipeline_options(cfg)
+        opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+        opts.ba_refine_principal_point = False
+        opts.image_names = sorted(p.name for p in images.iterdir())[::int(kind.split(":")[1])]
+        models = pycolmap.incremental_mapping(db, images, out, options=opts)
     elif kind == "global":
         opts = pycolmap.GlobalPipelineOptions()
         models = pycolmap.global_mapping(db, images, out, options=opts)
@@ -138,7 +147,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
-    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N)")
+    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N), "
+                    "subsample:K (incremental, every K-th photo)")
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")
@@ -196,6 +206,11 @@ def main(argv=None) -> dict:
                                                                                     kept["incremental"])]
             if a.parts:
                 out["parts"] = part_rows(kept["global"], kept["incremental"], truth, frame_of)
+        for kind in [k for k in kept if k.startswith("subsample:")]:
+            if kept.get("global") and kept[kind]:   # the check of a global model by a subsample's model
+                from curate.sfm.colmap import part_agreement
+                out[kind]["global_disagreement_p90_deg"] = [d for d, _ in part_agreement(kept["global"],
+                                                                                            kept[kind])]
     print(json.dumps(out))
     return out
 
