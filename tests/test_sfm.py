@@ -363,7 +363,7 @@ def test_part_agreement_on_reconstructions():
 
 def test_a_part_bent_only_at_its_end_disagrees():
     """office.mp4 without loop detection: the global model agreed with the median of the largest
-    incremental part (2.3 deg) and turned the first 10-15% of its frames by 12 deg. The check reads
+    incremental part (2.1 deg) and turned a tenth of its frames by 12-13 deg. The check reads
     the part's 90th percentile: a part with 15% of its frames turned by 12 deg does not agree; one
     with a single stray frame still does."""
     from scipy.spatial.transform import Rotation

@@ -581,7 +581,7 @@ def verify_frames(rec, names: list[str], max_rot_deg: float) -> dict[str, dict]:
 PART_AGREEMENT_PERCENTILE = 90
 """:func:`part_agreement`: the percentile of the per-frame disagreement that stands for a part. Not the
 median: a global model can agree with most of a part and bend its end (office.mp4 without loop
-detection: the largest part's median 2.3 deg, its 90th percentile 12.7 deg; docs/sfm.md)."""
+detection: the largest part's median 2.1 deg, its 90th percentile 12.3 deg; docs/sfm.md)."""
 
 
 def part_agreement(glob: dict, parts: dict, min_images: int = 10) -> list[tuple[float | None, set]]:
