@@ -39,11 +39,11 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     import pycolmap
 
-    from curate.sfm.colmap import (cameras_from_reconstruction, colmap_log, part_agreement,
-                                   _seeded_pipeline_options, verify_frames)
+    from curate.sfm.colmap import cameras_from_reconstruction, colmap_log, part_agreement, verify_frames
     from curate.sfm.config import SfmConfig
     from research.align import pose_errors
     from research.bench.bench_mapping import truth_cameras
+    from research.sfm_mappers import map_subset
     sfm = a.run / "sfm"
     rec = pycolmap.Reconstruction(str(sfm / "sparse" / "0"))
     names = sorted(im.name for im in rec.images.values() if im.has_pose)
@@ -66,13 +66,9 @@ def main(argv=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "d.db"
         shutil.copy2(sfm / "database.db", db)
-        opts = _seeded_pipeline_options(SfmConfig(progress=False))
-        opts.mapper.init_min_num_inliers = SfmConfig().init_min_num_inliers
-        opts.ba_refine_principal_point = False
-        opts.image_names = sub
         c0, t = time.process_time(), time.perf_counter()
         with colmap_log(Path(tmp) / "colmap.log"):
-            parts = pycolmap.incremental_mapping(db, sfm / "images", Path(tmp) / "m", options=opts)
+            parts = map_subset(db, sfm / "images", Path(tmp) / "m", sub)
         secs, cpu = time.perf_counter() - t, time.process_time() - c0
     sizes = sorted((int(r.num_reg_images()) for r in parts.values()), reverse=True)
     checks = part_agreement({0: rec}, parts)

@@ -53,14 +53,8 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
         models = map_hierarchical(SfmConfig(progress=False, seed=seed), db, images, out,
                                   int(kind.split(":")[1]) if ":" in kind else 500)
     elif kind.startswith("subsample:"):  # the incremental mapper on every K-th photo only (research.large_pool_check)
-        from curate.sfm.colmap import _seeded_pipeline_options
-        from curate.sfm.config import SfmConfig
-        cfg = SfmConfig()
-        opts = _seeded_pipeline_options(cfg)
-        opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
-        opts.ba_refine_principal_point = False
-        opts.image_names = sorted(p.name for p in images.iterdir())[::int(kind.split(":")[1])]
-        models = pycolmap.incremental_mapping(db, images, out, options=opts)
+        models = map_subset(db, images, out, sorted(p.name for p in images.iterdir())[::int(kind.split(":")[1])],
+                            seed)
     elif kind == "global":
         opts = pycolmap.GlobalPipelineOptions()
         models = pycolmap.global_mapping(db, images, out, options=opts)
@@ -119,16 +113,10 @@ def part_rows(glob: dict, parts: dict, truth, frame_of: dict) -> list[dict]:
     """Per model of ``parts`` (largest first): its size, first and last video frame, the largest
     ``glob`` model's orientation disagreement with it (median, 90th percentile, max, degrees) and,
     with ``truth``, the part's own rotation error (median, max) after its own similarity alignment."""
-    from curate.core.cameras import rotation_disagreement
-    from curate.sfm.colmap import cameras_from_reconstruction
+    from curate.sfm.colmap import part_disagreements
     from research.align import pose_errors
-    g = cameras_from_reconstruction(max(glob.values(), key=lambda r: r.num_reg_images()), warn=False)[0]
-    gi = {n: k for k, n in enumerate(g.names)}
     rows = []
-    for rec in sorted(parts.values(), key=lambda r: -r.num_reg_images()):
-        pc = cameras_from_reconstruction(rec, warn=False)[0]
-        both = np.array([(gi[n], k) for k, n in enumerate(pc.names) if n in gi]).reshape(-1, 2)
-        d = rotation_disagreement(g.rotations[both[:, 0]], pc.rotations[both[:, 1]])
+    for d, pc in part_disagreements(glob, parts):
         fr = sorted(frame_of.get(n, -1) for n in pc.names)
         row = {"photos": len(pc.names), "frames": [fr[0], fr[-1]]}
         if len(d):
@@ -143,12 +131,29 @@ def part_rows(glob: dict, parts: dict, truth, frame_of: dict) -> list[dict]:
     return rows
 
 
+def map_subset(db: Path, images: Path, out: Path, names: list[str], seed: int = 0) -> dict:
+    """{model id: Reconstruction} of COLMAP's incremental mapper with curate's options (seed, initial
+    pair, fixed principal point) on the photos ``names`` of ``db`` only."""
+    import pycolmap
+
+    from curate.sfm.colmap import _seeded_pipeline_options
+    from curate.sfm.config import SfmConfig
+    cfg = SfmConfig(progress=False, seed=seed)
+    opts = _seeded_pipeline_options(cfg)
+    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    opts.ba_refine_principal_point = False
+    opts.image_names = list(names)
+    out.mkdir(parents=True, exist_ok=True)
+    return pycolmap.incremental_mapping(db, images, out, options=opts)
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
-    ap.add_argument("--mappers", default="incremental,global", help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N), "
-                    "subsample:K (incremental, every K-th photo)")
+    ap.add_argument("--mappers", default="incremental,global",
+                    help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N), "
+                         "subsample:K (incremental, every K-th photo)")
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")
@@ -200,15 +205,14 @@ def main(argv=None) -> dict:
             out[kind] = row
             kept[kind] = models
             print(json.dumps({kind: row}), flush=True)
-        if "global" in kept and "incremental" in kept:  # what curate's --mapper auto checks before it
-            from curate.sfm.colmap import part_agreement  # prefers the global model
+        from curate.sfm.colmap import part_agreement   # what curate's --mapper auto checks before it
+        if "global" in kept and "incremental" in kept:  # prefers the global model
             out["global"]["part_disagreement_deg"] = [d for d, _ in part_agreement(kept["global"],
                                                                                     kept["incremental"])]
             if a.parts:
                 out["parts"] = part_rows(kept["global"], kept["incremental"], truth, frame_of)
         for kind in [k for k in kept if k.startswith("subsample:")]:
             if kept.get("global") and kept[kind]:   # the check of a global model by a subsample's model
-                from curate.sfm.colmap import part_agreement
                 out[kind]["global_disagreement_p90_deg"] = [d for d, _ in part_agreement(kept["global"],
                                                                                             kept[kind])]
     print(json.dumps(out))

@@ -596,6 +596,17 @@ def part_agreement(glob: dict, parts: dict, min_images: int = 10) -> list[tuple[
     from the truth); the global model of all 371 frames turned the 24 and 13 frames by 16 and
     20 deg (median) and the first 10% of the largest part's by more than 12 deg.
     """
+    out = []
+    for d, pc in part_disagreements(glob, parts):
+        q = round(float(np.percentile(d, PART_AGREEMENT_PERCENTILE)), 2) if len(d) >= min_images else None
+        out.append((q, set(pc.names)))
+    return out
+
+
+def part_disagreements(glob: dict, parts: dict) -> list[tuple[np.ndarray, Cameras]]:
+    """For each model of ``parts`` (largest first): [n] degrees by which the largest model of ``glob``
+    disagrees with it on the orientation of each of their n common images, once one rotation aligns
+    them (:func:`curate.core.cameras.rotation_disagreement`), and the part's cameras."""
     from curate.core.cameras import rotation_disagreement
     g = max(glob.values(), key=lambda r: r.num_reg_images())
     gc = cameras_from_reconstruction(g, warn=False)[0]
@@ -603,13 +614,8 @@ def part_agreement(glob: dict, parts: dict, min_images: int = 10) -> list[tuple[
     out = []
     for rec in sorted(parts.values(), key=lambda r: -r.num_reg_images()):
         pc = cameras_from_reconstruction(rec, warn=False)[0]
-        both = [(gi[n], k) for k, n in enumerate(pc.names) if n in gi]
-        d = None
-        if len(both) >= min_images:
-            a, b = np.array(both).T
-            d = round(float(np.percentile(rotation_disagreement(gc.rotations[a], pc.rotations[b]),
-                                          PART_AGREEMENT_PERCENTILE)), 2)
-        out.append((d, set(pc.names)))
+        both = np.array([(gi[n], k) for k, n in enumerate(pc.names) if n in gi], dtype=int).reshape(-1, 2)
+        out.append((rotation_disagreement(gc.rotations[both[:, 0]], pc.rotations[both[:, 1]]), pc))
     return out
 
 
