@@ -110,7 +110,7 @@ def refresh_after(cfg: RunConfig, run_dir: Path, stage: str, photos: str | None 
     """After ``stage`` ran on its own (``curate select RUN``, ...): redo the cheap stages after it
     (:data:`CHEAP_AFTER`) and the report, printing a line for each, and a line naming the evaluation
     when it is now out of date (with the command that refreshes it). Returns the stages' results."""
-    from curate.core.stage import stale_stages
+    from curate.core.stage import refresh_command, stale_stages
     from curate.export import stage as export
     from curate.report import stage as report
     from curate.select import stage as select
@@ -119,8 +119,8 @@ def refresh_after(cfg: RunConfig, run_dir: Path, stage: str, photos: str | None 
     results = [_done(fns[s](cfg, run_dir, False), []) for s in CHEAP_AFTER.get(stage, ())]
     stale = stale_stages(run_dir)
     if "evaluate" in stale:
-        print(f"{'evaluate':10s} out of date ({stale['evaluate']}): `curate evaluate {run_dir}` estimates the "
-              "current selection", flush=True)
+        print(f"{'evaluate':10s} out of date ({stale['evaluate']}): `{refresh_command(run_dir, stale, 'evaluate')}` "
+              "estimates the current selection", flush=True)
     out = report.run(cfg, run_dir, photos)
     print(out.line(), flush=True)
     return results + [out]

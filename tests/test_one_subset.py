@@ -94,6 +94,33 @@ def test_stale_stages_follow_the_recorded_inputs(tmp_path):
         assert set(st) == {"select", "evaluate", "export"} and "out of date" in st["evaluate"]
 
 
+def test_the_refresh_command_redoes_the_first_stale_stage(tmp_path):
+    """A run folder whose occupancy an earlier curate made (no inputs recorded): its selection, export
+    and evaluation are all out of date, and `curate export` or `curate evaluate` alone would leave them
+    so. The command the user is given starts from the occupancy."""
+    from curate.core.runfolder import claimed
+    from curate.core.stage import begin_stage, finish_stage, refresh_command, stale_stages, write_json_atomic
+    run = tmp_path / "run"
+    with claimed(run):
+        for name, key in (("sfm", "s1"), ("occupancy", "o1"), ("select", "x1"), ("export", "e1")):
+            begin_stage(run / name, key)
+            finish_stage(run / name, key, {}, 0.0)
+        write_json_atomic(run / "evaluate" / "summary.json", {"key": "v1", "inputs": {"select": "x1"}})
+        assert refresh_command(run, stale_stages(run), "evaluate") == f"curate evaluate {run}"
+        begin_stage(run / "select", "x2")
+        finish_stage(run / "select", "x2", {}, 0.0)
+        st = stale_stages(run)
+        assert refresh_command(run, st, "export") == f"curate export {run}"
+        assert refresh_command(run, st, "evaluate") == f"curate evaluate {run}"
+        rec = json.loads((run / "occupancy" / "stage.json").read_text())
+        rec.pop("inputs", None)                           # as an earlier curate wrote it
+        write_json_atomic(run / "occupancy" / "stage.json", rec)
+        st = stale_stages(run)
+        assert "earlier curate" in st["occupancy"]
+        assert refresh_command(run, st, "export") == f"curate occupancy {run}"
+        assert refresh_command(run, st, "evaluate") == f"curate occupancy {run} && curate evaluate {run}"
+
+
 @pytest.mark.parametrize("p, words", [({"mean": 1.2, "lo": 0.3, "hi": 2.1}, "ahead of"),
                                       ({"mean": -0.8, "lo": -1.5, "hi": -0.1}, "behind"),
                                       ({"mean": 0.5, "lo": -0.2, "hi": 1.2}, "level with"),

@@ -198,6 +198,24 @@ def stale_stages(run_dir: str | Path) -> dict[str, str]:
     return out
 
 
+def stale_root(stale: dict[str, str], stage: str) -> str:
+    """The stage to redo first so that ``stage`` of a run folder is current again, given ``stale``
+    (:func:`stale_stages`): the first out-of-date stage it reads, directly or not, else itself. A
+    record made by an earlier curate makes what reads it stale; only redoing its stage mends that."""
+    while (up := next((r for r in READS.get(stage, ()) if r in stale), None)) is not None:
+        stage = up
+    return stage
+
+
+def refresh_command(run_dir: str | Path, stale: dict[str, str], stage: str) -> str:
+    """The command that makes ``stage`` of ``run_dir`` current again: the stage command of
+    :func:`stale_root` (a stage command redoes the cheap stages after it), then, for the evaluation,
+    which no stage command redoes, ``curate evaluate``."""
+    root = stale_root(stale, stage)
+    return " && ".join([f"curate {root} {run_dir}"]
+                       + ([f"curate {stage} {run_dir}"] if stage == "evaluate" != root else []))
+
+
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename: a reader
     never sees half a file."""

@@ -151,8 +151,14 @@ def _warnings(run: _Run) -> list[str]:
                        (read_json(run.dir / "export" / "stage.json") or {}).get("warning")) if w]
     stale = r.get("stale") or {}
     if "export" in stale:
-        out.append(f"the export in {run.dir / 'export'} is of an earlier selection ({stale['export']}): "
-                   f"`curate export {run.dir}` makes it match this one")
+        from curate.core.stage import refresh_command, stale_root
+        cmd, root = refresh_command(run.dir, stale, "export"), stale_root(stale, "export")
+        if root != "export":   # the selection shown is out of date too: redo what it rests on
+            out.append(f"the selection and the export in {run.dir} rest on an out-of-date {root} stage "
+                       f"({stale[root]}): `{cmd}` redoes it and what follows")
+        else:
+            out.append(f"the export in {run.dir / 'export'} is of an earlier selection ({stale['export']}): "
+                       f"`{cmd}` makes it match this one")
     for v in run.sfm_stats.get("videos") or []:
         if v.get("stopped"):   # a damaged or cut video: the capture after that point is not in this run
             out.append(f"video {v.get('video')}: {v['stopped']}; nothing after that point is in this run")

@@ -35,8 +35,9 @@ def evaluation_status(run_dir: Path, stale: dict[str, str]) -> dict:
     """What the run's evaluation is worth now: ``status`` 'current' (it estimates the exported
     selection), 'out of date' (it estimates an earlier selection: ``why``, and ``of``: that
     selection's size and method) or 'not run'; ``refresh``: the command that (re)makes it."""
+    from curate.core.stage import refresh_command
     summ = Path(run_dir) / "evaluate" / "summary.json"
-    refresh = f"curate evaluate {run_dir}"
+    refresh = refresh_command(run_dir, stale, "evaluate")
     if not summ.is_file():
         return {"status": "not run", "refresh": refresh}
     if "evaluate" not in stale:
