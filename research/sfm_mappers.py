@@ -30,16 +30,12 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
     pycolmap.set_random_seed(seed)
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
-    if kind == "incremental":
+    if kind in ("incremental", "incremental:colmap_ba"):   # curate's options; ':colmap_ba': COLMAP's BA schedule
+        from curate.sfm.colmap import incremental_options
         from curate.sfm.config import SfmConfig
-        cfg = SfmConfig()
-        opts = pycolmap.IncrementalPipelineOptions()
-        opts.random_seed = seed
-        opts.mapper.random_seed = seed
-        opts.min_num_matches = cfg.min_num_matches
-        opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
-        opts.ba_refine_principal_point = False
-        models = pycolmap.incremental_mapping(db, images, out, options=opts)
+        cfg = SfmConfig(seed=seed, **({"global_ba_above": 10**9} if kind.endswith("colmap_ba") else {}))
+        n = len(pycolmap.Database.open(db).read_all_images())
+        models = pycolmap.incremental_mapping(db, images, out, options=incremental_options(cfg, n))
     elif kind == "auto":  # curate's own choice (SfmConfig.mapper = 'auto'), what `curate sfm` keeps
         from curate.sfm.colmap import map_capture
         from curate.sfm.config import SfmConfig
@@ -55,6 +51,18 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
     elif kind.startswith("subsample:"):  # the incremental mapper on every K-th photo only (research.large_pool_check)
         models = map_subset(db, images, out, sorted(p.name for p in images.iterdir())[::int(kind.split(":")[1])],
                             seed)
+    elif kind.startswith("chunks") or kind.startswith("rounds"):  # research.chunked_mapping: 'chunks[:SIZE:OVERLAP]',
+        from curate.sfm.config import SfmConfig                        # 'rounds[:SIZE]'
+        from research.chunked_mapping import map_chunks, map_rounds
+        cfg, stats = SfmConfig(progress=False, seed=seed), {}
+        names = sorted(p.name for p in images.iterdir())
+        if kind.startswith("chunks"):
+            size, over = (int(v) for v in kind.split(":")[1:3]) if ":" in kind else (400, 100)
+            models = map_chunks(cfg, db, images, out, names, stats, size, over)
+        else:
+            models = map_rounds(cfg, db, images, out, len(names), stats, int(kind.split(":")[1]) if ":" in kind
+                                else 250)
+        print(json.dumps({kind: stats}), flush=True)
     elif kind == "global":
         opts = pycolmap.GlobalPipelineOptions()
         models = pycolmap.global_mapping(db, images, out, options=opts)
@@ -136,12 +144,9 @@ def map_subset(db: Path, images: Path, out: Path, names: list[str], seed: int = 
     pair, fixed principal point) on the photos ``names`` of ``db`` only."""
     import pycolmap
 
-    from curate.sfm.colmap import _seeded_pipeline_options
+    from curate.sfm.colmap import incremental_options
     from curate.sfm.config import SfmConfig
-    cfg = SfmConfig(progress=False, seed=seed)
-    opts = _seeded_pipeline_options(cfg)
-    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
-    opts.ba_refine_principal_point = False
+    opts = incremental_options(SfmConfig(progress=False, seed=seed), len(names))
     opts.image_names = list(names)
     out.mkdir(parents=True, exist_ok=True)
     return pycolmap.incremental_mapping(db, images, out, options=opts)
@@ -152,8 +157,10 @@ def main(argv=None) -> dict:
     ap.add_argument("run", type=Path, help="a run folder whose SfM stage finished")
     ap.add_argument("--truth", type=Path, default=None, help="ground-truth folder (office, fox, templering)")
     ap.add_argument("--mappers", default="incremental,global",
-                    help="comma list of incremental, global, auto, hierarchical[:N] (clusters of <= N), "
-                         "subsample:K (incremental, every K-th photo)")
+                    help="comma list of incremental (curate's options), incremental:colmap_ba (COLMAP's global "
+                         "adjustment schedule), global, auto, hierarchical[:N] (clusters of <= N), subsample:K "
+                         "(incremental, every K-th photo), chunks[:SIZE:OVERLAP], rounds[:SIZE] "
+                         "(research.chunked_mapping)")
     ap.add_argument("--rematch", nargs="*", default=None, metavar="FIELD=VALUE",
                     help="match again first (on a copy of the database), with these SfmConfig overrides, "
                          "e.g. vocab_tree_descriptors=100000; prints the matching time")

@@ -70,6 +70,26 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
 
+def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
+    """A pool past global_ba_above photos gets the sparser global adjustment schedule (what keeps mapping a
+    long walk from growing as the square of it); a small pool keeps COLMAP's own, as before."""
+    from curate.sfm import colmap as sfm
+    colmap_default = pycolmap.IncrementalPipelineOptions()
+    got: dict = {}
+    monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
+    cfg = small_cfg(global_ba_above=300)
+    assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
+    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio, colmap_default.ba_global_max_refinements),
+                                  (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
+        sfm._map(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
+        o = got["options"]
+        assert o.ba_global_frames_ratio == pytest.approx(ratio) and o.ba_global_points_ratio == pytest.approx(ratio)
+        assert o.ba_global_max_refinements == refinements
+        assert o.mapper.init_min_num_inliers == cfg.init_min_num_inliers   # the rest as for any pool
+    with pytest.raises(ValueError, match="global_ba_growth"):
+        SfmConfig(global_ba_growth=1.0)
+
+
 class _Image:
     def __init__(self, name, frame_id):
         self.name, self.frame_id, self.has_pose = name, frame_id, True

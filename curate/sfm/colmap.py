@@ -411,13 +411,29 @@ def _seeded_pipeline_options(cfg: SfmConfig):
     return opts
 
 
+def incremental_options(cfg: SfmConfig, n_images: int):
+    """The incremental mapper's options for a pool of ``n_images`` photos: :func:`_seeded_pipeline_options`,
+    the initial pair's inliers (``cfg.init_min_num_inliers``), the principal point held; past
+    ``cfg.global_ba_above`` photos, a global bundle adjustment each time the model grows by the factor
+    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
+
+    The global adjustments are most of the incremental mapper's time on a long capture (the rendered
+    1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool (docs/sfm.md,
+    "Mapping past 1,000 photos")."""
+    opts = _seeded_pipeline_options(cfg)
+    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    opts.ba_refine_principal_point = False
+    if n_images > cfg.global_ba_above:
+        opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth
+        opts.ba_global_max_refinements = cfg.global_ba_refinements
+    return opts
+
+
 def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
     import pycolmap
     from tqdm import tqdm
 
-    opts = _seeded_pipeline_options(cfg)
-    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
-    opts.ba_refine_principal_point = False
+    opts = incremental_options(cfg, n_images)
     bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
     count = [0]
 

@@ -236,6 +236,9 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
                 models = C._map_global(cfg, db, sfm / "images", Path(tmp) / "m")
             elif kind == "hierarchical":
                 models = map_hierarchical(cfg, db, sfm / "images", Path(tmp) / "m")
+            elif kind == "incremental:colmap_ba":   # COLMAP's global adjustment schedule at every pool size
+                models = C._map(SfmConfig(progress=False, global_ba_above=10**9), db, sfm / "images", Path(tmp) / "m",
+                                n_kept, False)
             elif kind == "auto":
                 stats: dict = {}
                 models = C.map_capture(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, stats)
