@@ -71,8 +71,8 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
 
 
 def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
-    """A pool past global_ba_above photos gets the sparser global adjustment schedule (what keeps mapping a
-    long walk from growing as the square of it); a small pool keeps COLMAP's own, as before."""
+    """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
+    adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before."""
     from curate.sfm import colmap as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
