@@ -66,6 +66,18 @@ def registered_names(rec) -> list[str]:
     return [rec.image(i).name for i in rec.reg_image_ids()]
 
 
+def copy_image(out, src, iid: int, keypoints: bool) -> None:
+    """Add the registered image ``iid`` of the model ``src`` to the model ``out``: same id, name, camera
+    (added when missing) and pose; with every keypoint of it (``keypoints``) or none."""
+    import pycolmap
+    im = src.image(iid)
+    if not out.exists_camera(im.camera_id):
+        out.add_camera_with_trivial_rig(src.camera(im.camera_id))
+    kw = {"keypoints": np.array([p.xy for p in im.points2D], np.float64).reshape(-1, 2)} if keypoints else {}
+    out.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=iid, **kw),
+                                     im.cam_from_world())
+
+
 def crop(results: dict, pick: dict[str, object]):
     """A new ``pycolmap.Reconstruction`` (one frame) of the images ``pick`` names, each taken from the model
     ``results[pick[name]]`` (pose, camera, every keypoint), with each model's points that two or more of
@@ -78,11 +90,7 @@ def crop(results: dict, pick: dict[str, object]):
             im = rec.image(iid)
             if pick.get(im.name) != key:
                 continue
-            if not out.exists_camera(im.camera_id):
-                out.add_camera_with_trivial_rig(rec.camera(im.camera_id))
-            kp = np.array([p.xy for p in im.points2D], np.float64).reshape(-1, 2)
-            out.add_image_with_trivial_frame(pycolmap.Image(name=im.name, keypoints=kp, camera_id=im.camera_id,
-                                                            image_id=iid), im.cam_from_world())
+            copy_image(out, rec, iid, keypoints=True)
             ids.add(iid)
         for p in rec.points3D.values():
             els = [e for e in p.track.elements if e.image_id in ids]
@@ -246,10 +254,7 @@ def _join(cfg, db: Path, images: Path, out: Path, results: dict, pick: dict[str,
             im = src.image(iid)
             if pick.get(im.name) != k:
                 continue
-            if not poses.exists_camera(im.camera_id):
-                poses.add_camera_with_trivial_rig(src.camera(im.camera_id))
-            poses.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=iid),
-                                               im.cam_from_world())
+            copy_image(poses, src, iid, keypoints=False)
     opts = _seeded_pipeline_options(cfg)
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()

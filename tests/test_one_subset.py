@@ -74,16 +74,23 @@ def test_a_report_never_shows_another_selections_evaluation(tmp_path, capsys):
     assert rep["methods"]["selection"]["n_train"] == rep["estimate"]["budget"]
 
 
+def _finished_stages(run):
+    """sfm, occupancy, select and export finished in ``run`` (keys s1, o1, x1, e1), and an evaluation
+    that read selection x1."""
+    from curate.core.stage import begin_stage, finish_stage, write_json_atomic
+    for name, key in (("sfm", "s1"), ("occupancy", "o1"), ("select", "x1"), ("export", "e1")):
+        begin_stage(run / name, key)
+        finish_stage(run / name, key, {}, 0.0)
+    write_json_atomic(run / "evaluate" / "summary.json", {"key": "v1", "inputs": {"select": "x1"}})
+
+
 def test_stale_stages_follow_the_recorded_inputs(tmp_path):
     """A stage is out of date when a stage it reads was redone after it, or is itself out of date."""
     from curate.core.runfolder import claimed
-    from curate.core.stage import begin_stage, finish_stage, stale_stages, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, stale_stages
     run = tmp_path / "run"
     with claimed(run):
-        for name, key in (("sfm", "s1"), ("occupancy", "o1"), ("select", "x1"), ("export", "e1")):
-            begin_stage(run / name, key)
-            finish_stage(run / name, key, {}, 0.0)
-        write_json_atomic(run / "evaluate" / "summary.json", {"key": "v1", "inputs": {"select": "x1"}})
+        _finished_stages(run)
         assert stale_stages(run) == {}
         begin_stage(run / "select", "x2")                 # the selection is redone
         finish_stage(run / "select", "x2", {}, 0.0)
@@ -102,10 +109,7 @@ def test_the_refresh_command_redoes_the_first_stale_stage(tmp_path):
     from curate.core.stage import begin_stage, finish_stage, refresh_command, stale_stages, write_json_atomic
     run = tmp_path / "run"
     with claimed(run):
-        for name, key in (("sfm", "s1"), ("occupancy", "o1"), ("select", "x1"), ("export", "e1")):
-            begin_stage(run / name, key)
-            finish_stage(run / name, key, {}, 0.0)
-        write_json_atomic(run / "evaluate" / "summary.json", {"key": "v1", "inputs": {"select": "x1"}})
+        _finished_stages(run)
         assert refresh_command(run, stale_stages(run), "evaluate") == f"curate evaluate {run}"
         begin_stage(run / "select", "x2")
         finish_stage(run / "select", "x2", {}, 0.0)
