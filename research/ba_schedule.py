@@ -1,55 +1,146 @@
-"""The incremental mapper on a finished run's matches with COLMAP's schedule of global adjustments (or
-OPTION=VALUE overrides of pycolmap.IncrementalPipelineOptions): CPU and wall seconds, model sizes and
-pose error, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
+"""The incremental mapper on a finished run's matches, again: CPU and wall seconds, model sizes, pose
+error and the time of each global refinement, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
 
-    python3 -m research.ba_schedule RUN TRUTH KIND [ba_global_frames_ratio=1.5 ba_global_points_ratio=1.5 ...]
+    python3 -m research.ba_schedule RUN TRUTH KIND [OPTION=VALUE ...]
+    python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...]
 
-KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its video) or
-``walk`` (TRUTH a folder rendered by research.bench.bench_mapping, with truth.npy).
+Without ``--curate``: COLMAP's schedule of global adjustments, or OPTION=VALUE overrides of
+pycolmap.IncrementalPipelineOptions. With ``--curate``: curate's own mapping (``_map``, as ``curate
+sfm`` maps) under SfmConfig FIELD=VALUE overrides; with ``--direct-ba N`` the loop of
+research.incremental_loop maps instead, its global adjustments factored directly up to N photos
+(COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
+matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
+video) or ``walk`` (TRUTH a folder rendered by research.bench.bench_mapping, with truth.npy).
+
+``global_refinements``: [registered frames, seconds] of each global refinement; for the research loop
+timed around each call, for COLMAP's pipeline read from the
+timestamps of its log (from the refinement's log line to the next registration).
 """
-import json, shutil, sys, tempfile, time, resource
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import resource
+import shutil
+import sys
+import tempfile
+import time
+from datetime import datetime
 from pathlib import Path
-import numpy as np, pycolmap
-from curate.sfm.config import SfmConfig
-import curate.sfm.colmap as C
-run, truth, capture = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
-ov = dict(a.split("=") for a in sys.argv[4:])
-sfm = run / "sfm"
-cfg = SfmConfig(progress=False)
-tmp = Path(tempfile.mkdtemp()); db = tmp / "d.db"; shutil.copy2(sfm / "database.db", db)
-names = sorted(p.name for p in (sfm / "images").iterdir())
-orig = C.incremental_options
-def patched(cfg, n_images=0):
-    try:
-        o = orig(cfg, 0)   # COLMAP's schedule, then the overrides
-    except TypeError:
-        o = orig(cfg)
-    for k, v in ov.items():
-        setattr(o, k, type(getattr(o, k))(float(v)) if not isinstance(getattr(o, k), bool) else v == "1")
-    return o
-C.incremental_options = patched
-pycolmap.set_random_seed(0)
-r0 = resource.getrusage(resource.RUSAGE_SELF); t0 = time.perf_counter()
-with C.colmap_log(tmp / "colmap.log"):
-    models = C._map(cfg, db, sfm / "images", tmp / "m", len(names), False)
-r1 = resource.getrusage(resource.RUSAGE_SELF)
-rec = {"run": str(run), "overrides": ov, "wall_s": round(time.perf_counter() - t0, 1),
-       "cpu_s": round(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, 1)}
-if capture == "video":
-    from research.align import pose_errors
-    from research.datasets import load_ground_truth
-    from research.sfm_mappers import truth_for
-    recs = json.loads((sfm / "images.json").read_text()).get("photos", [])
-    frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
-    best = max(models.values(), key=lambda r: r.num_reg_images())
-    cams = C.cameras_from_reconstruction(best, warn=False)[0]
-    e = pose_errors(*truth_for(cams, load_ground_truth(Path(truth)), frame_of))
-    rd = np.asarray(e["rotation_deg"])
-    rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
-               rotation_deg_median=round(e["rotation_deg_median"], 3), rotation_deg_max=round(e["rotation_deg_max"], 3),
-               n_over_5deg=int((rd > 5).sum()))
-else:
-    from research.bench.bench_mapping import model_record
-    rec.update(model_record(models, len(names), truth, capture))
-print(json.dumps(rec), flush=True)
-shutil.rmtree(tmp)
+
+import numpy as np
+
+
+def refinements_from_log(log: Path) -> list[list[float]]:
+    """[[registered frames, seconds]] of each "Retriangulation and Global bundle adjustment" in a
+    COLMAP log (glog lines ``I20261127 00:01:02.123456 ...``): from its line to the next registration."""
+    out, start, frames = [], None, 0
+    for line in log.read_text(errors="replace").splitlines():
+        m = re.match(r"[IWE](\d{8} \d\d:\d\d:\d\d\.\d+)", line)
+        if not m:
+            continue
+        t = datetime.strptime(m.group(1), "%Y%m%d %H:%M:%S.%f").timestamp()
+        if "Retriangulation and Global bundle adjustment" in line:
+            start = t
+        elif start is not None and ("Registering image" in line or "Keeping" in line or "Discarding" in line):
+            out.append([frames, round(t - start, 2)])
+            start = None
+        r = re.search(r"num_reg_frames=(\d+)", line)
+        if r:
+            frames = int(r.group(1)) + 1   # the count before this registration
+    return out
+
+
+def main(argv: list[str]) -> dict:
+    import pycolmap
+
+    import curate.sfm.colmap as C
+    import research.incremental_loop as I
+    from curate.sfm.config import SfmConfig
+    run, truth, capture, rest = Path(argv[0]), argv[1], argv[2], list(argv[3:])
+    curate_mode = "--curate" in rest
+    first = direct = None
+    if "--direct-ba" in rest:
+        k = rest.index("--direct-ba")
+        direct = int(rest[k + 1])
+        del rest[k:k + 2]
+    if "--first" in rest:
+        k = rest.index("--first")
+        first = int(rest[k + 1])
+        del rest[k:k + 2]
+    ov = dict(a.split("=", 1) for a in rest if a != "--curate")
+    sfm = run / "sfm"
+    types = {f.name: f.type for f in dataclasses.fields(SfmConfig)}
+    cfg_over = {k: (int(v) if str(types[k]) == "int" else float(v)) for k, v in ov.items()} if curate_mode else {}
+    cfg = SfmConfig(progress=False, **cfg_over)
+    tmp = Path(tempfile.mkdtemp())
+    db = tmp / "d.db"
+    shutil.copy2(sfm / "database.db", db)
+    names = sorted(p.name for p in (sfm / "images").iterdir())[:first]
+
+    orig = C.incremental_options
+    if not curate_mode:
+        def patched(cfg, n_images=0):
+            o = orig(cfg, 0)   # COLMAP's schedule, then the overrides
+            for k, v in ov.items():
+                cur = getattr(o, k)
+                setattr(o, k, (v == "1") if isinstance(cur, bool) else type(cur)(float(v)))
+            return o
+        C.incremental_options = patched
+    if first:
+        inner = C.incremental_options
+
+        def only_first(cfg, n_images=0):
+            o = inner(cfg, n_images)
+            o.image_names = names
+            return o
+        C.incremental_options = only_first
+    timed: list = []
+    plain = I._global_refinement
+
+    def timed_refinement(pipeline, mapper, mapper_options, global_ba):
+        t = time.perf_counter()
+        plain(pipeline, mapper, mapper_options, global_ba)
+        timed.append([mapper.reconstruction.num_reg_frames(), round(time.perf_counter() - t, 2)])
+    I._global_refinement = timed_refinement
+
+    pycolmap.set_random_seed(0)
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    t0 = time.perf_counter()
+    with C.colmap_log(tmp / "colmap.log"):
+        if direct:
+            opts = C.incremental_options(cfg, len(names))
+            ba = opts.get_global_bundle_adjustment()
+            ba.ceres.max_num_images_direct_sparse_cpu_solver = direct
+            models = I.incremental_mapping(db, sfm / "images", tmp / "m", opts, ba)
+        else:
+            models = C._map(cfg, db, sfm / "images", tmp / "m", len(names), False)
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    rec = {"run": str(run), "mode": "curate" if curate_mode else "colmap_schedule", "overrides": ov,
+           "n_photos": len(names), "wall_s": round(time.perf_counter() - t0, 1),
+           "cpu_s": round(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, 1),
+           "peak_rss_mb": round(r1.ru_maxrss / 1024),
+           "loop": "research.incremental_loop" if direct else "colmap", "direct_ba_up_to": direct or 1000,
+           "global_refinements": timed or refinements_from_log(tmp / "colmap.log")}
+    if capture == "video":
+        from research.align import pose_errors
+        from research.datasets import load_ground_truth
+        from research.sfm_mappers import truth_for, video_frames
+        frame_of = video_frames(sfm)[1]
+        best = max(models.values(), key=lambda r: r.num_reg_images())
+        cams = C.cameras_from_reconstruction(best, warn=False)[0]
+        e = pose_errors(*truth_for(cams, load_ground_truth(Path(truth)), frame_of))
+        rd = np.asarray(e["rotation_deg"])
+        rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
+                   rotation_deg_median=round(e["rotation_deg_median"], 3),
+                   rotation_deg_max=round(e["rotation_deg_max"], 3), n_over_5deg=int((rd > 5).sum()))
+    else:
+        from research.bench.bench_mapping import model_record
+        rec.update(model_record(models, len(names), truth, capture))
+    shutil.rmtree(tmp)
+    return rec
+
+
+if __name__ == "__main__":
+    print(json.dumps(main(sys.argv[1:])), flush=True)

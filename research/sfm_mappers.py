@@ -71,6 +71,13 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
     return models, time.perf_counter() - t
 
 
+def video_frames(sfm: Path) -> tuple[list[dict], dict]:
+    """(the photo records of ``sfm``/images.json, {working name: frame index} of the photos taken from a
+    video): what :func:`truth_for` pairs a video's frames by."""
+    recs = json.loads((sfm / "images.json").read_text()).get("photos", []) if (sfm / "images.json").is_file() else []
+    return recs, {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
+
+
 def truth_for(cams, truth, frame_of: dict):
     """(``cams``, the ground truth) paired by name; for the frames of a video (``frame_of``: working
     name -> frame index) frame i of the video is ground-truth camera i, so ``cams`` are renamed to
@@ -175,11 +182,11 @@ def main(argv=None) -> dict:
     db = sfm / "database.db"
     if not db.is_file():
         raise SystemExit(f"{db}: no database (run `curate sfm` first)")
-    n_kept = (json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"] if (sfm / "stage.json").is_file()
-              else sum(1 for _ in (sfm / "images").iterdir()))   # a stage stopped after matching
+    stats = json.loads((sfm / "stage.json").read_text()).get("stats", {}) if (sfm / "stage.json").is_file() else {}
+    # a stage stopped after matching, or poses imported (their stats count registrations, not kept photos)
+    n_kept = stats.get("n_kept") or sum(1 for _ in (sfm / "images").iterdir())
     truth = load_ground_truth(a.truth) if a.truth else None
-    recs = json.loads((sfm / "images.json").read_text()).get("photos", []) if (sfm / "images.json").is_file() else []
-    frame_of = {r["working"]: r["extra"]["frame"] for r in recs if (r.get("extra") or {}).get("video")}
+    recs, frame_of = video_frames(sfm)
     out = {"run": str(a.run), "n_kept": n_kept}
     with tempfile.TemporaryDirectory() as tmp:
         if a.rematch is not None:

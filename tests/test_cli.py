@@ -201,7 +201,7 @@ def test_select_says_what_it_expected(tmp_path, capsys):
     assert "neither a run folder (no run.json) nor a pose file" in err and "--out" not in err
 
 
-def _posed_run(tmp_path, stages_done: str) -> "Path":
+def _posed_run(tmp_path, stages_done: str):
     """A run folder of the sample walk's first 8 photos with run.json and, when asked, its SfM stage."""
     from pathlib import Path
     from curate.config import RunConfig

@@ -252,6 +252,35 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
     assert not (tmp_path / "run" / "sfm" / "stage.json").exists()
 
 
+@pytest.mark.slow
+def test_curates_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
+    """The fox's matches mapped by COLMAP's pipeline and by research.incremental_loop, its steps in
+    Python with the global adjustment's options passed in (same options): the same photos
+    registered in one model, at the same poses."""
+    import shutil
+    from curate.sfm.colmap import cameras_from_reconstruction, incremental_options
+    from research.incremental_loop import incremental_mapping
+    sfm_dir, cfg = fox_run / "sfm", small_cfg()
+    n = sum(1 for _ in (sfm_dir / "images").iterdir())
+    models = {}
+    for who in ("colmap", "curate"):
+        db = tmp_path / f"{who}.db"
+        shutil.copy2(sfm_dir / "database.db", db)
+        opts = incremental_options(cfg, n)
+        pycolmap.set_random_seed(0)
+        models[who] = (pycolmap.incremental_mapping(db, sfm_dir / "images", tmp_path / who, options=opts)
+                       if who == "colmap" else
+                       incremental_mapping(db, sfm_dir / "images", tmp_path / who, opts, opts.get_global_bundle_adjustment()))
+    sizes = {k: sorted((r.num_reg_images() for r in m.values()), reverse=True) for k, m in models.items()}
+    assert sizes["curate"] == sizes["colmap"] and sizes["colmap"][0] >= 0.95 * n, sizes
+    cams = {k: cameras_from_reconstruction(max(m.values(), key=lambda r: r.num_reg_images()), warn=False)[0]
+            for k, m in models.items()}
+    assert set(cams["curate"].names) == set(cams["colmap"].names)
+    e = pose_errors(cams["curate"], cams["colmap"])
+    assert e["rotation_deg_max"] < 0.05 and e["centre_rel_median"] < 1e-3, e
+    assert (tmp_path / "curate" / "0" / "images.bin").is_file()   # written where COLMAP writes its models
+
+
 # ------------------------------------------------------------------ fox: accuracy, import
 @pytest.mark.slow
 def test_fox_sfm_matches_published_poses(fox_run):

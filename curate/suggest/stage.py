@@ -107,7 +107,6 @@ def read_run(run_dir: Path) -> RunInputs:
     if len(cams) < 2:
         raise ValueError(f"{run_dir / 'sfm' / 'cameras.json'}: {len(cams)} registered camera(s); need at least 2")
     records = json.loads((run_dir / "sfm" / "images.json").read_text())
-    st = json.loads((run_dir / "sfm" / "stage.json").read_text()) if (run_dir / "sfm" / "stage.json").is_file() else {}
     try:
         z = np.load(run_dir / "occupancy" / "occupancy.npz")
         occ, nodes = np.asarray(z["refined_mask"], bool), np.asarray(z["nodes_mask"], bool)

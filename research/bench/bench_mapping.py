@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -138,7 +137,6 @@ def pool_folder(work: Path, frames: Path, n: int) -> Path:
 
 def truth_cameras(frames: Path, kind: str):
     """Ground-truth Cameras of a rendered capture folder (names as the photos)."""
-    from curate.core.cameras import Cameras
     c2w = np.load(frames / "truth.npy")
     cams, _ = capture_cameras(kind, len(c2w), int(frames.name.split("_s")[1].split("_")[0]))
     assert np.allclose(cams.c2w, c2w)
@@ -254,7 +252,6 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
 def model_record(models: dict, n_kept: int, truth: str, capture: str) -> dict:
     """Sizes, registered fraction, points and pose errors (against the rendered poses) of a mapper's models."""
     from curate.sfm.colmap import cameras_from_reconstruction
-    from research.align import pose_errors
     sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
     rec: dict = {"model_sizes": sizes, "registered_fraction": round(sizes[0] / n_kept, 4) if sizes else 0.0}
     if not sizes:
