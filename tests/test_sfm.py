@@ -253,7 +253,7 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
 
 
 @pytest.mark.slow
-def test_curates_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
+def test_research_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
     """The fox's matches mapped by COLMAP's pipeline and by research.incremental_loop, its steps in
     Python with the global adjustment's options passed in (same options): the same photos
     registered in one model, at the same poses."""
@@ -263,7 +263,7 @@ def test_curates_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
     sfm_dir, cfg = fox_run / "sfm", small_cfg()
     n = sum(1 for _ in (sfm_dir / "images").iterdir())
     models = {}
-    for who in ("colmap", "curate"):
+    for who in ("colmap", "loop"):
         db = tmp_path / f"{who}.db"
         shutil.copy2(sfm_dir / "database.db", db)
         opts = incremental_options(cfg, n)
@@ -272,13 +272,13 @@ def test_curates_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
                        if who == "colmap" else
                        incremental_mapping(db, sfm_dir / "images", tmp_path / who, opts, opts.get_global_bundle_adjustment()))
     sizes = {k: sorted((r.num_reg_images() for r in m.values()), reverse=True) for k, m in models.items()}
-    assert sizes["curate"] == sizes["colmap"] and sizes["colmap"][0] >= 0.95 * n, sizes
+    assert sizes["loop"] == sizes["colmap"] and sizes["colmap"][0] >= 0.95 * n, sizes
     cams = {k: cameras_from_reconstruction(max(m.values(), key=lambda r: r.num_reg_images()), warn=False)[0]
             for k, m in models.items()}
-    assert set(cams["curate"].names) == set(cams["colmap"].names)
-    e = pose_errors(cams["curate"], cams["colmap"])
+    assert set(cams["loop"].names) == set(cams["colmap"].names)
+    e = pose_errors(cams["loop"], cams["colmap"])
     assert e["rotation_deg_max"] < 0.05 and e["centre_rel_median"] < 1e-3, e
-    assert (tmp_path / "curate" / "0" / "images.bin").is_file()   # written where COLMAP writes its models
+    assert (tmp_path / "loop" / "0" / "images.bin").is_file()   # written where COLMAP writes its models
 
 
 # ------------------------------------------------------------------ fox: accuracy, import
