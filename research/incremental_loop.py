@@ -1,6 +1,6 @@
-"""COLMAP's incremental mapper with the global bundle adjustment's options in our hands (measured, not
-adopted: written 2026-11-27, checked equal to COLMAP's pipeline on the fox; its effect past 1,000 photos
-not yet measured, see docs/sfm.md).
+"""COLMAP's incremental mapper with the global bundle adjustment's options in our hands (not adopted:
+checked equal to COLMAP's pipeline on the fox, 2026-11-27; its effect past 1,000 photos not yet measured,
+see docs/sfm.md).
 
 ``pycolmap.incremental_mapping`` builds the options of its global bundle adjustments inside C++, with
 Ceres' solver choice left at COLMAP's defaults: past ``max_num_images_direct_sparse_cpu_solver``
