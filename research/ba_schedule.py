@@ -18,7 +18,6 @@ timestamps of its log (from the refinement's log line to the next registration).
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import re
 import resource
@@ -52,28 +51,30 @@ def refinements_from_log(log: Path) -> list[list[float]]:
     return out
 
 
+def _take(args: list[str], flag: str) -> int | None:
+    """The integer after ``flag`` in ``args`` (both removed from it), or None when it is absent."""
+    if flag not in args:
+        return None
+    k = args.index(flag)
+    value = int(args[k + 1])
+    del args[k:k + 2]
+    return value
+
+
 def main(argv: list[str]) -> dict:
     import pycolmap
 
     import curate.sfm.colmap as C
     import research.incremental_loop as I
     from curate.sfm.config import SfmConfig
+    from research.sfm_mappers import sfm_config_overrides
     run, truth, capture, rest = Path(argv[0]), argv[1], argv[2], list(argv[3:])
     curate_mode = "--curate" in rest
-    first = direct = None
-    if "--direct-ba" in rest:
-        k = rest.index("--direct-ba")
-        direct = int(rest[k + 1])
-        del rest[k:k + 2]
-    if "--first" in rest:
-        k = rest.index("--first")
-        first = int(rest[k + 1])
-        del rest[k:k + 2]
-    ov = dict(a.split("=", 1) for a in rest if a != "--curate")
+    direct, first = _take(rest, "--direct-ba"), _take(rest, "--first")
+    pairs = [a for a in rest if a != "--curate"]
+    ov = dict(a.split("=", 1) for a in pairs)
     sfm = run / "sfm"
-    types = {f.name: f.type for f in dataclasses.fields(SfmConfig)}
-    cfg_over = {k: (int(v) if str(types[k]) == "int" else float(v)) for k, v in ov.items()} if curate_mode else {}
-    cfg = SfmConfig(progress=False, **cfg_over)
+    cfg = SfmConfig(progress=False, **(sfm_config_overrides(pairs) if curate_mode else {}))
     tmp = Path(tempfile.mkdtemp())
     db = tmp / "d.db"
     shutil.copy2(sfm / "database.db", db)
@@ -121,7 +122,8 @@ def main(argv: list[str]) -> dict:
            "n_photos": len(names), "wall_s": round(time.perf_counter() - t0, 1),
            "cpu_s": round(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, 1),
            "peak_rss_mb": round(r1.ru_maxrss / 1024),
-           "loop": "research.incremental_loop" if direct else "colmap", "direct_ba_up_to": direct or 1000,
+           "loop": "research.incremental_loop" if direct else "colmap", "direct_ba_up_to": direct or
+           pycolmap.BundleAdjustmentOptions().ceres.max_num_images_direct_sparse_cpu_solver,
            "global_refinements": timed or refinements_from_log(tmp / "colmap.log")}
     if capture == "video":
         from research.align import pose_errors

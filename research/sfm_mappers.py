@@ -89,24 +89,32 @@ def truth_for(cams, truth, frame_of: dict):
                    names=tuple(truth.names[frame_of[n]] for n in cams.names)), truth
 
 
+def sfm_config_overrides(pairs: list[str]) -> dict:
+    """{field: value} of SfmConfig from FIELD=VALUE strings, each value of its field's type."""
+    import dataclasses
+
+    from curate.sfm.config import SfmConfig
+    types = {f.name: str(f.type) for f in dataclasses.fields(SfmConfig)}
+    over = {}
+    for kv in pairs:
+        k, v = kv.split("=", 1)
+        t = types[k]
+        over[k] = (v.lower() in ("1", "true")) if t == "bool" else int(v) if t == "int" else \
+            float(v) if t == "float" else v
+    return over
+
+
 def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | None = None) -> Path:
     """A copy of ``db`` in ``tmp`` matched again by curate's matching step with SfmConfig
     ``overrides`` (FIELD=VALUE); the matcher and seconds go into ``out``. ``takes`` ({take: image
     names}, from images.json) lets the step match across takes, as ``curate sfm`` does."""
-    import dataclasses
     import shutil
 
     import pycolmap
 
     from curate.sfm.colmap import _match
     from curate.sfm.config import SfmConfig
-    types = {f.name: f.type for f in dataclasses.fields(SfmConfig)}
-    over = {}
-    for kv in overrides:
-        k, v = kv.split("=", 1)
-        t = str(types[k])
-        over[k] = (v.lower() in ("1", "true")) if t == "bool" else int(v) if t == "int" else \
-            float(v) if t == "float" else v
+    over = sfm_config_overrides(overrides)
     cfg = SfmConfig(**over)
     new = tmp / "rematched.db"
     shutil.copy2(db, new)
