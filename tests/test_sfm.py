@@ -236,6 +236,30 @@ def test_sfm_on_mixed_folder_and_skip_unchanged(tmp_path):
     assert json.loads((out / "stage.json").read_text())["key"] != key
 
 
+def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path):
+    """Image ids break ties in matching and mapping, so the same photos must get the same ids in every
+    run: a slow first photo (large, textured) finishes extraction after the small ones behind it."""
+    import sqlite3
+
+    from PIL import Image
+
+    from curate.sfm.colmap import _extract
+    rng = np.random.default_rng(0)
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    names = [f"p{i:02d}.png" for i in range(12)]
+    for i, name in enumerate(names):
+        side = 1600 if i == 0 else 96
+        Image.fromarray(rng.integers(0, 255, (side, side, 3), dtype=np.uint8)).save(photos / name)
+    db = tmp_path / "database.db"
+    _extract(small_cfg(max_image_size=1600, num_threads=2), db, photos, names[::-1], False)
+    with sqlite3.connect(db) as con:
+        rows = con.execute("SELECT name FROM images ORDER BY image_id").fetchall()
+        n_kp = con.execute("SELECT COUNT(*) FROM keypoints WHERE rows > 0").fetchone()[0]
+        n_cameras = con.execute("SELECT COUNT(*) FROM cameras").fetchone()[0]
+    assert [r[0] for r in rows] == names and n_kp == n_cameras == len(names)
+
+
 def test_refuses_run_folder_inside_photos(tmp_path):
     (tmp_path / "a.jpg").write_bytes(b"")
     with pytest.raises(ValueError, match="inside the photo folder"):

@@ -221,6 +221,11 @@ def _extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: b
     ext.sift.max_num_features = cfg.max_num_features
     ext.sift.peak_threshold = cfg.sift_peak_threshold
     mode = pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_IMAGE
+    # The photos enter the database in name order first, so their ids are too: the extractor's threads
+    # finish in any order and number the photos as they finish, and the ids break ties in matching and
+    # mapping (office.mp4's same frames, mapped whole in one run and split 357 + 21 in the next).
+    pycolmap.Database.open(db).close()
+    pycolmap.import_images(db, images, camera_mode=mode, image_names=sorted(names), options=reader)
     pycolmap.extract_features(db, images, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=ext, device=pycolmap.Device.cpu if not pycolmap.has_cuda
                               else pycolmap.Device.auto)
