@@ -71,23 +71,30 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
 
 
 def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
-    """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
-    adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before."""
+    """A pool past global_ba_above photos gets the sparser global adjustment schedule and one local
+    refinement per photo (the adjustments are most of a long walk's mapping time); a small pool keeps
+    COLMAP's own, as before."""
     from curate.sfm import colmap as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
     cfg = small_cfg(global_ba_above=300)
     assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
-    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio, colmap_default.ba_global_max_refinements),
-                                  (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
+    assert cfg.local_ba_refinements < colmap_default.ba_local_max_refinements
+    for n, ratio, refinements, local in [(300, colmap_default.ba_global_frames_ratio,
+                                          colmap_default.ba_global_max_refinements,
+                                          colmap_default.ba_local_max_refinements),
+                                         (301, cfg.global_ba_growth, cfg.global_ba_refinements,
+                                          cfg.local_ba_refinements)]:
         sfm._map(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
         o = got["options"]
         assert o.ba_global_frames_ratio == pytest.approx(ratio) and o.ba_global_points_ratio == pytest.approx(ratio)
-        assert o.ba_global_max_refinements == refinements
+        assert o.ba_global_max_refinements == refinements and o.ba_local_max_refinements == local
         assert o.mapper.init_min_num_inliers == cfg.init_min_num_inliers   # the rest as for any pool
     with pytest.raises(ValueError, match="global_ba_growth"):
         SfmConfig(global_ba_growth=1.0)
+    with pytest.raises(ValueError, match="local_ba_refinements"):
+        SfmConfig(local_ba_refinements=0)
 
 
 class _Image:
@@ -258,6 +265,22 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
         n_kp = con.execute("SELECT COUNT(*) FROM keypoints WHERE rows > 0").fetchone()[0]
         n_cameras = con.execute("SELECT COUNT(*) FROM cameras").fetchone()[0]
     assert [r[0] for r in rows] == names and n_kp == n_cameras == len(names)
+
+
+def test_a_part_inside_the_largest_model_is_no_split():
+    """COLMAP may keep a first model of a few photos that the next model also registers: nothing is
+    lost, so it is dropped (no split reported); a part with a photo of its own stays."""
+    from curate.sfm.colmap import reconstruction_from_cameras, without_contained
+    a = np.linspace(0, 1, 6)
+    c2w = look_at(np.stack([np.cos(a), np.sin(a), np.full(6, 0.3)], 1), np.zeros((6, 3)))
+    cams = Cameras(c2w, np.full(6, 300.0), np.full(6, 300.0), np.full(6, 160.0), np.full(6, 120.0),
+                   np.full(6, 320), np.full(6, 240), names=tuple(f"f{i}.jpg" for i in range(6)))
+    whole = reconstruction_from_cameras(cams[np.arange(5)])
+    inside = reconstruction_from_cameras(cams[np.array([1, 2, 3])])
+    own = reconstruction_from_cameras(cams[np.array([3, 4, 5])])
+    assert list(without_contained({0: inside, 1: whole})) == [1]
+    assert sorted(without_contained({0: whole, 1: inside, 2: own})) == [0, 2]
+    assert list(without_contained({0: inside})) == [0]
 
 
 def test_refuses_run_folder_inside_photos(tmp_path):

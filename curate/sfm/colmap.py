@@ -420,7 +420,8 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     """The incremental mapper's options for a pool of ``n_images`` photos: :func:`_seeded_pipeline_options`,
     the initial pair's inliers (``cfg.init_min_num_inliers``), the principal point held; past
     ``cfg.global_ba_above`` photos, a global bundle adjustment each time the model grows by the factor
-    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
+    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5),
+    and each new photo's local adjustment refined ``cfg.local_ba_refinements`` times at most (COLMAP: 2).
 
     The global adjustments are most of the incremental mapper's time on a long capture (the rendered
     1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool (docs/sfm.md,
@@ -431,6 +432,7 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     if n_images > cfg.global_ba_above:
         opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth
         opts.ba_global_max_refinements = cfg.global_ba_refinements
+        opts.ba_local_max_refinements = cfg.local_ba_refinements
     return opts
 
 
@@ -470,6 +472,19 @@ def _map_global(cfg: SfmConfig, db: Path, images: Path, out: Path):
 
 def _sizes(models: dict) -> list[int]:
     return sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+
+
+def without_contained(models: dict) -> dict:
+    """``models`` ({id: Reconstruction}) without those whose registered photos all lie in the largest
+    model: COLMAP keeps a first model that stopped at a few photos when the next one grows past it, and
+    such a part loses nothing, so it must not be reported as a split (the 3,000-frame walk: models of
+    2,998 and 3 photos, every photo in the first)."""
+    if len(models) < 2:
+        return models
+    best = max(models, key=lambda k: models[k].num_reg_images())
+    names = lambda r: {r.image(i).name for i in r.reg_image_ids()}  # noqa: E731
+    inside = names(models[best])
+    return {k: r for k, r in models.items() if k == best or not names(r) <= inside}
 
 
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
@@ -707,6 +722,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         timings["map"] = round(time.perf_counter() - t, 2)
     if not models:
         raise RuntimeError(f"sfm: COLMAP registered no images (see {out / 'colmap.log'})")
+    models = without_contained(models)
     best = max(models.values(), key=lambda r: r.num_reg_images())
     stats["model_sizes"] = _sizes(models)
     sparse = out / "sparse" / "0"
@@ -1018,7 +1034,6 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
     """
     import pycolmap
 
-    from curate.core.cameras import w2c_from_c2w
     from curate.sfm.ingest import PhotoRecord
     from tqdm import tqdm
 

@@ -109,6 +109,8 @@ class SfmConfig:
     #                                   (COLMAP: 1.1)
     global_ba_refinements: int = 1    # ... each refined (adjust, retriangulate, filter) at most this many times
     #                                   (COLMAP: 5)
+    local_ba_refinements: int = 1     # ... and each new photo's local bundle adjustment refined at most this many
+    #                                   times (COLMAP: 2; most of each registration's time on a long walk)
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
     #                                   agrees with each within this many degrees (orientation difference, on
@@ -149,9 +151,10 @@ class SfmConfig:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1):
             raise ValueError("SfmConfig.min_registered_fraction must be in [0, 1]")
-        if not self.global_ba_growth > 1 or self.global_ba_refinements < 1 or self.global_ba_above < 0:
-            raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements >= 1 and "
-                             "global_ba_above >= 0")
+        if not self.global_ba_growth > 1 or self.global_ba_refinements < 1 or self.local_ba_refinements < 1 \
+                or self.global_ba_above < 0:
+            raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements and local_ba_refinements "
+                             ">= 1 and global_ba_above >= 0")
         if self.cross_take_period < 1 or self.cross_take_num_images < 1:
             raise ValueError("SfmConfig.cross_take_period and cross_take_num_images must be >= 1")
         if self.vocab_tree_descriptors < 256 * 40:
