@@ -2,11 +2,12 @@
 error and the time of each global refinement, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
 
     python3 -m research.ba_schedule RUN TRUTH KIND [OPTION=VALUE ...]
-    python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...]
+    python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...] [OPTION=VALUE ...]
 
 Without ``--curate``: COLMAP's schedule of global adjustments, or OPTION=VALUE overrides of
-pycolmap.IncrementalPipelineOptions. With ``--curate``: curate's own mapping (``_map``, as ``curate
-sfm`` maps) under SfmConfig FIELD=VALUE overrides; with ``--direct-ba N`` the loop of
+pycolmap.IncrementalPipelineOptions (dotted for nested options: ``mapper.ba_global_ignore_redundant_points3D=1``).
+With ``--curate``: curate's own mapping (``_map``, as ``curate sfm`` maps) under SfmConfig
+FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set on top; with ``--direct-ba N`` the loop of
 research.incremental_loop maps instead, its global adjustments factored directly up to N photos
 (COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
 matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
@@ -18,6 +19,7 @@ timestamps of its log (from the refinement's log line to the next registration).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import resource
@@ -51,6 +53,16 @@ def refinements_from_log(log: Path) -> list[list[float]]:
     return out
 
 
+def set_option(options, path: str, value: str) -> None:
+    """``options.<path> = value`` (pycolmap options; ``path`` dotted for nested ones), the value read
+    as the type of the option's current value."""
+    *parents, name = path.split(".")
+    for p in parents:
+        options = getattr(options, p)
+    cur = getattr(options, name)
+    setattr(options, name, value.lower() in ("1", "true") if isinstance(cur, bool) else type(cur)(float(value)))
+
+
 def _take(args: list[str], flag: str) -> int | None:
     """The integer after ``flag`` in ``args`` (both removed from it), or None when it is absent."""
     if flag not in args:
@@ -73,20 +85,21 @@ def main(argv: list[str]) -> dict:
     direct, first = _take(rest, "--direct-ba"), _take(rest, "--first")
     pairs = [a for a in rest if a != "--curate"]
     ov = dict(a.split("=", 1) for a in pairs)
+    fields = {f.name for f in dataclasses.fields(SfmConfig)} if curate_mode else set()
+    colmap_ov = {k: v for k, v in ov.items() if k not in fields}
     sfm = run / "sfm"
-    cfg = SfmConfig(progress=False, **(sfm_config_overrides(pairs) if curate_mode else {}))
+    cfg = SfmConfig(progress=False, **sfm_config_overrides([a for a in pairs if a.split("=", 1)[0] in fields]))
     tmp = Path(tempfile.mkdtemp())
     db = tmp / "d.db"
     shutil.copy2(sfm / "database.db", db)
     names = sorted(p.name for p in (sfm / "images").iterdir())[:first]
 
     orig = C.incremental_options
-    if not curate_mode:
+    if colmap_ov or not curate_mode:
         def patched(cfg, n_images=0):
-            o = orig(cfg, 0)   # COLMAP's schedule, then the overrides
-            for k, v in ov.items():
-                cur = getattr(o, k)
-                setattr(o, k, (v == "1") if isinstance(cur, bool) else type(cur)(float(v)))
+            o = orig(cfg, n_images if curate_mode else 0)   # curate's or COLMAP's schedule, then the overrides
+            for k, v in colmap_ov.items():
+                set_option(o, k, v)
             return o
         C.incremental_options = patched
     if first:
