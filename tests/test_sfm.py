@@ -126,6 +126,8 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
     from curate.sfm import colmap as sfm
     calls = []
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: [(1.0, set())] * len(p))   # the global model agrees
+    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg, trusted=None:      # and its frames check out
+                        {x: {"ok": True, "why": ""} for x in names})
     monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {i: _Model(n) for i, n in enumerate(inc)})
     monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or
                         {i: _Model(n) for i, n in enumerate(glob)})
@@ -140,31 +142,46 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
     assert (tmp_path / "database.db").read_bytes() == b"db"   # the global mapper ran on a copy
 
 
-@pytest.mark.parametrize("dis, passes, kept, n", [
-    ([1.2, 2.9, 0.5], False, "global", 10),        # agrees with every part: kept whole
-    ([1.2, 2.9, 14.0], True, "global", 8),         # bent the smallest part: it leaves, however its frames look alone
-    ([14.0, 1.0, 1.0], True, "incremental", 5),    # bent the largest: what is left is no larger than it
-    ([1.0, None, 1.0], False, "global", 7),        # a part too small to check, whose frames fail on their own
-    ([1.0, None, 1.0], True, "global", 10),        # ... or pass on their own: kept (issue 36)
+@pytest.mark.parametrize("dis, ties, alone, kept, n", [
+    ([1.2, 2.9, 0.5], True, False, "global", 10),         # agrees with every part and ties them together: whole
+    ([1.2, 2.9, 0.5], False, True, "incremental", 5),     # agrees, but nothing ties the smaller parts to the largest
+    ([1.2, 2.9, 14.0], True, True, "global", 8),          # bent the smallest part: it leaves, however its frames look alone
+    ([14.0, 1.0, 1.0], True, True, "incremental", 5),     # bent the largest: what is left is no larger than it
+    ([1.0, None, 1.0], True, False, "global", 7),         # a part too small to check, whose frames fail on their own
+    ([1.0, None, 1.0], True, True, "global", 10),         # ... or pass on their own: kept (issue 36)
 ])
-def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_path, dis, passes, kept, n):
+def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_path, dis, ties, alone, kept, n):
     """office.mp4 without loop detection: the global mapper registered all 371 frames but turned two
     incremental parts (24 and 13 frames) by 16 and 21 deg; each part alone was right. A bent whole
-    is no better than sound parts: only the parts it agrees with stay in it."""
+    is no better than sound parts: only the parts it agrees with stay in it, and only where their
+    frames tie them to the largest of them (a two-take walk: a part tied by 25 points was put a tenth
+    of the walk off on some runs, every part still agreeing)."""
     from curate.sfm import colmap as sfm
     a, b, c = [f"a{i}" for i in range(5)], [f"b{i}" for i in range(3)], [f"c{i}" for i in range(2)]
     monkeypatch.setattr(sfm, "_map", lambda *a_, **k: {0: _Model(5, a), 1: _Model(3, b), 2: _Model(2, c)})
     monkeypatch.setattr(sfm, "_map_global", lambda *a_, **k: {0: _Model(10, a + b + c)})
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: list(zip(dis, (set(a), set(b), set(c)))))
-    checked = []
-    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg: checked.extend(names) or
-                        {x: {"ok": passes, "why": "" if passes else "disagrees"} for x in names})
+    unchecked = set().union(*(set(p) for d, p in zip(dis, (a, b, c)) if d is None))
+    calls = []
+
+    def verify(rec, names, deg, trusted=None):   # a frame of a checked part passes when the seam holds
+        calls.append((set(names), set(trusted or ())))
+        return {x: {"ok": alone if x in unchecked else ties, "why": "" if ties else "too few"} for x in names}
+    monkeypatch.setattr(sfm, "verify_frames", verify)
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
-    assert stats["mapper"] == kept and stats["mappers_tried"]["global"]["part_disagreement_deg"] == dis
-    assert set(checked) == (set(b) if dis[1] is None else set())   # only frames no part checked, never a refuted part
+    g = stats["mappers_tried"]["global"]
+    assert stats["mapper"] == kept and g["part_disagreement_deg"] == dis
     assert sfm._sizes(models) == ([n] if kept == "global" else [5, 3, 2])
+    refuted = set().union(*(set(p) for d, p in zip(dis, (a, b, c)) if d is not None and d > 3.0))
+    anchor = next(set(p) for d, p in zip(dis, (a, b, c)) if d is not None and d <= 3.0)
+    checked = set().union(*(nm for nm, _ in calls))
+    assert not checked & (refuted | anchor)            # a refuted part is never checked, nor the anchor
+    assert checked >= unchecked
+    for nm, trusted in calls:                          # no frame vouches for itself or its own part
+        assert anchor <= trusted and not nm & trusted
+    assert [j["joined"] for j in g["joins"]] == [ties] * len(g["joins"])
 
 
 @pytest.mark.parametrize("mapper, calls_expected", [("incremental", ["inc"]), ("global", ["glob"])])
@@ -479,3 +496,24 @@ def test_a_part_bent_only_at_its_end_disagrees():
     (end, _), = part_agreement(glob, {0: turned(6)})
     (stray, _), = part_agreement(glob, {0: turned(1)})
     assert end > 3.0 and stray < 3.0
+
+
+def test_the_warning_says_which_parts_the_global_model_could_not_tie(tmp_path):
+    """When the global model is kept pruned, the end-of-run warning says why photos are missing: the
+    parts it bends, the parts too few points tie to the rest, the frames that failed their own check."""
+    from curate.sfm.stage import split_warning
+    (tmp_path / "sfm").mkdir()
+    lost = [f"walk2_{0.1 * i:010.3f}.jpg" for i in range(15)]
+    glob = {"model_sizes": [93, 17], "pruned_to": 76, "joins": [{"photos": 15, "frames_passed": 0, "joined": False}],
+            "verified": {"checked": 3, "kept": 1, "refused": {"a.jpg": "x", "b.jpg": "y"}}}
+    stats = {"mapper": "global", "model_sizes": [76], "n_kept": 91, "n_registered": 76, "unregistered": lost,
+             "mappers_tried": {"incremental": {"model_sizes": [75, 17, 15]}, "global": glob}}
+    (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
+    w = split_warning(tmp_path)
+    assert w.startswith("the incremental mapper split the capture (75, 17, 15 photos) and the global mapper placed "
+                        "93 in one model"), w
+    assert "of parts too few points tie to the rest (1 part, 15 photos)" in w and "(2 of 3)" in w
+    assert "curate uses the largest, 76 of 91 photos; 15 are left out" in w
+    glob["joins"][0]["joined"] = True
+    (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
+    assert "too few points" not in split_warning(tmp_path)

@@ -137,7 +137,12 @@ def _video(path: Path, frames: list[np.ndarray]) -> Path:
 @pytest.mark.slow
 def test_two_overlapping_takes_make_one_model_and_a_foreign_take_is_named(tmp_path):
     """Two takes of one room (the second a pass the other way, over part of the first) come back as
-    one model; a take of another room joins nothing and the SfM warning names it."""
+    one model; a take of another room joins nothing and the SfM warning names it.
+
+    The second take covers frames 69..20 of the sample walk: its frames 89..74 hang on the rest by a
+    seam of about 25 points, and the global model placed them a tenth of the walk off on one CI run
+    (37 deg after alignment); such a part is now left out (`join_parts`), so a take over it would not
+    come back whole, and that stretch is not what this test is about."""
     pytest.importorskip("pycolmap")
     pytest.importorskip("av")
     from PIL import Image
@@ -152,7 +157,7 @@ def test_two_overlapping_takes_make_one_model_and_a_foreign_take_is_named(tmp_pa
     folder = tmp_path / "capture"
     folder.mkdir()
     _video(folder / "walk1.mp4", frames[0:50])
-    _video(folder / "walk2.mp4", frames[89:29:-1])                 # frames 89..30: back over 30..49 of walk1
+    _video(folder / "walk2.mp4", frames[69:19:-1])                 # frames 69..20: back over 20..49 of walk1
     scene = make_scene("office", 3)
     cams, _ = hand_held_walk(20, "loop", seed=3, width=320, height=240, room=scene.interior)
     other, _ = scene.render(cams)
@@ -174,7 +179,7 @@ def test_two_overlapping_takes_make_one_model_and_a_foreign_take_is_named(tmp_pa
     # the joined takes sit in one frame: their poses agree with the rendered walk after one alignment
     truth, _ = read_transforms(SAMPLE.parent / "transforms.json")
     of = {r["working"]: (r["extra"]["video_rel"], r["extra"]["frame"]) for r in recs if r["status"] == "kept"}
-    src = {"walk1.mp4": list(range(0, 50)), "walk2.mp4": list(range(89, 29, -1))}
+    src = {"walk1.mp4": list(range(0, 50)), "walk2.mp4": list(range(69, 19, -1))}
     got = load_sfm(run).cameras
     keep = [i for i, n in enumerate(got.names) if of[n][0] in src]
     sub = got[keep]

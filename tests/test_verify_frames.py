@@ -9,12 +9,15 @@ import pytest
 pycolmap = pytest.importorskip("pycolmap")
 
 from curate.core.cameras import Cameras, look_at, w2c_from_c2w  # noqa: E402
-from curate.sfm.colmap import VERIFY_MIN_POINTS, verify_frames  # noqa: E402
+from curate.sfm.colmap import JOIN_MIN_FRAMES, VERIFY_MIN_POINTS, join_parts, verify_frames  # noqa: E402
 
 
-def model(perturb: dict[int, np.ndarray] | None = None, n_points: int = 600, seed: int = 0):
+def model(perturb: dict[int, np.ndarray] | None = None, n_points: int = 600, seed: int = 0,
+          moved: np.ndarray | None = None):
     """A model of 8 cameras on an arc looking at a cloud of points, every observation exact; the poses of
-    ``perturb`` (index -> 3x3 rotation applied to its world-to-camera rotation) are wrong in the model."""
+    ``perturb`` (index -> 3x3 rotation applied to its world-to-camera rotation) are wrong in the model;
+    ``moved`` [3, 3], a rotation of the world about its origin, moves cameras 4-7 together (a rigid part put
+    in the wrong place)."""
     rng = np.random.default_rng(seed)
     a = np.linspace(0, 1.2, 8)
     centres = np.stack([4 * np.cos(a), 4 * np.sin(a), np.full(8, 1.5)], 1)
@@ -32,6 +35,8 @@ def model(perturb: dict[int, np.ndarray] | None = None, n_points: int = 600, see
         seen = np.flatnonzero((x[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < 640) & (uv[:, 1] >= 0) & (uv[:, 1] < 480))
         obs[i] = {int(j): k for k, j in enumerate(seen)}
         Ri = R[i] if not perturb or i not in perturb else perturb[i] @ R[i]
+        if moved is not None and i >= 4:      # centre c -> moved c, orientation turned with it: t unchanged
+            Ri = Ri @ moved.T
         rec.add_image_with_trivial_frame(pycolmap.Image(name=cams.names[i], keypoints=uv[seen], camera_id=1,
                                                         image_id=i + 1),
                                          pycolmap.Rigid3d(pycolmap.Rotation3d(Ri), t[i]))
@@ -60,3 +65,31 @@ def test_a_frame_with_too_few_matches_to_other_frames_is_not_kept():
     v = verify_frames(rec, ["f03.jpg"], max_rot_deg=3.0)
     assert not v["f03.jpg"]["ok"] and f"< {VERIFY_MIN_POINTS}" in v["f03.jpg"]["why"]
     assert verify_frames(rec, ["not_there.jpg"], 3.0) == {}
+
+
+def test_a_part_joins_where_its_frames_check_out_against_the_frames_already_kept():
+    """Two parts of a model (cameras 0-3 and 4-7), each sound among itself: the second joins the first
+    only where its frames, posed from the points the first part's frames see, land where the model put
+    them; moved together by 10 deg about the scene (still agreeing with itself), or tied to the first by
+    too few points, it stays out."""
+    first, second = {f"f{i:02d}.jpg" for i in range(4)}, {f"f{i:02d}.jpg" for i in range(4, 8)}
+    rec, cams = model()
+    keep, joins = join_parts(rec, [first, second], 3.0)
+    assert keep == first | second and joins == [{"photos": 4, "frames_passed": 4, "joined": True}]
+    rec, _ = model(moved=rot_z(10.0))
+    keep, joins = join_parts(rec, [first, second], 3.0)
+    assert keep == first and joins[0]["joined"] is False and joins[0]["frames_passed"] < JOIN_MIN_FRAMES
+    rec, _ = model(n_points=20)
+    keep, joins = join_parts(rec, [first, second], 3.0)
+    assert keep == first and joins[0]["frames_passed"] == 0
+    assert join_parts(rec, [], 3.0) == (set(), [])
+
+
+def test_a_part_joins_through_another_that_joined_first():
+    """Parts are tied one to another in turn: a part that only a later part touches still joins."""
+    rec, _ = model()
+    a, b, c = {"f00.jpg", "f01.jpg"}, {"f02.jpg", "f03.jpg", "f04.jpg"}, {"f05.jpg", "f06.jpg", "f07.jpg"}
+    keep, joins = join_parts(rec, [a, b, c], 3.0)
+    assert keep == a | b | c and all(j["joined"] for j in joins)
+    v = verify_frames(rec, ["f05.jpg"], 3.0, trusted={"f05.jpg", "f06.jpg"})   # itself and one other: never enough
+    assert not v["f05.jpg"]["ok"] and "matches to points" in v["f05.jpg"]["why"]

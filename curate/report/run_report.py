@@ -441,7 +441,8 @@ def _capture(run: _Run) -> str:
         rows.append(("mapping", f"the incremental mapper split the capture into models of "
                      f"{', '.join(map(str, inc.get('model_sizes', [])))} photos; the global mapper mapped "
                      f"{(glo.get('model_sizes') or ['?'])[0]} in one model"
-                     + (f", kept where it agrees with every part ({glo.get('pruned_to')} photos)" if
+                     + (f", kept where it agrees with the parts and can tie them together ({glo.get('pruned_to')} "
+                        f"photos)" if
                         glo.get("pruned_to") else "") + f"; curate used {how or mapper}"))
     rows.append(("candidates", f"{r.get('n_candidates', reg)}: the selection chooses among every registered photo"))
     if st.get("n_points") is not None:

@@ -494,10 +494,11 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     ``auto`` runs the incremental mapper and, when its largest model holds less than
     ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
     were left out), the global mapper on a copy of the same matches. Its largest model is
-    checked against every incremental part (:func:`part_agreement`): where it agrees with all
-    of them (orientation disagreement <= ``cfg.max_part_disagreement_deg`` on 90% of the part's photos) it is kept
-    whole; else only the images of the parts it agrees with stay in it. It replaces the
-    incremental models when it then holds more photos than their largest.
+    checked against every incremental part (:func:`part_agreement`, orientation disagreement <=
+    ``cfg.max_part_disagreement_deg`` on 90% of the part's photos). Of it stay the parts it agrees
+    with that :func:`join_parts` can tie to the largest of them, and the frames of no checked part
+    that pass :func:`verify_frames` against those (against every other frame where no part agrees).
+    It replaces the incremental models when it then holds more photos than their largest.
     """
     tried: dict = {}
     work.mkdir(parents=True, exist_ok=True)
@@ -530,15 +531,19 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     tried["global"]["part_disagreement_deg"] = [d for d, _ in checks]
     ok = [d is not None and d <= cfg.max_part_disagreement_deg for d, _ in checks]
     best = max(glob.values(), key=lambda r: r.num_reg_images())
-    if not all(ok):  # keep of the global model the parts it agrees with, and the frames that pass on their own
-        keep = set().union(*(names for (_, names), good in zip(checks, ok) if good))
+    refuted: set = set()
+    if checks:  # keep of the global model the parts it agrees with and can tie together, and the frames that pass
+        placed = {im.name for im in best.images.values() if im.has_pose}
+        agreed = [names & placed for (_, names), good in zip(checks, ok) if good]
         refuted = set().union(*(names for (d, names), good in zip(checks, ok) if d is not None and not good))
-        unchecked = [im.name for im in best.images.values() if im.has_pose and im.name not in keep | refuted]
-        verdicts = verify_frames(best, unchecked, cfg.max_part_disagreement_deg)
+        keep, joins = join_parts(best, [a for a in agreed if a], cfg.max_part_disagreement_deg)
+        unchecked = sorted(placed - keep - refuted - set().union(*agreed))
+        verdicts = verify_frames(best, unchecked, cfg.max_part_disagreement_deg, trusted=keep or None)
         passed = {n for n, v in verdicts.items() if v["ok"]}
         keep |= passed
         tried["global"]["verified"] = {"checked": len(unchecked), "kept": len(passed),
                                        "refused": {n: v["why"] for n, v in verdicts.items() if not v["ok"]}}
+        tried["global"]["joins"] = joins
         for im in list(best.images.values()):
             if im.name not in keep and im.has_pose:
                 best.deregister_frame(im.frame_id)
@@ -546,18 +551,64 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
                     for d in tried["global"]["part_disagreement_deg"])
     if best.num_reg_images() <= i:
-        logger.warning("sfm: the global model disagrees with the incremental parts (orientation difference on 90%% "
-                       "of each part's photos, deg: %s; limit %g); keeping the incremental models", dis,
+        logger.warning("sfm: what the global model keeps (%d photos: the incremental parts it agrees with, on "
+                       "orientation (90%% of each part's photos, deg: %s; limit %g), where it can tie them "
+                       "together, and the frames that pass a check of their own) is no more than the largest "
+                       "incremental model; keeping the incremental models", best.num_reg_images(), dis,
                        cfg.max_part_disagreement_deg)
         stats["mapper"] = "incremental"
         return inc
     ver = tried["global"].get("verified")
+    loose = [j for j in tried["global"].get("joins", []) if not j["joined"]]
     logger.warning("sfm: the global mapper keeps %d photos in one model (it agrees with the incremental parts: %s "
-                   "deg%s)", best.num_reg_images(), dis,
-                   "" if all(ok) else (f"; the parts it disagrees with are left out; of {ver['checked']} photos no "
-                                       f"part checks, {ver['kept']} pass a check of their own pose" if ver else ""))
+                   "deg%s%s)", best.num_reg_images(), dis,
+                   "; the parts it disagrees with are left out" if refuted else "",
+                   (f"; {len(loose)} part(s) of {sum(j['photos'] for j in loose)} photos left out: too few points "
+                    f"tie them to the rest" if loose else "")
+                   + (f"; of {ver['checked']} photos no part checks, {ver['kept']} pass a check of their own pose"
+                      if ver and ver["checked"] else ""))
     stats["mapper"] = "global"
     return {0: best}
+
+
+JOIN_MIN_FRAMES = 2
+""":func:`join_parts`: the fewest frames of a part that must pass :func:`verify_frames` against the frames
+already kept for the part to join them. Two frames apart fix where a rigid part sits, its scale included."""
+
+
+def join_parts(rec, parts: list[set], max_rot_deg: float) -> tuple[set, list[dict]]:
+    """The frames of ``rec`` (the global model) that one tied-together whole of ``parts`` covers.
+
+    ``parts``: names of incremental parts the global model agrees with, largest first. Agreeing
+    with a part says its frames sit right *among themselves*; where the global model put the part
+    against the others rests on the matches between them, and a seam of a few points can place it
+    wrong (a rendered walk filmed in two takes: the 15-frame start of the second take tied to the
+    rest by 25 points, so each of its frames saw at most 17 of them; on some runs the global model
+    put it there right, on others off by a tenth of the walk, and turned the whole alignment by
+    6-37 deg, every part still agreeing). So the largest part anchors the model, and each other
+    part joins once :data:`JOIN_MIN_FRAMES` of its frames pass :func:`verify_frames` on the points
+    the frames already joined see (repeated until no part joins).
+
+    Returns (names kept, [{"photos", "frames_passed", "joined"} per part after the first]).
+    """
+    if not parts:
+        return set(), []
+    keep, left = set(parts[0]), list(range(1, len(parts)))
+    passed = {k: 0 for k in left}
+    while left:
+        joined = []
+        for k in left:
+            v = verify_frames(rec, sorted(parts[k]), max_rot_deg, trusted=keep)
+            passed[k] = sum(x["ok"] for x in v.values())
+            if passed[k] >= JOIN_MIN_FRAMES:
+                joined.append(k)
+        if not joined:
+            break
+        for k in joined:
+            keep |= parts[k]
+        left = [k for k in left if k not in joined]
+    return keep, [{"photos": len(parts[k]), "frames_passed": passed[k], "joined": k not in left}
+                  for k in range(1, len(parts))]
 
 
 VERIFY_MIN_POINTS = 30
@@ -567,16 +618,21 @@ VERIFY_MAX_STEP = 0.05
 of the median depth of the points it sees."""
 
 
-def verify_frames(rec, names: list[str], max_rot_deg: float) -> dict[str, dict]:
+def verify_frames(rec, names: list[str], max_rot_deg: float, trusted: set[str] | None = None
+                  ) -> dict[str, dict]:
     """Check frames of the model ``rec`` that no mapper part confirms, each by its own evidence: its
     pose estimated again (PnP with LO-RANSAC, then refined: pycolmap) from its matches to the 3D points
     the *other* frames see (tracks of at least two other frames), with the model held fixed, must agree
     with the pose the model gives it: within ``max_rot_deg`` degrees and :data:`VERIFY_MAX_STEP` of its
     scene depth, with at least :data:`VERIFY_MIN_POINTS` inliers, half of its matches or more.
 
+    ``trusted`` (names): only these frames count as "other" frames (default: every other frame), so a
+    frame, or a part it belongs to, cannot vouch for itself (:func:`join_parts`).
+
     Returns {name: {"ok", "why", "inliers", "rot_deg", "step"}}."""
     import pycolmap
     by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+    ok_ids = None if trusted is None else {by_name[m].image_id for m in trusted if m in by_name}
     out: dict[str, dict] = {}
     for n in names:
         im = by_name.get(n)
@@ -588,7 +644,7 @@ def verify_frames(rec, names: list[str], max_rot_deg: float) -> dict[str, dict]:
                 continue
             pt = rec.point3D(p.point3D_id)
             others = {e.image_id for e in pt.track.elements} - {im.image_id}
-            if len(others) >= 2:
+            if len(others if ok_ids is None else others & ok_ids) >= 2:
                 xy.append(p.xy)
                 xyz.append(pt.xyz)
         if len(xy) < VERIFY_MIN_POINTS:

@@ -98,9 +98,12 @@ def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
     if st.get("mapper") == "global" and glob.get("pruned_to") is not None:
         inc = (st["mappers_tried"].get("incremental") or {}).get("model_sizes") or []
         ver = glob.get("verified") or {}
+        loose = [j for j in glob.get("joins") or [] if not j.get("joined")]
         how = (f"the incremental mapper split the capture ({', '.join(map(str, inc))} photos) and the global "
-               f"mapper placed {(glob.get('model_sizes') or ['?'])[0]} in one model; the photos of parts it bends, "
-               f"and those no part checks whose own pose check failed ({len(ver.get('refused') or {})} of "
+               f"mapper placed {(glob.get('model_sizes') or ['?'])[0]} in one model; the photos of parts it bends"
+               + (f", of parts too few points tie to the rest ({len(loose)} part{'s' * (len(loose) > 1)}, "
+                  f"{sum(j['photos'] for j in loose)} photos)" if loose else "")
+               + f", and those no part checks whose own pose check failed ({len(ver.get('refused') or {})} of "
                f"{ver.get('checked', 0)}), are left out")
     elif len(sizes) > 1:
         how = f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos)"
