@@ -487,6 +487,29 @@ def without_contained(models: dict) -> dict:
     return {k: r for k, r in models.items() if k == best or not names(r) <= inside}
 
 
+def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
+    """Deregister, in every model ({id: Reconstruction}), the video frames :func:`curate.sfm.continuity.off_path`
+    finds on an island off their take's path; ``kept``: the PhotoRecords (a frame's ``extra`` holds its
+    ``video_rel`` and ``time``). Returns {take: [names]} of the frames left out."""
+    from curate.sfm.continuity import off_path
+    when = {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
+            if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+    out: dict[str, list[str]] = {}
+    for rec in models.values():
+        takes: dict[str, list] = {}
+        for im in rec.images.values():
+            if im.has_pose and im.name in when:
+                takes.setdefault(when[im.name][0], []).append((when[im.name][1], im))
+        for tk, frames in sorted(takes.items()):
+            frames.sort(key=lambda x: x[0])
+            t = np.array([x[0] for x in frames])
+            c = np.array([np.asarray(im.projection_center()) for _, im in frames])
+            for i in off_path(t, c):
+                rec.deregister_frame(frames[i][1].frame_id)
+                out.setdefault(tk, []).append(frames[i][1].name)
+    return out
+
+
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
     """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
     kept) and, when both ran, ``mappers_tried`` ({mapper: model sizes, seconds}).
@@ -779,6 +802,12 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     if not models:
         raise RuntimeError(f"sfm: COLMAP registered no images (see {out / 'colmap.log'})")
     models = without_contained(models)
+    off = drop_off_path(models, kept)
+    if off:
+        stats["off_path"] = off
+        logger.warning("sfm: %d frames were placed off their video's path (a stretch that jumps away and back), "
+                       "left out: %s", sum(map(len, off.values())),
+                       "; ".join(f"{tk}: {', '.join(sorted(n))}" for tk, n in off.items()))
     best = max(models.values(), key=lambda r: r.num_reg_images())
     stats["model_sizes"] = _sizes(models)
     sparse = out / "sparse" / "0"

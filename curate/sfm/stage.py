@@ -107,10 +107,15 @@ def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
                f"{ver.get('checked', 0)}), are left out")
     elif len(sizes) > 1:
         how = f"the capture split into {len(sizes)} models ({', '.join(map(str, sizes))} photos)"
+    elif st.get("off_path"):
+        how = "SfM placed some frames off their video's path"
     else:
         how = "SfM could not register every photo"
+    off = sum(len(v) for v in (st.get("off_path") or {}).values())
     return (f"{how}: curate uses the largest, {st.get('n_registered', kept - len(lost))} of {kept} photos; "
-            f"{len(lost)} are left out of the selection, the export and the evaluation: {name_ranges(lost)}")
+            f"{len(lost)} are left out of the selection, the export and the evaluation"
+            + (f" ({off} of them placed off their video's path, a stretch that jumped away and back)" if off else "")
+            + f": {name_ranges(lost)}")
 
 
 def import_warning(run_dir: Path) -> str | None:

@@ -1,0 +1,113 @@
+"""A stretch of a video placed off the walk (issue 36, part 1: frames checked by their neighbours in capture
+order): office.mp4 in two takes came back as one model with 14 frames 42-46 deg and metres off, entered and
+left by a jump; such an island is left out, and a walk that pauses, speeds up or skips frames is not one."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from curate.sfm.continuity import JUMP_FACTOR, off_path
+
+
+def walk(n: int = 120, fps: float = 10.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """[n] times and [n, 3] centres of a hand-held walk: a wide curve at about 1 m/s, a little shake."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fps
+    c = np.stack([3 * np.cos(t / 6), 3 * np.sin(t / 6), 1.5 + 0.05 * np.sin(3 * t)], 1)
+    return t, c + rng.normal(0, 0.01, c.shape)
+
+
+def test_a_stretch_that_jumps_away_and_back_is_found_and_nothing_else():
+    t, c = walk()
+    assert off_path(t, c).tolist() == []
+    away = c.copy()
+    away[50:57] += [2.0, -1.0, 0.5]                   # 7 frames moved together, as a wrong piece is
+    assert off_path(t, away).tolist() == list(range(50, 57))
+    one = c.copy()
+    one[80] += [0.0, 0.0, 3.0]                        # a single frame out and back
+    assert off_path(t, one).tolist() == [80]
+    both = away.copy()
+    both[80] = one[80]
+    assert off_path(t, both).tolist() == [*range(50, 57), 80]
+
+
+def test_a_walk_that_pauses_speeds_up_or_skips_frames_is_no_island():
+    t, c = walk()
+    # stands still for 70 frames (a little shake), then walks a loop back to where it stood
+    still = np.repeat(c[:1], 70, 0) + np.random.default_rng(1).normal(0, 0.002, (70, 3))
+    loop = c[0] + np.stack([np.sin(np.linspace(0, 2 * np.pi, 50)), 1 - np.cos(np.linspace(0, 2 * np.pi, 50)),
+                            np.zeros(50)], 1)
+    pause = np.concatenate([still, loop])
+    assert off_path(t, pause).tolist() == []
+    # frames 40-69 dropped (a cut between candidates): a gap in time, not in speed
+    keep = np.r_[0:40, 70:120]
+    assert off_path(t[keep], c[keep]).tolist() == []
+    # twice as fast for a while
+    fast = np.cumsum(np.r_[np.full(60, 0.1), np.full(60, 0.2)])[:, None] * [1.0, 0.0, 0.0]
+    assert off_path(t, fast).tolist() == []
+
+
+def test_an_island_longer_than_half_the_take_is_left_alone():
+    """Which side of two jumps is wrong is then not the path's to say."""
+    t, c = walk(40)
+    away = c.copy()
+    away[10:31] += [3.0, 0.0, 0.0]
+    assert off_path(t, away).tolist() == []
+    away = c.copy()
+    away[10:29] += [3.0, 0.0, 0.0]
+    assert off_path(t, away).tolist() == list(range(10, 29))
+
+
+@pytest.mark.parametrize("t, c", [
+    (np.zeros(0), np.zeros((0, 3))),                                   # nothing
+    (np.arange(3.0), np.eye(3)),                                       # too few frames
+    (np.arange(10.0), np.zeros((10, 3))),                              # never moves
+    (np.zeros(10), np.arange(30.0).reshape(10, 3)),                    # one time for every frame
+    (np.arange(10.0), np.full((10, 3), np.nan)),                       # no centres
+    (np.arange(10.0), np.r_[np.zeros((9, 3)), [[1e300, 0, 0]]]),       # one far beyond the rest
+])
+def test_degenerate_takes_give_no_island_and_no_warning(t, c):
+    with np.errstate(all="raise"):
+        out = off_path(t, c)
+    assert out.dtype.kind == "i" and len(out) <= 1
+
+
+def test_jump_factor_sits_between_a_sound_walk_and_a_wrong_piece():
+    """The measured margins (docs/sfm.md): sound takes stepped at most 3.75 times their median speed,
+    the wrong pieces were entered and left at 21-32 times."""
+    assert 3.75 < JUMP_FACTOR < 21
+
+
+def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_path):
+    pytest.importorskip("pycolmap")
+    from curate.core.cameras import Cameras, look_at
+    from curate.sfm.colmap import drop_off_path, reconstruction_from_cameras
+    from curate.sfm.ingest import PhotoRecord
+    from curate.sfm.stage import split_warning
+    t, c = walk(60)
+    c[20:24] += [2.0, 2.0, 0.0]
+    names = tuple(f"walk_{x:010.3f}.jpg" for x in t) + ("IMG_1.jpg", "IMG_2.jpg", "IMG_3.jpg", "IMG_4.jpg")
+    centres = np.r_[c, [[0, 0, 5.0], [0, 1, 5], [1, 0, 5], [9, 9, 5]]]
+    cams = Cameras(look_at(centres, np.zeros((len(names), 3)) + [0, 0, 0.1]), 300, 300, 160, 120, 320, 240,
+                   names=names)
+    recs = []
+    for i, n in enumerate(names):
+        r = PhotoRecord(original=f"/p/{n}", rel=n, working=n)
+        if i < 60:
+            r.extra.update(video="/p/walk.mp4", video_rel="walk.mp4", time=float(t[i]), frame=i)
+        recs.append(r)
+    rec = reconstruction_from_cameras(cams)
+    off = drop_off_path({0: rec}, recs)
+    assert off == {"walk.mp4": list(names[20:24])}
+    left = {rec.image(i).name for i in rec.reg_image_ids()}
+    assert left == set(names) - set(names[20:24])                    # photos (no time order) untouched
+    (tmp_path / "sfm").mkdir()
+    stats = {"model_sizes": [60], "n_kept": 64, "n_registered": 60, "unregistered": list(names[20:24]),
+             "off_path": off}
+    (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
+    w = split_warning(tmp_path)
+    assert w.startswith("SfM placed some frames off their video's path: curate uses the largest, 60 of 64"), w
+    assert "4 are left out of the selection, the export and the evaluation (4 of them placed off" in w
