@@ -198,6 +198,7 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
             e = pose_errors(est, truth)
             out.update({"n_with_truth": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], 2),
                         "rotation_deg_max": round(e["rotation_deg_max"], 2),
+                        "over_5_deg": int(sum(r > 5 for r in e["rotation_deg"])),
                         "centre_rel_median": round(e["centre_rel_median"], 4)})
     return out
 

@@ -807,7 +807,8 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         stats["off_path"] = off
         logger.warning("sfm: %d frames were placed off their video's path (a stretch that jumps away and back), "
                        "left out: %s", sum(map(len, off.values())),
-                       "; ".join(f"{tk}: {', '.join(sorted(n))}" for tk, n in off.items()))
+                       "; ".join(f"{tk}: {len(n)} ({n[0]}..{n[-1]})" if len(n) > 1 else f"{tk}: {n[0]}"
+                                 for tk, n in off.items()))
     best = max(models.values(), key=lambda r: r.num_reg_images())
     stats["model_sizes"] = _sizes(models)
     sparse = out / "sparse" / "0"

@@ -1,0 +1,59 @@
+"""Each video take of a finished SfM run along its path: the islands `curate.sfm.continuity.off_path`
+finds and the largest steps between consecutive frames, as multiples of the take's median speed.
+
+Reads ``RUN/sfm/images.json`` and every model under ``RUN/sfm/sparse/`` (the frames the run already
+left out are not in them: run it on a run made before the check to see what it finds). One JSON line
+per model and take.
+
+    python3 -m research.path_check /tmp/takes_runs/three /tmp/office_run
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def takes_along(run: Path):
+    """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and video take."""
+    import pycolmap
+    recs = {r["working"]: r for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]}
+    for model in sorted((run / "sfm" / "sparse").iterdir()):
+        rec = pycolmap.Reconstruction(model)
+        takes: dict[str, list] = {}
+        for im in rec.images.values():
+            e = (recs.get(im.name) or {}).get("extra") or {}
+            if im.has_pose and e.get("video_rel") is not None and e.get("time") is not None:
+                takes.setdefault(e["video_rel"], []).append((float(e["time"]), im.name,
+                                                             np.asarray(im.projection_center())))
+        for take, fr in sorted(takes.items()):
+            fr.sort(key=lambda x: x[0])
+            yield model.name, take, np.array([x[0] for x in fr]), [x[1] for x in fr], np.array([x[2] for x in fr])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", type=Path, nargs="+", help="run folders whose SfM stage finished")
+    a = ap.parse_args(argv)
+    from curate.sfm.continuity import off_path, _speeds
+    for run in a.runs:
+        for model, take, t, names, c in takes_along(run):
+            isl = off_path(t, c)
+            v = _speeds(t, c)
+            med = float(np.median(v)) if len(v) else 0.0
+            ratio = v / med if med > 0 else np.zeros_like(v)
+            steps = np.ones(len(v), bool)           # the steps into, inside and out of an island
+            for i in isl:
+                steps[max(i - 1, 0):i + 1] = False
+            print(json.dumps({"run": str(run), "model": model, "take": take, "frames": len(t),
+                              "islands": [names[i] for i in isl],
+                              "largest_steps_x_median": np.sort(ratio)[-4:].round(2).tolist(),
+                              "largest_step_elsewhere_x_median": round(float(ratio[steps].max()), 2)
+                              if steps.any() else None}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
