@@ -8,7 +8,8 @@ after alignment. This script makes the same capture (``walk1.mp4`` = sample fram
 on it once, then perturbs the matches the way another machine does (each variant removes one photo's
 two-view geometries from a copy of the database) and, per variant, prints one JSON line: the global
 model as COLMAP returns it (sizes, the orientation agreement with each incremental part, its error
-against the rendered walk) and what :func:`curate.sfm.colmap.map_capture` keeps (mapper, sizes, the
+against the rendered walk, and per incremental part the number of its points also seen by
+frames outside it, the seam) and what :func:`curate.sfm.colmap.map_capture` keeps (mapper, sizes, the
 parts joined, each take's frames in the model, the error).
 
     python3 -m research.join_check /tmp/join_check/89_29 --walk2 89:29 --drops 0:110:7
@@ -112,10 +113,17 @@ def main(argv=None) -> None:
         models = C.map_capture(cfg, Path(shutil.copy2(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
                                stats)
         g = stats.get("mappers_tried", {}).get("global", {})
+        seams = []                              # per incremental part: the global model's points it shares with the rest
+        for part in sorted(inc.values(), key=lambda r: -r.num_reg_images()):
+            names = {part.image(i).name for i in part.reg_image_ids()}
+            ids = {im.image_id for im in gbest.images.values() if im.has_pose and im.name in names}
+            seams.append(sum(1 for p in gbest.points3D.values()
+                             if (lambda s: s & ids and s - ids)({e.image_id for e in p.track.elements})))
         print(json.dumps({
             "removed": None if d < 0 else name_of[ids[d]],
             "incremental": C._sizes(inc),
             "global": {"sizes": C._sizes(glob), "part_disagreement_deg": [q for q, _ in C.part_agreement(glob, inc)],
+                       "seam_points": seams,
                        **judge(gbest)},
             "auto": {"mapper": stats["mapper"], "sizes": C._sizes(models), "joins": g.get("joins"),
                      **judge(max(models.values(), key=lambda r: r.num_reg_images()))}}), flush=True)

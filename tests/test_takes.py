@@ -140,7 +140,7 @@ def test_two_overlapping_takes_make_one_model_and_a_foreign_take_is_named(tmp_pa
     one model; a take of another room joins nothing and the SfM warning names it.
 
     The second take covers frames 69..20 of the sample walk: its frames 89..74 hang on the rest by a
-    seam of about 25 points, and the global model placed them a tenth of the walk off on one CI run
+    seam of about 20 points, and the global model placed them a quarter of the walk off on one CI run
     (37 deg after alignment); such a part is now left out (`join_parts`), so a take over it would not
     come back whole, and that stretch is not what this test is about."""
     pytest.importorskip("pycolmap")

@@ -606,9 +606,9 @@ def join_parts(rec, parts: list[set], max_rot_deg: float) -> tuple[set, list[dic
     with a part says its frames sit right *among themselves*; where the global model put the part
     against the others rests on the matches between them, and a seam of a few points can place it
     wrong (a rendered walk filmed in two takes: the 15-frame start of the second take tied to the
-    rest by 25 points, so each of its frames saw at most 17 of them; on some runs the global model
-    put it there right, on others off by a tenth of the walk, and turned the whole alignment by
-    6-37 deg, every part still agreeing). So the largest part anchors the model, and each other
+    rest by 22 points, none of its frames passing the check below; here the global model
+    put it right, on a CI machine a quarter of the walk off, the model 37 deg off the walk after
+    alignment, every part still agreeing). So the largest part anchors the model, and each other
     part joins once :data:`JOIN_MIN_FRAMES` of its frames pass :func:`verify_frames` on the points
     the frames already joined see (repeated until no part joins).
 

@@ -5,8 +5,7 @@ A video is a continuous path: between two frames a tenth of a second apart the c
 hand's breadth. An incremental model can still register a stretch of a take in the wrong place, a
 piece hinged on a few wrong matches: office.mp4 cut into two takes that cross the walk's weak stretch
 (its frames 173-186) came back as one model of 371 frames in which 14 of them, from both takes, sat
-42-46 deg and several metres off, entered and left by steps 12-17 times the take's median step
-(docs/sfm.md). Each such frame agrees with its own neighbours in the piece, so no check of a frame
+42-46 deg off, entered and left by steps 21-32 times the take's median step (docs/sfm.md). Each such frame agrees with its own neighbours in the piece, so no check of a frame
 against the points it sees finds it; the path does.
 
 :func:`off_path` works on one take's registered frames in time order and flags an *island*: a run
@@ -25,7 +24,8 @@ import numpy as np
 JUMP_FACTOR = 6.0
 """A step between consecutive frames of a take is a jump when its speed (distance over time between
 them) exceeds this many times the take's median speed. office.mp4's wrong stretch: entered and left at
-12-17 times the median; the largest step of a sound take measured: under 4 times (docs/sfm.md)."""
+21-32 times the median; the largest step of a sound video measured: 3.75 times (the fox photos played as
+a video: one jump of 13.4 times with no way back; research.path_check, docs/sfm.md)."""
 
 
 def _speeds(t: np.ndarray, c: np.ndarray) -> np.ndarray:
