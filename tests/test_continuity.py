@@ -76,10 +76,15 @@ def test_degenerate_takes_give_no_island_and_no_warning(t, c):
 
 
 def test_jump_factor_sits_between_a_sound_walk_and_a_wrong_piece():
-    """The measured margins (docs/sfm.md, research.path_check): sound videos stepped at most 3.75 times
-    their median speed (the fox photos played as a video: one jump of 13.4, no way back, then 4.28), the
-    wrong pieces were entered and left at 21-32 times."""
-    assert 3.75 < JUMP_FACTOR < 21
+    """The measured margins (docs/sfm.md, research.path_check): sound videos stepped at most 4.59 times
+    their median speed (the fox photos played as a video: one jump of 13.4, no way back), the wrong
+    pieces were entered and left at 21-32 times; an island entered at 15 times is found at the default."""
+    assert 4.59 < JUMP_FACTOR < 21
+    t = np.arange(40) / 10.0
+    c = np.stack([t, np.zeros(40), np.zeros(40)], 1)
+    c[20:23, 1] += 1.5                                 # steps of 0.1 m, the island entered 1.5 m off: 15 x
+    assert off_path(t, c).tolist() == [20, 21, 22]
+    assert off_path(t, c, factor=20).tolist() == []
 
 
 def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_path):
