@@ -71,16 +71,17 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
 
 
 def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
-    """A pool past global_ba_above photos gets the sparser global adjustment schedule and one local
-    refinement per photo (the adjustments are most of a long walk's mapping time); a small pool keeps
-    COLMAP's own, as before."""
+    """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
+    adjustments are most of a long walk's mapping time) and the local refinements asked for; a small
+    pool keeps COLMAP's own, as before. The default local refinements are COLMAP's: one folded
+    office.mp4 cut into two takes (docs/sfm.md)."""
     from curate.sfm import colmap as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
-    cfg = small_cfg(global_ba_above=300)
+    assert SfmConfig().local_ba_refinements == colmap_default.ba_local_max_refinements
+    cfg = small_cfg(global_ba_above=300, local_ba_refinements=1)
     assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
-    assert cfg.local_ba_refinements < colmap_default.ba_local_max_refinements
     for n, ratio, refinements, local in [(300, colmap_default.ba_global_frames_ratio,
                                           colmap_default.ba_global_max_refinements,
                                           colmap_default.ba_local_max_refinements),

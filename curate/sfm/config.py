@@ -109,8 +109,9 @@ class SfmConfig:
     #                                   (COLMAP: 1.1)
     global_ba_refinements: int = 1    # ... each refined (adjust, retriangulate, filter) at most this many times
     #                                   (COLMAP: 5)
-    local_ba_refinements: int = 1     # ... and each new photo's local bundle adjustment refined at most this many
-    #                                   times (COLMAP: 2; most of each registration's time on a long walk)
+    local_ba_refinements: int = 2     # ... and each new photo's local bundle adjustment refined at most this many
+    #                                   times (COLMAP's 2: 1 saved 16-26% of a long walk's mapping and folded
+    #                                   office.mp4 in two takes, every frame 35 deg off; docs/sfm.md)
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
     #                                   agrees with each within this many degrees (orientation difference, on
