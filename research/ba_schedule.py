@@ -11,7 +11,8 @@ FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set 
 research.incremental_loop maps instead, its global adjustments factored directly up to N photos
 (COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
 matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
-video) or ``walk`` (TRUTH a folder rendered by research.bench.bench_mapping, with truth.npy).
+video), ``walk`` (TRUTH a folder rendered by research.bench.bench_mapping, with truth.npy) or ``takes``
+(TRUTH ``CASE.truth.json:OFFICE``, a case of research.takes and the office folder).
 
 ``global_refinements``: [registered frames, seconds] of each global refinement; for the research loop
 timed around each call, for COLMAP's pipeline read from the
@@ -146,6 +147,17 @@ def main(argv: list[str]) -> dict:
         best = max(models.values(), key=lambda r: r.num_reg_images())
         cams = C.cameras_from_reconstruction(best, warn=False)[0]
         e = pose_errors(*truth_for(cams, load_ground_truth(Path(truth)), frame_of))
+        rd = np.asarray(e["rotation_deg"])
+        rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
+                   rotation_deg_median=round(e["rotation_deg_median"], 3),
+                   rotation_deg_max=round(e["rotation_deg_max"], 3), n_over_5deg=int((rd > 5).sum()))
+    elif capture == "takes":      # TRUTH: CASE.truth.json:OFFICE (research.takes make, ../shared/data/office)
+        from research.takes import errors_against_truth
+        tj, office = str(truth).split(":", 1)
+        recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+        best = max(models.values(), key=lambda r: r.num_reg_images())
+        e = errors_against_truth(C.cameras_from_reconstruction(best, warn=False)[0], recs,
+                                 json.loads(Path(tj).read_text()), Path(office))
         rd = np.asarray(e["rotation_deg"])
         rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
                    rotation_deg_median=round(e["rotation_deg_median"], 3),

@@ -153,7 +153,6 @@ def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
 
 def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     """How ``RUN/sfm`` kept each take, and the rotation errors of the kept frames with ground truth."""
-    from curate.core.cameras import Cameras
     from curate.sfm.io import load_sfm
     sfm = run / "sfm"
     st = json.loads((sfm / "stage.json").read_text())
@@ -178,29 +177,39 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
            "seconds": st.get("seconds")}
     tj = json.loads(truth_json.read_text()) if truth_json is not None else {}
     if tj and (office is not None or tj.get("cameras")):
-        from research.align import pose_errors
-        from research.datasets import load_office
-        truth = Cameras.load(tj["cameras"]) if tj.get("cameras") else load_office(office)
-        gt_of = {}
-        for r in recs:
-            e = r.get("extra") or {}
-            if e.get("video"):
-                idx = tj["videos"].get(e["video_rel"])
-                if idx is not None:
-                    gt_of[r["working"]] = idx[e["frame"]]
-            elif r["rel"] in tj["photos"]:
-                gt_of[r["working"]] = tj["photos"][r["rel"]]
-        keep = [i for i, nm in enumerate(cams.names) if nm in gt_of]
-        if len(keep) >= 3:
-            sub = cams[keep]
-            est = Cameras(sub.c2w, sub.fx, sub.fy, sub.cx, sub.cy, sub.width, sub.height,
-                          names=tuple(truth.names[gt_of[nm]] for nm in sub.names))
-            e = pose_errors(est, truth)
+        e = errors_against_truth(cams, recs, tj, office)
+        if e is not None:
             out.update({"n_with_truth": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], 2),
                         "rotation_deg_max": round(e["rotation_deg_max"], 2),
                         "over_5_deg": int(sum(r > 5 for r in e["rotation_deg"])),
                         "centre_rel_median": round(e["centre_rel_median"], 4)})
     return out
+
+
+def errors_against_truth(cams, recs: list[dict], tj: dict, office: Path | None) -> dict | None:
+    """:func:`research.align.pose_errors` of ``cams`` (a model's cameras, named by working name) against
+    the case's truth (``tj``: a ``<case>.truth.json``; office cases need ``office``); ``recs``: the kept
+    records of ``images.json``. None under 3 frames with a truth."""
+    from curate.core.cameras import Cameras
+    from research.align import pose_errors
+    from research.datasets import load_office
+    truth = Cameras.load(tj["cameras"]) if tj.get("cameras") else load_office(office)
+    gt_of = {}
+    for r in recs:
+        e = r.get("extra") or {}
+        if e.get("video"):
+            idx = tj["videos"].get(e["video_rel"])
+            if idx is not None and idx[e["frame"]] is not None:
+                gt_of[r["working"]] = idx[e["frame"]]
+        elif r["rel"] in tj["photos"]:
+            gt_of[r["working"]] = tj["photos"][r["rel"]]
+    keep = [i for i, nm in enumerate(cams.names) if nm in gt_of]
+    if len(keep) < 3:
+        return None
+    sub = cams[keep]
+    est = Cameras(sub.c2w, sub.fx, sub.fy, sub.cx, sub.cy, sub.width, sub.height,
+                  names=tuple(truth.names[gt_of[nm]] for nm in sub.names))
+    return pose_errors(est, truth)
 
 
 def main(argv=None) -> dict:
