@@ -1,6 +1,7 @@
 """A stretch of a video placed off the walk (issue 36, part 1: frames checked by their neighbours in capture
-order): office.mp4 in two takes came back as one model with 14 frames 42-46 deg and metres off, entered and
-left by a jump; such an island is left out, and a walk that pauses, speeds up or skips frames is not one."""
+order): office.mp4 in two takes (one local refinement, since withdrawn) came back with 14 frames 42-46 deg
+off, entered and left by a jump; such an island is left out, and a walk that pauses, speeds up or skips
+frames is not one."""
 
 from __future__ import annotations
 
