@@ -139,25 +139,19 @@ def main(argv: list[str]) -> dict:
            "loop": "research.incremental_loop" if direct else "colmap", "direct_ba_up_to": direct or
            pycolmap.BundleAdjustmentOptions().ceres.max_num_images_direct_sparse_cpu_solver,
            "global_refinements": timed or refinements_from_log(tmp / "colmap.log")}
-    if capture == "video":
-        from research.align import pose_errors
-        from research.datasets import load_ground_truth
-        from research.sfm_mappers import truth_for, video_frames
-        frame_of = video_frames(sfm)[1]
+    if capture in ("video", "takes"):
         best = max(models.values(), key=lambda r: r.num_reg_images())
         cams = C.cameras_from_reconstruction(best, warn=False)[0]
-        e = pose_errors(*truth_for(cams, load_ground_truth(Path(truth)), frame_of))
-        rd = np.asarray(e["rotation_deg"])
-        rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
-                   rotation_deg_median=round(e["rotation_deg_median"], 3),
-                   rotation_deg_max=round(e["rotation_deg_max"], 3), n_over_5deg=int((rd > 5).sum()))
-    elif capture == "takes":      # TRUTH: CASE.truth.json:OFFICE (research.takes make, ../shared/data/office)
-        from research.takes import errors_against_truth
-        tj, office = str(truth).split(":", 1)
-        recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
-        best = max(models.values(), key=lambda r: r.num_reg_images())
-        e = errors_against_truth(C.cameras_from_reconstruction(best, warn=False)[0], recs,
-                                 json.loads(Path(tj).read_text()), Path(office))
+        if capture == "video":
+            from research.align import pose_errors
+            from research.datasets import load_ground_truth
+            from research.sfm_mappers import truth_for, video_frames
+            e = pose_errors(*truth_for(cams, load_ground_truth(Path(truth)), video_frames(sfm)[1]))
+        else:                     # TRUTH: CASE.truth.json:OFFICE (research.takes make, ../shared/data/office)
+            from research.takes import errors_against_truth
+            tj, office = str(truth).split(":", 1)
+            recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+            e = errors_against_truth(cams, recs, json.loads(Path(tj).read_text()), Path(office))
         rd = np.asarray(e["rotation_deg"])
         rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
                    rotation_deg_median=round(e["rotation_deg_median"], 3),

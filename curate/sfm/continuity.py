@@ -6,8 +6,8 @@ hand's breadth. An incremental model can still register a stretch of a take in t
 piece hinged on a few wrong matches: office.mp4 cut into two takes that cross the walk's weak stretch
 (its frames 173-186), mapped with one local refinement per photo (since withdrawn), came back as one
 model of 371 frames in which 14 of them, from both takes, sat 42-46 deg off, entered and left by steps
-21-32 times the take's median step (docs/sfm.md). Each such frame agrees with its own neighbours in the piece, so no check of a frame
-against the points it sees finds it; the path does.
+21-32 times the take's median step (docs/sfm.md). Each such frame agrees with its own neighbours in the
+piece, so no check of a frame against the points it sees finds it; the path does.
 
 :func:`off_path` works on one take's registered frames in time order and flags an *island*: a run
 of frames entered by a jump and left by the next jump (a step at a speed over :data:`JUMP_FACTOR`
