@@ -54,6 +54,23 @@ def refinements_from_log(log: Path) -> list[list[float]]:
     return out
 
 
+def path_record(rec, sfm: Path) -> dict:
+    """Per video take of the model ``rec``: its largest step as a multiple of the speed around it
+    (curate.sfm.continuity.step_ratios) and the one-way jumps ``curate sfm`` would warn of
+    (curate.sfm.colmap.jumps_along); ``sfm``: the run's sfm folder (images.json)."""
+    from types import SimpleNamespace
+
+    import curate.sfm.colmap as C
+    from curate.sfm.continuity import step_ratios
+    kept = [SimpleNamespace(working=r["working"], extra=r.get("extra") or {})
+            for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+    out = {}
+    for take, frames in C._video_takes(rec, C._frame_times(kept)).items():
+        r = step_ratios(*C._along(frames)) if len(frames) > 1 else np.zeros(0)
+        out[take] = {"frames": len(frames), "largest_step_x_around": round(float(r.max()), 2) if len(r) else None}
+    return {"takes": out, "jumps": C.jumps_along(rec, kept)}
+
+
 def set_option(options, path: str, value: str) -> None:
     """``options.<path> = value`` (pycolmap options; ``path`` dotted for nested ones), the value read
     as the type of the option's current value."""
@@ -153,6 +170,7 @@ def main(argv: list[str]) -> dict:
             recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
             e = errors_against_truth(cams, recs, json.loads(Path(tj).read_text()), Path(office))
         rd = np.asarray(e["rotation_deg"])
+        rec["path"] = path_record(best, sfm)
         rec.update(model_sizes=sorted((int(r.num_reg_images()) for r in models.values()), reverse=True),
                    rotation_deg_median=round(e["rotation_deg_median"], 3),
                    rotation_deg_max=round(e["rotation_deg_max"], 3), n_over_5deg=int((rd > 5).sum()))

@@ -1,5 +1,6 @@
 """Each video take of a finished SfM run along its path: the islands `curate.sfm.continuity.off_path`
-finds and the largest steps between consecutive frames, as multiples of the take's median speed.
+finds, the largest steps between consecutive frames as multiples of the take's median speed, and the
+largest as multiples of the speed around them (`step_ratios`: what `path_jumps` reports a fold by).
 
 Reads ``RUN/sfm/images.json`` and every model under ``RUN/sfm/sparse/`` (the frames the run already
 left out are not in them: run it on a run made before the check to see what it finds). One JSON line
@@ -38,7 +39,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+", help="run folders whose SfM stage finished")
     a = ap.parse_args(argv)
-    from curate.sfm.continuity import off_path, _speeds
+    from curate.sfm.continuity import _speeds, off_path, path_jumps, step_ratios
     for run in a.runs:
         for model, take, t, names, c in takes_along(run):
             isl = off_path(t, c)
@@ -52,7 +53,13 @@ def main(argv=None) -> None:
                               "islands": [names[i] for i in isl],
                               "largest_steps_x_median": np.sort(ratio)[-4:].round(2).tolist(),
                               "largest_step_elsewhere_x_median": round(float(ratio[steps].max()), 2)
-                              if steps.any() else None}), flush=True)
+                              if steps.any() else None,
+                              "largest_steps_x_around": np.sort(step_ratios(t, c))[-4:].round(2).tolist()
+                              if len(t) > 1 else [],
+                              "largest_step_elsewhere_x_around": round(float(step_ratios(t, c)[steps].max()), 2)
+                              if steps.any() else None,
+                              "jumps": [(names[i - 1], names[i], round(r, 2)) for i, r in path_jumps(t, c)]}),
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """A stretch of a video placed off the walk (issue 36, part 1: frames checked by their neighbours in capture
 order): office.mp4 in two takes (one local refinement, since withdrawn) came back with 14 frames 42-46 deg
 off, entered and left by a jump; such an island is left out, and a walk that pauses, speeds up or skips
-frames is not one."""
+frames is not one. A fold (the same capture, mapped the same way, came back with every frame 35 deg off
+and one jump of 44.75 times the median step) is a jump with no way back: the user is told."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from curate.sfm.continuity import JUMP_FACTOR, off_path
+from curate.sfm.continuity import FOLD_FACTOR, JUMP_FACTOR, off_path, path_jumps
 
 
 def walk(n: int = 120, fps: float = 10.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -73,7 +74,9 @@ def test_an_island_longer_than_half_the_take_is_left_alone():
 def test_degenerate_takes_give_no_island_and_no_warning(t, c):
     with np.errstate(all="raise"):
         out = off_path(t, c)
+        jumps = path_jumps(t, c)
     assert out.dtype.kind == "i" and len(out) <= 1
+    assert len(jumps) <= 1 and all(i == len(t) - 1 and r > FOLD_FACTOR for i, r in jumps)  # only the 1e300 frame
 
 
 def test_jump_factor_sits_between_a_sound_walk_and_a_wrong_piece():
@@ -118,3 +121,60 @@ def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_pat
     w = split_warning(tmp_path)
     assert w.startswith("SfM placed some frames off their video's path: curate uses the largest, 60 of 64"), w
     assert "4 are left out of the selection, the export and the evaluation (4 of them placed off" in w
+
+
+def test_a_fold_is_a_jump_with_no_way_back_and_walking_on_after_a_pause_is_not():
+    t, c = walk()
+    assert path_jumps(t, c) == []
+    fold = c.copy()
+    fold[60:] += [2.0, 2.0, 0.0]                      # the second half placed 2.8 m away: one jump, no way back
+    (i, r), = path_jumps(t, fold)
+    assert i == 60 and r > FOLD_FACTOR
+    assert off_path(t, fold).tolist() == []           # not an island: nothing is left out for it
+    # stands still for 70 frames (shake only), then walks on: every step of the walk is fast against the
+    # take's median, none against the steps around it
+    still = np.repeat(c[:1], 70, 0) + np.random.default_rng(1).normal(0, 0.002, (70, 3))
+    on = np.concatenate([still, still[-1] + np.cumsum(np.full((50, 3), [0.1, 0.0, 0.0]), 0)])
+    assert path_jumps(t, on) == []
+    keep = np.r_[0:40, 70:120]                         # frames dropped between candidates: a gap in time
+    assert path_jumps(t[keep], c[keep]) == []
+    fast = np.cumsum(np.r_[np.full(60, 0.1), np.full(60, 0.3)])[:, None] * [1.0, 0.0, 0.0]
+    assert path_jumps(t, fast) == []
+
+
+def test_fold_factor_sits_between_a_sound_capture_and_the_fold():
+    """Measured (docs/sfm.md, research.path_check): the largest one-way step of a sound model, 13.4 times the
+    median (the fox photos played as a video); the fold, 44.75. A 30x jump is reported, a 15x one is not."""
+    assert 13.4 < FOLD_FACTOR < 44.75
+    t = np.arange(40) / 10.0
+    c = np.stack([t, np.zeros(40), np.zeros(40)], 1)
+    c[20:, 1] += 3.0                                  # steps of 0.1 m, one of 3 m: 30 x
+    assert [i for i, _ in path_jumps(t, c)] == [20]
+    c[20:, 1] -= 1.5                                  # 15 x
+    assert path_jumps(t, c) == []
+
+
+def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
+    pytest.importorskip("pycolmap")
+    from curate.core.cameras import Cameras, look_at
+    from curate.sfm.colmap import drop_off_path, jumps_along, reconstruction_from_cameras
+    from curate.sfm.ingest import PhotoRecord
+    from curate.sfm.stage import path_warning
+    t, c = walk(60)
+    c[30:] += [3.0, 0.0, 0.0]
+    names = tuple(f"walk_{x:010.3f}.jpg" for x in t)
+    cams = Cameras(look_at(c, np.zeros((60, 3)) + [0, 0, 0.1]), 300, 300, 160, 120, 320, 240, names=names)
+    recs = []
+    for i, n in enumerate(names):
+        r = PhotoRecord(original=f"/p/{n}", rel=n, working=n)
+        r.extra.update(video="/p/walk.mp4", video_rel="walk.mp4", time=float(t[i]), frame=i)
+        recs.append(r)
+    rec = reconstruction_from_cameras(cams)
+    assert drop_off_path({0: rec}, recs) == {}
+    jumps = jumps_along(rec, recs)
+    assert [(j["from"], j["to"]) for j in jumps["walk.mp4"]] == [(names[29], names[30])]
+    assert jumps["walk.mp4"][0]["x_median"] > FOLD_FACTOR and rec.num_reg_images() == 60
+    w = path_warning({"path_jumps": jumps})
+    assert w.startswith(f"video walk.mp4: the camera path jumps from {names[29]} to {names[30]} ("), w
+    assert "does not come back: SfM may have folded the model there" in w
+    assert path_warning({}) is None and path_warning({"path_jumps": {}}) is None

@@ -168,6 +168,19 @@ def test_a_split_capture_and_a_disconnected_export_are_boxed_at_the_top(tmp_path
     assert body.index("warnbox") < body.index('class="verdict"') < body.index("<dl")   # above the figures
 
 
+def test_a_folded_video_take_is_boxed_at_the_top(tmp_path):
+    """A model whose camera path jumps once and does not come back (a fold keeps every frame): said above
+    the figures, with the frames on each side of the jump."""
+    run = make_run(tmp_path)
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"path_jumps": {"walk.mp4": [
+        {"from": "walk_000012.300.jpg", "to": "walk_000012.400.jpg", "x_median": 44.8}]}}}))
+    body = write_html(run).read_text()
+    body = body[body.index("<body"):]
+    assert body.count('class="warnbox"') == 1
+    assert "video walk.mp4: the camera path jumps from walk_000012.300.jpg to walk_000012.400.jpg (44.8 times" in body
+    assert body.index("warnbox") < body.index("<dl")
+
+
 def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):
     """A video that stopped decoding before its end: where it stopped, above the figures."""
     run = make_run(tmp_path)

@@ -487,26 +487,53 @@ def without_contained(models: dict) -> dict:
     return {k: r for k, r in models.items() if k == best or not names(r) <= inside}
 
 
+def _video_takes(rec, when: dict) -> dict[str, list]:
+    """{take: [(time, Image)] in time order} of the registered video frames of ``rec``; ``when``:
+    {name: (take, time)}."""
+    takes: dict[str, list] = {}
+    for im in rec.images.values():
+        if im.has_pose and im.name in when:
+            takes.setdefault(when[im.name][0], []).append((when[im.name][1], im))
+    for frames in takes.values():
+        frames.sort(key=lambda x: x[0])
+    return dict(sorted(takes.items()))
+
+
+def _frame_times(kept: list) -> dict:
+    """{working name: (take, seconds)} of the video frames among the PhotoRecords ``kept``."""
+    return {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
+            if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+
+
+def _along(frames: list) -> tuple[np.ndarray, np.ndarray]:
+    return (np.array([x[0] for x in frames]), np.array([np.asarray(im.projection_center()) for _, im in frames]))
+
+
 def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
     """Deregister, in every model ({id: Reconstruction}), the video frames :func:`curate.sfm.continuity.off_path`
     finds on an island off their take's path; ``kept``: the PhotoRecords (a frame's ``extra`` holds its
     ``video_rel`` and ``time``). Returns {take: [names]} of the frames left out."""
     from curate.sfm.continuity import off_path
-    when = {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
-            if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+    when = _frame_times(kept)
     out: dict[str, list[str]] = {}
     for rec in models.values():
-        takes: dict[str, list] = {}
-        for im in rec.images.values():
-            if im.has_pose and im.name in when:
-                takes.setdefault(when[im.name][0], []).append((when[im.name][1], im))
-        for tk, frames in sorted(takes.items()):
-            frames.sort(key=lambda x: x[0])
-            t = np.array([x[0] for x in frames])
-            c = np.array([np.asarray(im.projection_center()) for _, im in frames])
-            for i in off_path(t, c):
+        for tk, frames in _video_takes(rec, when).items():
+            for i in off_path(*_along(frames)):
                 rec.deregister_frame(frames[i][1].frame_id)
                 out.setdefault(tk, []).append(frames[i][1].name)
+    return out
+
+
+def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
+    """{take: [{"from", "to", "x_median"}]}: the one-way jumps (:func:`curate.sfm.continuity.path_jumps`)
+    of every video take in the model ``rec``, each between two consecutive registered frames, at
+    ``x_median`` times the take's median speed. Run after :func:`drop_off_path`."""
+    from curate.sfm.continuity import path_jumps
+    out: dict[str, list[dict]] = {}
+    for tk, frames in _video_takes(rec, _frame_times(kept)).items():
+        for i, r in path_jumps(*_along(frames)):
+            out.setdefault(tk, []).append({"from": frames[i - 1][1].name, "to": frames[i][1].name,
+                                           "x_median": round(r, 1) if np.isfinite(r) else None})
     return out
 
 
@@ -810,6 +837,9 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
                        "; ".join(f"{tk}: {len(n)} ({n[0]}..{n[-1]})" if len(n) > 1 else f"{tk}: {n[0]}"
                                  for tk, n in off.items()))
     best = max(models.values(), key=lambda r: r.num_reg_images())
+    jumps = jumps_along(best, kept)
+    if jumps:
+        stats["path_jumps"] = jumps
     stats["model_sizes"] = _sizes(models)
     sparse = out / "sparse" / "0"
     sparse.mkdir(parents=True)

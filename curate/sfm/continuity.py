@@ -16,6 +16,11 @@ are within that speed of each other, the way a real walk would have gone; a run 
 take. A take that speeds up after a pause has an entry without a way back (and, walking, a jump at
 every step: no run between two of them holds still); a cut in a video (frames dropped between
 candidates) is a gap in time the speed allows for. Neither is an island.
+
+:func:`path_jumps` finds what is left once islands are out: a jump with no way back, at over
+:data:`FOLD_FACTOR` times the median speed. A model folded at such a step holds every frame, and the
+frames on each side agree with their neighbours; which side is wrong the path cannot say, so nothing is
+left out: the user is told (``curate.sfm.stage.path_warning``).
 """
 
 from __future__ import annotations
@@ -28,6 +33,18 @@ them) exceeds this many times the take's median speed. office.mp4's wrong stretc
 21-32 times the median; the largest step of a sound video measured: 4.59 times (a rendered second
 session; office.mp4: 3.75; the fox photos played as a video: one jump of 13.4 times with no way back).
 10 sits midway (geometrically) between 4.59 and 21 (research.path_check, docs/sfm.md)."""
+
+
+FOLD_FACTOR = 20.0
+"""A jump with no way back is reported when its speed exceeds this many times the take's median speed.
+The one fold measured (office.mp4 in two takes, one local refinement per photo, since withdrawn: every
+frame 35 deg off, median) jumped at 44.75 times the median; the largest one-way steps of sound models:
+13.4 times (the fox photos played as a video: the photographer's uneven steps), at most 4.59 for videos
+(research.path_check, docs/sfm.md). 20 sits above every sound capture measured, under the fold by 2.2x."""
+
+
+JUMP_WINDOW = 10
+"""Steps on each side of a step that :func:`path_jumps` compares it with (a second at 10 candidates a second)."""
 
 
 def _speeds(t: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -63,3 +80,39 @@ def off_path(t: np.ndarray, c: np.ndarray, factor: float = JUMP_FACTOR) -> np.nd
         if way <= limit:
             out.update(range(a, b))
     return np.array(sorted(out), int)
+
+
+def step_ratios(t: np.ndarray, c: np.ndarray, window: int = JUMP_WINDOW) -> np.ndarray:
+    """[n-1] each step's speed over the speed around it: the median of the ``window`` steps on each side,
+    itself at least the take's median (all zeros when the take never moves). Measured against its
+    neighbours, not the take as a whole, so that walking on after a long pause (every step fast against a
+    take that mostly stood still) stays near 1.
+
+    t: [n] seconds, increasing; c: [n, 3] camera centres (finite; see :func:`path_jumps`)."""
+    v = _speeds(t, c)
+    if len(v) == 0:
+        return v
+    med = float(np.median(v))
+    if not med > 0:
+        return np.zeros_like(v)
+    ref = np.array([max(float(np.median(np.r_[v[max(i - window, 0):i], v[i + 1:i + 1 + window]]))
+                        if len(v) > 1 else med, med) for i in range(len(v))])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return v / ref
+
+
+def path_jumps(t: np.ndarray, c: np.ndarray, factor: float = FOLD_FACTOR, window: int = JUMP_WINDOW
+               ) -> list[tuple[int, float]]:
+    """The lone jumps of a take: [(i, ratio)], frame i reached from frame i-1 at ``ratio`` > ``factor`` times
+    the speed around it (:func:`step_ratios`). Run :func:`off_path` first and leave its frames out: an
+    island's way in and out are such jumps.
+
+    t: [n] seconds, increasing (one take's registered frames in time order).
+    c: [n, 3] their camera centres in the model.
+    Returns [] under 4 frames, for a take that never moves, and for non-finite input.
+    """
+    t, c = np.asarray(t, np.float64), np.asarray(c, np.float64).reshape(-1, 3)
+    if len(t) < 4 or not (np.isfinite(t).all() and np.isfinite(c).all()):
+        return []
+    r = step_ratios(t, c, window)
+    return [(int(i) + 1, float(r[i])) for i in np.flatnonzero(r > factor)]

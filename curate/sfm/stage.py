@@ -118,6 +118,25 @@ def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
             + f": {name_ranges(lost)}")
 
 
+def path_warning(stats: dict) -> str | None:
+    """A warning for each video take whose path in the model jumps at over
+    :data:`curate.sfm.continuity.FOLD_FACTOR` times its median speed and does not come back (a model
+    folded there keeps every frame, the ones on one side wrong); None without such a jump.
+    ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`)."""
+    jumps = stats.get("path_jumps") or {}
+    if not jumps:
+        return None
+    each = []
+    for take, js in sorted(jumps.items()):
+        j = max(js, key=lambda x: x["x_median"] if x["x_median"] is not None else float("inf"))
+        how = f"{j['x_median']:g} times its median step" if j["x_median"] is not None else "an unbounded step"
+        each.append(f"video {take}: the camera path jumps from {j['from']} to {j['to']} ({how})"
+                    + (f" and {len(js) - 1} more time{'s' * (len(js) > 2)}" if len(js) > 1 else ""))
+    return ("; ".join(each) + ", and does not come back: SfM may have folded the model there, the cameras on one "
+            "side of the jump then being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or "
+            "transforms.json in nerfstudio's viewer) before training on them")
+
+
 def import_warning(run_dir: Path) -> str | None:
     """A warning about an import of known poses (``curate run PHOTOS --poses POSES``): when fewer than
     half of the poses found a photo in the photo folder, or fewer than half of the folder's photos have a
@@ -176,6 +195,12 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
             raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part, "
                              "--on-split each curates every part)")
         log.warning("sfm: %s", warn)
+    if not poses:
+        from curate.core.stage import read_stage
+        fold = path_warning((read_stage(d) or {}).get("stats") or {})
+        if fold is not None:
+            log.warning("sfm: %s", fold)
+            warn = fold if warn is None else f"{warn}; {fold}"
     summary = f"{n} cameras registered"
     if poses:
         from curate.core.stage import read_stage
