@@ -173,7 +173,7 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     assert drop_off_path({0: rec}, recs) == {}
     jumps = jumps_along(rec, recs)
     assert [(j["from"], j["to"]) for j in jumps["walk.mp4"]] == [(names[29], names[30])]
-    assert jumps["walk.mp4"][0]["x_median"] > FOLD_FACTOR and rec.num_reg_images() == 60
+    assert jumps["walk.mp4"][0]["x_around"] > FOLD_FACTOR and rec.num_reg_images() == 60
     w = path_warning({"path_jumps": jumps})
     assert w.startswith(f"video walk.mp4: the camera path jumps from {names[29]} to {names[30]} ("), w
     assert "does not come back: SfM may have folded the model there" in w

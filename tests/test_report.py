@@ -173,11 +173,12 @@ def test_a_folded_video_take_is_boxed_at_the_top(tmp_path):
     the figures, with the frames on each side of the jump."""
     run = make_run(tmp_path)
     (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"path_jumps": {"walk.mp4": [
-        {"from": "walk_000012.300.jpg", "to": "walk_000012.400.jpg", "x_median": 44.8}]}}}))
+        {"from": "walk_000012.300.jpg", "to": "walk_000012.400.jpg", "x_around": 44.8}]}}}))
     body = write_html(run).read_text()
     body = body[body.index("<body"):]
     assert body.count('class="warnbox"') == 1
-    assert "video walk.mp4: the camera path jumps from walk_000012.300.jpg to walk_000012.400.jpg (44.8 times" in body
+    assert ("video walk.mp4: the camera path jumps from walk_000012.300.jpg to walk_000012.400.jpg (44.8 times the "
+            "steps around it)") in body
     assert body.index("warnbox") < body.index("<dl")
 
 

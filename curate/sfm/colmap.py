@@ -525,15 +525,15 @@ def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
 
 
 def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
-    """{take: [{"from", "to", "x_median"}]}: the one-way jumps (:func:`curate.sfm.continuity.path_jumps`)
+    """{take: [{"from", "to", "x_around"}]}: the one-way jumps (:func:`curate.sfm.continuity.path_jumps`)
     of every video take in the model ``rec``, each between two consecutive registered frames, at
-    ``x_median`` times the take's median speed. Run after :func:`drop_off_path`."""
+    ``x_around`` times the speed around the step (``step_ratios``). Run after :func:`drop_off_path`."""
     from curate.sfm.continuity import path_jumps
     out: dict[str, list[dict]] = {}
     for tk, frames in _video_takes(rec, _frame_times(kept)).items():
         for i, r in path_jumps(*_along(frames)):
             out.setdefault(tk, []).append({"from": frames[i - 1][1].name, "to": frames[i][1].name,
-                                           "x_median": round(r, 1) if np.isfinite(r) else None})
+                                           "x_around": round(r, 1) if np.isfinite(r) else None})
     return out
 
 

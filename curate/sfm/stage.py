@@ -128,8 +128,8 @@ def path_warning(stats: dict) -> str | None:
         return None
     each = []
     for take, js in sorted(jumps.items()):
-        j = max(js, key=lambda x: x["x_median"] if x["x_median"] is not None else float("inf"))
-        how = f"{j['x_median']:g} times its median step" if j["x_median"] is not None else "an unbounded step"
+        j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
+        how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
         each.append(f"video {take}: the camera path jumps from {j['from']} to {j['to']} ({how})"
                     + (f" and {len(js) - 1} more time{'s' * (len(js) > 2)}" if len(js) > 1 else ""))
     return ("; ".join(each) + ", and does not come back: SfM may have folded the model there, the cameras on one "
