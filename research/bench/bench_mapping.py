@@ -2,6 +2,7 @@
 """Benchmark SfM's mapping against the pool size: photo folders of 1,000-3,000 frames and a 300-photo object.
 
     python3 -m research.bench.bench_mapping --walk 1000 2000 3000 --object 300 [--mappers incremental global]
+    python3 -m research.bench.bench_mapping --walk --object --hall 1000 3000 --mappers
 
 Renders (once, cached under ``--work``, resumable frame by frame):
 
@@ -10,6 +11,9 @@ Renders (once, cached under ``--work``, resumable frame by frame):
   :mod:`research.bench.bench_capture`) as numbered JPEG photos ``frame_00000.jpg``...; the pool of
   size N is a folder of hard links to its first N frames (photos, not a video: no ``--max-frames``
   cap; ``--matcher auto`` picks sequential matching for numbered photos);
+* a walk down a long hall that never comes back (:func:`hall_walk` through :func:`hall_scene`, same
+  size, rate and blur as the loop walk), the pool of size N again its first N frames: new ground all
+  the way, where the loop walk keeps revisiting one room;
 * an object capture (:func:`object_orbit`): ``--object`` photos of 800x533 taken hand-held in three
   rings around the coffee table of the same room, named ``IMG_0001.jpg``... as a phone names them.
 
@@ -71,8 +75,93 @@ def object_orbit(n: int = 300, seed: int = 0, width: int = 800, height: int = 53
                    names=tuple(f"IMG_{i + 1:04d}.jpg" for i in range(n)))
 
 
+HALL_WIDTH, HALL_HEIGHT = 4.0, 2.7
+HALL_SPEED = 0.35          # m/s, the walk's pace (as hand_held_walk's)
+
+
+def hall_scene(n: int, seed: int = 0):
+    """A long furnished hall for a walk of ``n`` frames that never comes back (``HALL_WIDTH`` x
+    ``HALL_HEIGHT`` m, 4 m longer than the walk): pictures hung along both long walls, and shelves with books, cabinets, tables with things on
+    them, plants and pillars along both long walls every 1.2-2.2 m, each with its own procedural
+    texture (:class:`curate.simulate.synthetic.Scene`), and a ceiling light every 5 m. Deterministic
+    from (n, seed)."""
+    from curate.simulate.synthetic import Scene, _Builder
+    b = _Builder(seed * 1000 + 77)
+    L, W, H = 4.0 + n * HALL_SPEED / FPS, HALL_WIDTH, HALL_HEIGHT
+    b.room(L, W, H)
+    r = b.rng
+    for wall in (0, 1):                              # pictures along both walls, each its own texture
+        x = float(r.uniform(0.0, 0.5))
+        while x < L - 0.5:
+            w = float(r.uniform(0.5, 1.3))
+            y0, y1 = (0.0, 0.02) if wall == 0 else (W - 0.02, W)
+            b.box([x, y0, float(r.uniform(0.9, 1.3))], [x + w, y1, float(r.uniform(1.9, 2.4))])
+            x += w + float(r.uniform(0.1, 0.5))
+    for wall in (0, 1):
+        x = float(r.uniform(0.3, 1.0))
+        while x < L - 1.8:
+            w, d = float(r.uniform(0.8, 1.5)), float(r.uniform(0.35, 0.7))
+            y0 = 0.05 if wall == 0 else W - 0.05 - d
+            k = int(r.integers(5))
+            if k == 0:
+                b.shelf(x, y0, w, d, float(r.uniform(1.5, 2.2)), n=3)
+            elif k == 1:
+                b.box([x, y0, 0], [x + w, y0 + d, float(r.uniform(0.6, 1.6))])            # cabinet
+            elif k == 2:
+                h = float(r.uniform(0.7, 0.95))
+                b.table(x, y0, w, d, h)
+                b.sphere([x + 0.3 * w, y0 + d / 2, h + 0.08], 0.08)
+                b.cyl([x + 0.7 * w, y0 + d / 2, h], 0.06, float(r.uniform(0.1, 0.3)))
+            elif k == 3:
+                c = [x + w / 2, y0 + d / 2]
+                b.cyl([*c, 0], 0.18, 0.45)                                                 # plant
+                b.sphere([*c, 0.85], float(r.uniform(0.3, 0.42)))
+            else:
+                b.box([x, y0, 0], [x + 0.35, y0 + 0.35 if wall == 0 else y0 + d, H])     # pillar
+            x += w + float(r.uniform(0.2, 0.9))
+    lights = np.array([[x, W / 2, H - 0.15] for x in np.arange(2.5, L, 5.0)])
+    lo, hi = np.zeros(3), np.array([L, W, H])
+    free = ([1.0, 1.0, 1.0], [L - 1.0, W - 1.0, 2.2])
+    return Scene("hall", (lo, hi), b.solids, lights, (np.asarray(free[0]), np.asarray(free[1])),
+                 np.array([L / 2, W / 2, 1.0]))
+
+
+def hall_walk(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_deg: float = 60.0):
+    """(Cameras [n], angular speed [n] radians a frame) of a hand-held walk down :func:`hall_scene`'s hall,
+    one frame at ``FPS``: 2 m in, straight along it at ``HALL_SPEED`` with a slow sway, eye height with a
+    walking bob, the gaze swinging between the two walls (up to 70 deg either side of ahead, a swing
+    every 8 s) with hand shake and roll as :func:`curate.simulate.walks.hand_held_walk`. It covers new
+    ground the whole way: no frame sees what a frame 10 m earlier saw. Names ``frame_00000.jpg``..."""
+    from curate.core.cameras import Cameras, look_at
+    from curate.simulate.walks import _smooth_noise
+    rng = np.random.default_rng(seed + 5)
+    f = np.arange(n, dtype=float)
+    x = 2.0 + f * HALL_SPEED / FPS
+    y = HALL_WIDTH / 2 + 0.3 * np.sin(2 * np.pi * f / (11 * FPS))
+    z = 1.55 + 0.03 * np.sin(f * 2 * np.pi * 1.8 / FPS)
+    c = np.stack([x, y, z], 1)
+    shake = 0.004 * np.sqrt(30 / FPS)
+    yaw = 1.22 * np.sin(2 * np.pi * f / (8 * FPS)) + _smooth_noise(rng, n, 0.1, 3 * int(FPS))
+    yaw = yaw + _smooth_noise(rng, n, shake, 2)
+    pitch = -0.12 + 0.1 * np.sin(2 * np.pi * f / (9 * FPS)) + _smooth_noise(rng, n, shake, 2)
+    roll = _smooth_noise(rng, n, 0.03, int(FPS))
+    d = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
+    c2w = look_at(c, c + d)
+    cr, sr = np.cos(roll), np.sin(roll)
+    Rz = np.zeros((n, 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = cr, -sr, sr, cr, 1.0
+    c2w[:, :3, :3] = c2w[:, :3, :3] @ Rz
+    fx = width / 2 / np.tan(np.radians(fov_deg) / 2)
+    omega = np.abs(np.gradient(yaw)) + np.abs(np.gradient(pitch))
+    return Cameras(c2w, fx, fx, width / 2, height / 2, width, height,
+                   names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
+
+
+SCENES = {"walk": "livingroom", "object": "livingroom", "hall": "gallery"}
+
+
 def capture_cameras(kind: str, n: int, seed: int = 0):
-    """(Cameras [n], angular speed [n] radians a frame or None) of capture ``kind`` ('walk' or 'object')."""
+    """(Cameras [n], angular speed [n] radians a frame or None) of capture ``kind`` ('walk', 'hall' or 'object')."""
     if kind == "walk":
         from curate.simulate.synthetic import make_scene
         from curate.simulate.walks import hand_held_walk
@@ -80,7 +169,32 @@ def capture_cameras(kind: str, n: int, seed: int = 0):
         from curate.core.cameras import Cameras
         return Cameras(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height,
                        names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
+    if kind == "hall":
+        return hall_walk(n, seed)
     return object_orbit(n, seed), None
+
+
+_SCENE: dict = {}
+
+
+def capture_scene(kind: str, n: int, seed: int = 0):
+    """The scene of capture (kind, n, seed), built once per process."""
+    key = (kind, n, seed)
+    if key not in _SCENE:
+        from curate.simulate.synthetic import make_scene
+        _SCENE[key] = hall_scene(n, seed) if kind == "hall" else make_scene("livingroom", seed)
+        _SCENE[key]._raycaster()                     # built once, shared by _lit_near's copies
+    return _SCENE[key]
+
+
+def _lit_near(scene, centre, k: int = 3):
+    """``scene`` lit by its ``k`` lights nearest ``centre`` (a hall's far lights add nothing visible and
+    each costs a shadow cast per pixel); the ray-casting structure is shared."""
+    import dataclasses
+    if len(scene.lights) <= k:
+        return scene
+    near = np.argsort(np.linalg.norm(scene.lights - centre, axis=1))[:k]
+    return dataclasses.replace(scene, lights=scene.lights[np.sort(near)])
 
 
 def _render_chunk(args):
@@ -88,12 +202,11 @@ def _render_chunk(args):
     kind, n, seed, folder, idx = args
     from PIL import Image
 
-    from curate.simulate.synthetic import make_scene
     from curate.simulate.walks import motion_blur
-    scene = make_scene("livingroom", seed)
+    scene = capture_scene(kind, n, seed)
     cams, omega = capture_cameras(kind, n, seed)
     for i in idx:
-        rgb, _ = scene.render(cams[int(i)])
+        rgb, _ = _lit_near(scene, cams.centres[int(i)]).render(cams[int(i)])
         img = rgb[0] if omega is None else motion_blur(rgb[0], omega[i], float(cams.fx[i]), FPS * EXPOSURE_S)
         dst = Path(folder) / cams.names[i]
         Image.fromarray(img).save(str(dst) + ".part.jpg", quality=92)
@@ -105,7 +218,7 @@ def render(work: Path, kind: str, n: int, upto: int, seed: int = 0, jobs: int = 
     """Folder of the capture ``kind`` of ``n`` frames with (at least) its first ``upto`` frames rendered;
     frames already there are kept, so a killed rendering resumes. ``truth.npy``: [n, 4, 4] c2w."""
     from multiprocessing import Pool
-    folder = work / "frames" / f"{kind}_livingroom_s{seed}_n{n}"
+    folder = work / "frames" / f"{kind}_{SCENES[kind]}_s{seed}_n{n}"
     folder.mkdir(parents=True, exist_ok=True)
     cams, _ = capture_cameras(kind, n, seed)
     np.save(folder / "truth.npy", cams.c2w)
@@ -365,18 +478,22 @@ def summarize(work: Path, tag: str = "") -> dict:
             row["after_cpu_s"] = round(pre + after["cpu_s"], 1)
             row["map_share_after"] = round(after["cpu_s"] / row["after_cpu_s"], 3)
         rows.append(row)
-    walks = sorted((r for r in rows if r["name"].startswith("walk_") and "error" not in r), key=lambda r: r["n_kept"])
-    n = [r["n_kept"] for r in walks]
-    fits = {"sizes": n, "sfm_before_cpu": fit_exponent(n, [r["before_cpu_s"] for r in walks])}
-    for k in ("ingest", "extract", "match", "map"):
-        fits[f"{k}_cpu"] = fit_exponent(n, [r["steps"].get(k, {}).get("cpu_s", 0) for r in walks])
-    for k in ("global", "hierarchical", "auto" + tag):
-        have = [r for r in walks if k in r and "cpu_s" in r[k]]
-        if len(have) == len(walks):
-            fits[f"map_{k}_cpu"] = fit_exponent(n, [r[k]["cpu_s"] for r in have])
-    if all("after_cpu_s" in r for r in walks):
-        fits["sfm_after_cpu"] = fit_exponent(n, [r["after_cpu_s"] for r in walks])
-    return {"rows": rows, "growth_exponents": fits}
+    out = {"rows": rows}
+    for capture, key in (("walk", "growth_exponents"), ("hall", "hall_growth_exponents")):
+        walks = sorted((r for r in rows if r["name"].startswith(capture + "_") and "error" not in r),
+                       key=lambda r: r["n_kept"])
+        n = [r["n_kept"] for r in walks]
+        fits = {"sizes": n, "sfm_before_cpu": fit_exponent(n, [r["before_cpu_s"] for r in walks])}
+        for k in ("ingest", "extract", "match", "map"):
+            fits[f"{k}_cpu"] = fit_exponent(n, [r["steps"].get(k, {}).get("cpu_s", 0) for r in walks])
+        for k in ("global", "hierarchical", "auto" + tag):
+            have = [r for r in walks if k in r and "cpu_s" in r[k]]
+            if have and len(have) == len(walks):
+                fits[f"map_{k}_cpu"] = fit_exponent(n, [r[k]["cpu_s"] for r in have])
+        if walks and all("after_cpu_s" in r for r in walks):
+            fits["sfm_after_cpu"] = fit_exponent(n, [r["after_cpu_s"] for r in walks])
+        out[key] = fits
+    return out
 
 
 def main(argv=None) -> int:
@@ -393,6 +510,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--walk", type=int, nargs="*", default=[1000, 2000, 3000], help="pool sizes of the walk")
     ap.add_argument("--walk-frames", type=int, default=3000, help="frames of the whole walk (pools are its prefixes)")
+    ap.add_argument("--hall", type=int, nargs="*", default=[],
+                    help="pool sizes of the hall walk (new ground all the way: :func:`hall_walk`)")
+    ap.add_argument("--hall-frames", type=int, default=3000, help="frames of the whole hall walk")
     ap.add_argument("--object", type=int, nargs="*", default=[300], help="photos of each object capture")
     ap.add_argument("--mappers", nargs="*", default=["global", "hierarchical"],
                     help="mappers to run again on each pool's matches (the SfM run itself maps with --sfm-mapper)")
@@ -405,7 +525,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     (a.work / "results").mkdir(parents=True, exist_ok=True)
     out = []
-    todo = [("object", n, n) for n in a.object] + [("walk", a.walk_frames, n) for n in sorted(a.walk)]
+    todo = [("object", n, n) for n in a.object] + [("walk", a.walk_frames, n) for n in sorted(a.walk)] \
+        + [("hall", a.hall_frames, n) for n in sorted(a.hall)]
     for capture, total, n in todo:
         frames = render(a.work, capture, total, n, jobs=a.jobs)
         photos = pool_folder(a.work, frames, n)
