@@ -178,3 +178,8 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     assert w.startswith(f"video walk.mp4: the camera path jumps from {names[29]} to {names[30]} ("), w
     assert "does not come back: SfM may have folded the model there" in w
     assert path_warning({}) is None and path_warning({"path_jumps": {}}) is None
+    two = {"walk.mp4": jumps["walk.mp4"] * 2, "b.mp4": [{"from": "b_1.jpg", "to": "b_2.jpg", "x_around": None}]}
+    w = path_warning({"path_jumps": two})
+    assert w.startswith("video b.mp4: the camera path jumps from b_1.jpg to b_2.jpg (an unbounded step) and does not "
+                        "come back; video walk.mp4: "), w
+    assert "steps around it; 1 more such jump) and does not come back: SfM may" in w

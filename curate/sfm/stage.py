@@ -120,7 +120,7 @@ def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
 
 def path_warning(stats: dict) -> str | None:
     """A warning for each video take whose path in the model jumps at over
-    :data:`curate.sfm.continuity.FOLD_FACTOR` times its median speed and does not come back (a model
+    :data:`curate.sfm.continuity.FOLD_FACTOR` times the speed around the step and does not come back (a model
     folded there keeps every frame, the ones on one side wrong); None without such a jump.
     ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`)."""
     jumps = stats.get("path_jumps") or {}
@@ -130,11 +130,12 @@ def path_warning(stats: dict) -> str | None:
     for take, js in sorted(jumps.items()):
         j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
         how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
-        each.append(f"video {take}: the camera path jumps from {j['from']} to {j['to']} ({how})"
-                    + (f" and {len(js) - 1} more time{'s' * (len(js) > 2)}" if len(js) > 1 else ""))
-    return ("; ".join(each) + ", and does not come back: SfM may have folded the model there, the cameras on one "
-            "side of the jump then being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or "
-            "transforms.json in nerfstudio's viewer) before training on them")
+        more = f"; {len(js) - 1} more such jump{'s' * (len(js) > 2)}" if len(js) > 1 else ""
+        each.append(f"video {take}: the camera path jumps from {j['from']} to {j['to']} ({how}{more}) and does "
+                    "not come back")
+    return ("; ".join(each) + ": SfM may have folded the model there, the cameras on one side of the jump then "
+            "being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or transforms.json in "
+            "nerfstudio's viewer) before training on them")
 
 
 def import_warning(run_dir: Path) -> str | None:
