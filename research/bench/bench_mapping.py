@@ -82,7 +82,7 @@ HALL_SPEED = 0.35          # m/s, the walk's pace (as hand_held_walk's)
 def hall_scene(n: int, seed: int = 0):
     """A long furnished hall for a walk of ``n`` frames that never comes back (``HALL_WIDTH`` x
     ``HALL_HEIGHT`` m, 4 m longer than the walk): along both long walls, pictures hung every 0.6-1.8 m
-    and, every 1.2-2.2 m, shelves with books, cabinets, tables with things on them, plants and pillars,
+    and, every 1.0-2.4 m, shelves with books, cabinets, tables with things on them, plants and pillars,
     each with its own procedural texture (:class:`curate.simulate.synthetic.Scene`); a ceiling light
     every 5 m. Deterministic from (n, seed)."""
     from curate.simulate.synthetic import Scene, _Builder
