@@ -46,6 +46,7 @@ def main(argv=None) -> None:
             v = _speeds(t, c)
             med = float(np.median(v)) if len(v) else 0.0
             ratio = v / med if med > 0 else np.zeros_like(v)
+            around = step_ratios(t, c)
             steps = np.ones(len(v), bool)           # the steps into, inside and out of an island
             for i in isl:
                 steps[max(i - 1, 0):i + 1] = False
@@ -54,9 +55,8 @@ def main(argv=None) -> None:
                               "largest_steps_x_median": np.sort(ratio)[-4:].round(2).tolist(),
                               "largest_step_elsewhere_x_median": round(float(ratio[steps].max()), 2)
                               if steps.any() else None,
-                              "largest_steps_x_around": np.sort(step_ratios(t, c))[-4:].round(2).tolist()
-                              if len(t) > 1 else [],
-                              "largest_step_elsewhere_x_around": round(float(step_ratios(t, c)[steps].max()), 2)
+                              "largest_steps_x_around": np.sort(around)[-4:].round(2).tolist(),
+                              "largest_step_elsewhere_x_around": round(float(around[steps].max()), 2)
                               if steps.any() else None,
                               "jumps": [(names[i - 1], names[i], round(r, 2)) for i, r in path_jumps(t, c)]}),
                   flush=True)

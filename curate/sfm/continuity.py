@@ -18,9 +18,9 @@ every step: no run between two of them holds still); a cut in a video (frames dr
 candidates) is a gap in time the speed allows for. Neither is an island.
 
 :func:`path_jumps` finds what is left once islands are out: a jump with no way back, at over
-:data:`FOLD_FACTOR` times the speed of the steps around it. A model folded at such a step holds every frame, and the
-frames on each side agree with their neighbours; which side is wrong the path cannot say, so nothing is
-left out: the user is told (``curate.sfm.stage.path_warning``).
+:data:`FOLD_FACTOR` times the speed of the steps around it. A model folded at such a step holds every
+frame, and the frames on each side agree with their neighbours; which side is wrong the path cannot
+say, so nothing is left out: the user is told (``curate.sfm.stage.path_warning``).
 """
 
 from __future__ import annotations
@@ -37,8 +37,9 @@ session; office.mp4: 3.75; the fox photos played as a video: one jump of 13.4 ti
 
 FOLD_FACTOR = 20.0
 """A jump with no way back is reported when its speed exceeds this many times the speed around it
-(:func:`step_ratios`: the steps on each side, at least the take's median speed). The one fold measured (office.mp4 in two takes, one local refinement per photo, since withdrawn: every
-frame 35 deg off, median) jumped at 44.75 times the median; the largest one-way steps of sound models:
+(:func:`step_ratios`: the steps on each side, at least the take's median speed). The one fold measured
+(office.mp4 in two takes, one local refinement per photo, since withdrawn: every frame 35 deg off,
+median) jumped at 44.75 times the median; the largest one-way steps of sound models:
 13.4 times (the fox photos played as a video: the photographer's uneven steps), at most 4.59 for videos
 (research.path_check, docs/sfm.md; against the take's median, which bounds the ratio to the speed
 around a step from above). 20 sits above every sound capture measured, under the fold by 2.2x."""

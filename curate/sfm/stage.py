@@ -177,6 +177,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
 
     The stage ran when its record changed; an unchanged re-run leaves it as it was.
     """
+    from curate.core.stage import read_stage
     from curate.sfm.colmap import import_poses, run_sfm
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
@@ -190,22 +191,19 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
         run_sfm(cfg.sfm, photos, run_dir, force=force)
     ran = _record_stamp(d) != before
     n = len(json.loads((d / "cameras.json").read_text())["cameras"])
+    st = (read_stage(d) or {}).get("stats") or {}
     warn = split_warning(run_dir, each=cfg.sfm.on_split == "each")
     if warn is not None:
         if cfg.sfm.on_split == "stop":
             raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part, "
                              "--on-split each curates every part)")
         log.warning("sfm: %s", warn)
-    if not poses:
-        from curate.core.stage import read_stage
-        fold = path_warning((read_stage(d) or {}).get("stats") or {})
-        if fold is not None:
-            log.warning("sfm: %s", fold)
-            warn = fold if warn is None else f"{warn}; {fold}"
+    fold = path_warning(st)              # imported poses carry no path_jumps: curate does not check them
+    if fold is not None:
+        log.warning("sfm: %s", fold)
+        warn = fold if warn is None else f"{warn}; {fold}"
     summary = f"{n} cameras registered"
     if poses:
-        from curate.core.stage import read_stage
-        st = (read_stage(d) or {}).get("stats") or {}
         tri = st.get("triangulation") or {}
         summary += f" (imported, of {st['n_poses']} poses)" if st.get("n_poses", n) != n else " (imported)"
         if tri.get("status") == "done":
