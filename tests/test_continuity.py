@@ -183,3 +183,10 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     assert w.startswith("video b.mp4: the camera path jumps from b_1.jpg to b_2.jpg (an unbounded step) and does not "
                         "come back; video walk.mp4: "), w
     assert "steps around it; 1 more such jump) and does not come back: SfM may" in w
+    # a fold in another part of a split capture (curated on its own with --on-split each) is named too
+    parts = [{"model": "sparse/0", "n_registered": 300}, {"model": "sparse/1", "n_registered": 60, "path_jumps": jumps}]
+    w = path_warning({"parts": parts})
+    assert w.startswith(f"in the other model of 60 photos, video walk.mp4: the camera path jumps from {names[29]}"), w
+    w = path_warning({"path_jumps": {"b.mp4": two["b.mp4"]}, "parts": parts})
+    assert w.startswith("video b.mp4: ") and "; in the other model of 60 photos, video walk.mp4: " in w, w
+    assert path_warning({"parts": parts[:1] + [{"model": "sparse/1", "n_registered": 60}]}) is None

@@ -72,30 +72,27 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
 
 def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
     """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
-    adjustments are most of a long walk's mapping time) and the local refinements asked for; a small
-    pool keeps COLMAP's own, as before. The default local refinements are COLMAP's: one folded
-    office.mp4 cut into two takes (docs/sfm.md)."""
+    adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before.
+    Every pool keeps COLMAP's two local refinements: one folded office.mp4 cut into two takes
+    (docs/sfm.md)."""
     from curate.sfm import colmap as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
-    assert SfmConfig().local_ba_refinements == colmap_default.ba_local_max_refinements
-    cfg = small_cfg(global_ba_above=300, local_ba_refinements=1)
+    cfg = small_cfg(global_ba_above=300)
     assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
-    for n, ratio, refinements, local in [(300, colmap_default.ba_global_frames_ratio,
-                                          colmap_default.ba_global_max_refinements,
-                                          colmap_default.ba_local_max_refinements),
-                                         (301, cfg.global_ba_growth, cfg.global_ba_refinements,
-                                          cfg.local_ba_refinements)]:
+    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio, colmap_default.ba_global_max_refinements),
+                                  (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
         sfm._map(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
         o = got["options"]
         assert o.ba_global_frames_ratio == pytest.approx(ratio) and o.ba_global_points_ratio == pytest.approx(ratio)
-        assert o.ba_global_max_refinements == refinements and o.ba_local_max_refinements == local
+        assert o.ba_global_max_refinements == refinements
+        assert o.ba_local_max_refinements == colmap_default.ba_local_max_refinements
         assert o.mapper.init_min_num_inliers == cfg.init_min_num_inliers   # the rest as for any pool
     with pytest.raises(ValueError, match="global_ba_growth"):
         SfmConfig(global_ba_growth=1.0)
-    with pytest.raises(ValueError, match="local_ba_refinements"):
-        SfmConfig(local_ba_refinements=0)
+    with pytest.raises(ValueError, match="min_global_gain"):
+        SfmConfig(min_global_gain=1.5)
 
 
 class _Image:
@@ -141,6 +138,37 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
         assert stats["mappers_tried"]["incremental"]["model_sizes"] == inc
         assert stats["mappers_tried"]["global"]["model_sizes"] == glob
     assert (tmp_path / "database.db").read_bytes() == b"db"   # the global mapper ran on a copy
+
+
+@pytest.mark.parametrize("inc, glob, gain, kept", [
+    ([69, 13], [71, 13], 0.05, "incremental"),   # a foreign take keeps the incremental model short: 2 more is not worth it
+    ([60, 30], [92], 0.05, "global"),            # a capture split in two, made whole
+    ([80, 13], [85], 0.05, "global"),            # exactly 5 of the 100 photos more
+    ([81, 13], [85], 0.05, "incremental"),       # 4 more
+    ([69, 13], [71, 13], 0.0, "global"),         # no gain asked: any photo more
+    ([69, 13], [69, 13], 0.0, "incremental"),    # ... but at least one
+])
+def test_a_global_model_must_gain_enough_photos_to_replace_the_incremental_one(monkeypatch, tmp_path, inc, glob,
+                                                                               gain, kept):
+    """Three takes, the third of another place (on a fresh machine): the incremental mapper kept 369 of
+    434 photos (the foreign take's 63 apart), the global mapper 371, agreeing with every part, and the
+    global model had 12 frames over 5 deg where the incremental one had none. On the real walks measured
+    the global model is the less accurate: it must gain ``min_global_gain`` of the pool to be kept."""
+    from curate.sfm import colmap as sfm
+    monkeypatch.setattr(sfm, "part_agreement", lambda g, p: [(1.0, set())] * len(p))
+    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg, trusted=None:
+                        {x: {"ok": True, "why": ""} for x in names})
+    monkeypatch.setattr(sfm, "_map", lambda *a, **k: {i: _Model(n) for i, n in enumerate(inc)})
+    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: {i: _Model(n) for i, n in enumerate(glob)})
+    (tmp_path / "database.db").write_bytes(b"db")
+    stats: dict = {}
+    models = sfm.map_capture(small_cfg(min_global_gain=gain), tmp_path / "database.db", tmp_path, tmp_path / "m",
+                             100, stats)
+    assert stats["mapper"] == kept
+    assert sfm._sizes(models) == (glob[:1] if kept == "global" else inc)
+    g = stats["mappers_tried"]["global"]
+    if glob[0] > inc[0]:
+        assert g["gain"] == glob[0] - inc[0] and g["gain_needed"] == max(1, round(gain * 100))
 
 
 @pytest.mark.parametrize("dis, ties, alone, kept, n", [

@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import re
 import shutil
 import time
@@ -420,8 +421,9 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     """The incremental mapper's options for a pool of ``n_images`` photos: :func:`_seeded_pipeline_options`,
     the initial pair's inliers (``cfg.init_min_num_inliers``), the principal point held; past
     ``cfg.global_ba_above`` photos, a global bundle adjustment each time the model grows by the factor
-    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5),
-    and each new photo's local adjustment refined ``cfg.local_ba_refinements`` times at most (COLMAP: 2).
+    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
+    Each new photo's local adjustment keeps COLMAP's two refinements (one folded office.mp4 cut into two
+    takes: docs/sfm.md).
 
     The global adjustments are most of the incremental mapper's time on a long capture (the rendered
     1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool (docs/sfm.md,
@@ -432,7 +434,6 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     if n_images > cfg.global_ba_above:
         opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth
         opts.ba_global_max_refinements = cfg.global_ba_refinements
-        opts.ba_local_max_refinements = cfg.local_ba_refinements
     return opts
 
 
@@ -548,7 +549,10 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     ``cfg.max_part_disagreement_deg`` on 90% of the part's photos). Of it stay the parts it agrees
     with that :func:`join_parts` can tie to the largest of them, and the frames of no checked part
     that pass :func:`verify_frames` against those (against every other frame where no part agrees).
-    It replaces the incremental models when it then holds more photos than their largest.
+    It replaces the incremental models when it then holds at least ``cfg.min_global_gain`` of the
+    ``n_images`` photos (and at least one) more than their largest: on the real walks measured the
+    global model is the less accurate, and a take that joins neither model (a foreign one) leaves the
+    incremental model short of the pool whatever the mapper, so a gain of a few photos is not worth it.
     """
     tried: dict = {}
     work.mkdir(parents=True, exist_ok=True)
@@ -600,12 +604,15 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
         tried["global"]["pruned_to"] = int(best.num_reg_images())
     dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
                     for d in tried["global"]["part_disagreement_deg"])
-    if best.num_reg_images() <= i:
-        logger.warning("sfm: what the global model keeps (%d photos: the incremental parts it agrees with, on "
+    need = max(1, math.ceil(cfg.min_global_gain * n_images - 1e-9))
+    tried["global"]["gain"], tried["global"]["gain_needed"] = int(best.num_reg_images() - i), need
+    if best.num_reg_images() - i < need:
+        logger.warning("sfm: the global model keeps %d photos (the incremental parts it agrees with, on "
                        "orientation (90%% of each part's photos, deg: %s; limit %g), where it can tie them "
-                       "together, and the frames that pass a check of their own) is no more than the largest "
-                       "incremental model; keeping the incremental models", best.num_reg_images(), dis,
-                       cfg.max_part_disagreement_deg)
+                       "together, and the frames that pass a check of their own) against the largest incremental "
+                       "model's %d: it must keep %d more (%g of the %d photos) to replace it; keeping the "
+                       "incremental models", best.num_reg_images(), dis, cfg.max_part_disagreement_deg, i, need,
+                       cfg.min_global_gain, n_images)
         stats["mapper"] = "incremental"
         return inc
     ver = tried["global"].get("verified")
@@ -851,6 +858,9 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         r.write(out / "sparse" / str(k))
     stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
                       for k, r in enumerate([best] + others)]
+    for part, r in zip(stats["parts"][1:], others):   # --on-split each curates them: a fold there is named too
+        if j := jumps_along(r, kept):
+            part["path_jumps"] = j
     shutil.rmtree(out / "mapper", ignore_errors=True)
     in_model = {best.image(i).name for i in best.reg_image_ids()}
     in_others = {r.image(i).name for r in models.values() if r is not best for i in r.reg_image_ids()}

@@ -101,7 +101,8 @@ class SfmConfig:
     mapper: str = "auto"              # how matches become cameras: incremental (COLMAP's), global (COLMAP's
     #                                   global mapper, formerly GLOMAP), or auto: incremental, then global on the
     #                                   same matches when the incremental model leaves photos out, the global
-    #                                   model kept where it holds more photos and agrees with every part
+    #                                   model kept where it agrees with the incremental parts and holds more
+    #                                   photos than their largest, by at least 5% of the photos
     global_ba_above: int = 300        # pools of more photos than this: the incremental mapper adjusts the whole
     #                                   model less often (global_ba_growth, global_ba_refinements), the cost that
     #                                   grows fastest with the pool; smaller pools keep COLMAP's schedule
@@ -109,10 +110,11 @@ class SfmConfig:
     #                                   (COLMAP: 1.1)
     global_ba_refinements: int = 1    # ... each refined (adjust, retriangulate, filter) at most this many times
     #                                   (COLMAP: 5)
-    local_ba_refinements: int = 2     # ... and each new photo's local bundle adjustment refined at most this many
-    #                                   times (COLMAP's 2: 1 saved 16-26% of a long walk's mapping and folded
-    #                                   office.mp4 in two takes, every frame 35 deg off; docs/sfm.md)
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
+    min_global_gain: float = 0.05     # 'auto': the global model (the less accurate of the two on real walks) replaces
+    #                                   the incremental ones only when it holds at least this share of the photos
+    #                                   more than their largest (three takes, one foreign: 2 photos more for 12
+    #                                   frames over 5 deg; docs/sfm.md)
     max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
     #                                   agrees with each within this many degrees (orientation difference, on
     #                                   90% of the part's photos)
@@ -150,12 +152,11 @@ class SfmConfig:
             raise ValueError(f"--max-size must be >= 64 (pixels), got {self.max_image_size}")
         if not self.max_part_disagreement_deg > 0:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
-        if not (0 <= self.min_registered_fraction <= 1):
-            raise ValueError("SfmConfig.min_registered_fraction must be in [0, 1]")
-        if not self.global_ba_growth > 1 or self.global_ba_refinements < 1 or self.local_ba_refinements < 1 \
-                or self.global_ba_above < 0:
-            raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements and local_ba_refinements "
-                             ">= 1 and global_ba_above >= 0")
+        if not (0 <= self.min_registered_fraction <= 1) or not (0 <= self.min_global_gain <= 1):
+            raise ValueError("SfmConfig.min_registered_fraction and min_global_gain must be in [0, 1]")
+        if not self.global_ba_growth > 1 or self.global_ba_refinements < 1 or self.global_ba_above < 0:
+            raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements >= 1 and "
+                             "global_ba_above >= 0")
         if self.cross_take_period < 1 or self.cross_take_num_images < 1:
             raise ValueError("SfmConfig.cross_take_period and cross_take_num_images must be >= 1")
         if self.vocab_tree_descriptors < 256 * 40:

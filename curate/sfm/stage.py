@@ -122,17 +122,21 @@ def path_warning(stats: dict) -> str | None:
     """A warning for each video take whose path in the model jumps at over
     :data:`curate.sfm.continuity.FOLD_FACTOR` times the speed around the step and does not come back (a model
     folded there keeps every frame, the ones on one side wrong); None without such a jump.
-    ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`)."""
-    jumps = stats.get("path_jumps") or {}
-    if not jumps:
-        return None
+    ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`, of the
+    model curate uses; each other part of a split capture, ``parts[k]``, may carry its own)."""
+    where = [("", stats.get("path_jumps") or {})]
+    where += [(f"in the other model of {p['n_registered']} photos, ", p.get("path_jumps") or {})
+              for p in (stats.get("parts") or [])[1:]]
     each = []
-    for take, js in sorted(jumps.items()):
-        j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
-        how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
-        more = f"; {len(js) - 1} more such jump{'s' * (len(js) > 2)}" if len(js) > 1 else ""
-        each.append(f"video {take}: the camera path jumps from {j['from']} to {j['to']} ({how}{more}) and does "
-                    "not come back")
+    for prefix, jumps in where:
+        for take, js in sorted(jumps.items()):
+            j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
+            how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
+            more = f"; {len(js) - 1} more such jump{'s' * (len(js) > 2)}" if len(js) > 1 else ""
+            each.append(f"{prefix}video {take}: the camera path jumps from {j['from']} to {j['to']} ({how}{more}) "
+                        "and does not come back")
+    if not each:
+        return None
     return ("; ".join(each) + ": SfM may have folded the model there, the cameras on one side of the jump then "
             "being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or transforms.json in "
             "nerfstudio's viewer) before training on them")
