@@ -9,7 +9,8 @@ on it once, then perturbs the matches the way another machine does (each variant
 two-view geometries from a copy of the database) and, per variant, prints one JSON line: the global
 model as COLMAP returns it (sizes, the orientation agreement with each incremental part, its error
 against the rendered walk, and per incremental part the number of its points also seen by
-frames outside it, the seam) and what :func:`curate.sfm.colmap.map_capture` keeps (mapper, sizes, the
+frames outside it, the seam), the largest incremental model (sizes, its error) and what
+:func:`curate.sfm.colmap.map_capture` keeps (mapper, sizes, the
 parts joined, each take's frames in the model, the error).
 
     python3 -m research.join_check /tmp/join_check/89_29 --walk2 89:29 --drops 0:110:7
@@ -116,12 +117,12 @@ def main(argv=None) -> None:
         seams = []                              # per incremental part: the global model's points it shares with the rest
         for part in sorted(inc.values(), key=lambda r: -r.num_reg_images()):
             names = {part.image(i).name for i in part.reg_image_ids()}
-            ids = {im.image_id for im in gbest.images.values() if im.has_pose and im.name in names}
+            inside = {im.image_id for im in gbest.images.values() if im.has_pose and im.name in names}
             seams.append(sum(1 for p in gbest.points3D.values()
-                             if (lambda s: s & ids and s - ids)({e.image_id for e in p.track.elements})))
+                             if (lambda s: s & inside and s - inside)({e.image_id for e in p.track.elements})))
         print(json.dumps({
             "removed": None if d < 0 else name_of[ids[d]],
-            "incremental": C._sizes(inc),
+            "incremental": {"sizes": C._sizes(inc), **judge(max(inc.values(), key=lambda r: r.num_reg_images()))},
             "global": {"sizes": C._sizes(glob), "part_disagreement_deg": [q for q, _ in C.part_agreement(glob, inc)],
                        "seam_points": seams,
                        **judge(gbest)},
