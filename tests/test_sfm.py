@@ -147,6 +147,7 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
     ([81, 13], [85], 0.05, "incremental"),       # 4 more
     ([69, 13], [71, 13], 0.0, "global"),         # no gain asked: any photo more
     ([69, 13], [69, 13], 0.0, "incremental"),    # ... but at least one
+    ([], [3], 0.05, "global"),                   # no incremental model at all: any global one is better
 ])
 def test_a_global_model_must_gain_enough_photos_to_replace_the_incremental_one(monkeypatch, tmp_path, inc, glob,
                                                                                gain, kept):
@@ -167,8 +168,9 @@ def test_a_global_model_must_gain_enough_photos_to_replace_the_incremental_one(m
     assert stats["mapper"] == kept
     assert sfm._sizes(models) == (glob[:1] if kept == "global" else inc)
     g = stats["mappers_tried"]["global"]
-    if glob[0] > inc[0]:
-        assert g["gain"] == glob[0] - inc[0] and g["gain_needed"] == max(1, round(gain * 100))
+    i = (inc or [0])[0]
+    if glob[0] > i:
+        assert g["gain"] == glob[0] - i and g["gain_needed"] == (max(1, round(gain * 100)) if inc else 1)
 
 
 @pytest.mark.parametrize("dis, ties, alone, kept, n", [

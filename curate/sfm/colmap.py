@@ -604,7 +604,7 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
         tried["global"]["pruned_to"] = int(best.num_reg_images())
     dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
                     for d in tried["global"]["part_disagreement_deg"])
-    need = max(1, math.ceil(cfg.min_global_gain * n_images - 1e-9))
+    need = max(1, math.ceil(cfg.min_global_gain * n_images - 1e-9)) if i else 1   # no incremental model: any will do
     tried["global"]["gain"], tried["global"]["gain_needed"] = int(best.num_reg_images() - i), need
     if best.num_reg_images() - i < need:
         logger.warning("sfm: the global model keeps %d photos (the incremental parts it agrees with, on "
