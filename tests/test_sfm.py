@@ -81,7 +81,8 @@ def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
     cfg = small_cfg(global_ba_above=300)
     assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
-    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio, colmap_default.ba_global_max_refinements),
+    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio,
+                                   colmap_default.ba_global_max_refinements),
                                   (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
         sfm._map(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
         o = got["options"]
@@ -141,7 +142,7 @@ def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path,
 
 
 @pytest.mark.parametrize("inc, glob, gain, kept", [
-    ([69, 13], [71, 13], 0.05, "incremental"),   # a foreign take keeps the incremental model short: 2 more is not worth it
+    ([69, 13], [71, 13], 0.05, "incremental"),   # a foreign take keeps the incremental model short: 2 more won't do
     ([60, 30], [92], 0.05, "global"),            # a capture split in two, made whole
     ([80, 13], [85], 0.05, "global"),            # exactly 5 of the 100 photos more
     ([81, 13], [85], 0.05, "incremental"),       # 4 more
