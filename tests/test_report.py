@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import re
 from pathlib import Path
@@ -180,6 +181,27 @@ def test_a_folded_video_take_is_boxed_at_the_top(tmp_path):
     assert ("video walk.mp4: the camera path jumps from walk_000012.300.jpg to walk_000012.400.jpg (44.8 times the "
             "steps around it)") in body
     assert body.index("warnbox") < body.index("<dl")
+
+
+@pytest.mark.parametrize("gain, says", [
+    (2, "curate used COLMAP's incremental mapper: the global model, the less accurate of the two, held 2 photos "
+        "more than the incremental one, under the 22 it must gain to replace it"),
+    (0, "held no more photos than the incremental one, under the 22"),
+    (30, None)])
+def test_the_report_says_why_a_larger_global_model_was_not_used(tmp_path, gain, says):
+    """Three takes, one of another place: the global model held 2 photos more than the incremental one
+    and was not used (it is the less accurate); the SfM section says why, not only which mapper."""
+    run = make_run(tmp_path)
+    mapper = "incremental" if says else "global"
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"mapper": mapper, "mappers_tried": {
+        "incremental": {"model_sizes": [369, 63]},
+        "global": {"model_sizes": [369 + gain, 63], "pruned_to": 369 + gain, "gain": gain, "gain_needed": 22}}}}))
+    body = html.unescape(write_html(run).read_text())
+    assert "the incremental mapper split the capture into models of 369, 63 photos" in body
+    if says:
+        assert says in body
+    else:
+        assert "it must gain" not in body and "curate used COLMAP's global mapper" in body
 
 
 def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):

@@ -443,12 +443,23 @@ def _capture(run: _Run) -> str:
                      f"{(glo.get('model_sizes') or ['?'])[0]} in one model"
                      + (f", kept where it agrees with the parts and can tie them together ({glo.get('pruned_to')} "
                         f"photos)" if
-                        glo.get("pruned_to") else "") + f"; curate used {how or mapper}"))
+                        glo.get("pruned_to") else "") + f"; curate used {how or mapper}" + _gain_said(mapper, glo)))
     rows.append(("candidates", f"{r.get('n_candidates', reg)}: the selection chooses among every registered photo"))
     if st.get("n_points") is not None:
         rows.append(("3D points", f"{st['n_points']} sparse points"))
     return '<dl class="kv">' + "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in rows) + "</dl>" \
         + _skipped(run)
+
+
+def _gain_said(mapper: str | None, glo: dict) -> str:
+    """Why the incremental model was used where the global one held more photos (``glo``: SfM's
+    ``mappers_tried.global``, with ``gain`` and ``gain_needed``), or ""."""
+    gain, need = glo.get("gain"), glo.get("gain_needed")
+    if mapper != "incremental" or gain is None or need is None or gain >= need:
+        return ""
+    held = f"{gain} photo{'s' * (gain != 1)} more" if gain > 0 else "no more photos"
+    return (f": the global model, the less accurate of the two, held {held} than the incremental one, under the "
+            f"{need} it must gain to replace it")
 
 
 def _skipped(run: _Run) -> str:
