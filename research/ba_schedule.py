@@ -11,7 +11,7 @@ FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set 
 research.incremental_loop maps instead, its global adjustments factored directly up to N photos
 (COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
 matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
-video), ``walk`` or ``hall`` (TRUTH a folder research.bench.bench_mapping rendered of that capture, with
+video), ``walk``, ``hall`` or ``hall_back`` (TRUTH a folder research.bench.bench_mapping rendered of that capture, with
 truth.npy) or ``takes``
 (TRUTH ``CASE.truth.json:OFFICE``, a case of research.takes and the office folder).
 

@@ -3,6 +3,7 @@
 
     python3 -m research.bench.bench_mapping --walk 1000 2000 3000 --object 300 [--mappers incremental global]
     python3 -m research.bench.bench_mapping --walk --object --hall 1000 3000 --mappers
+    python3 -m research.bench.bench_mapping --walk --object --hall-back 1600 --mappers
 
 Renders (once, cached under ``--work``, resumable frame by frame):
 
@@ -14,6 +15,9 @@ Renders (once, cached under ``--work``, resumable frame by frame):
 * a walk down a long hall that never comes back (:func:`hall_walk` through :func:`hall_scene`, same
   size, rate and blur as the loop walk), the pool of size N again its first N frames: new ground all
   the way, where the loop walk keeps revisiting one room;
+* ``--hall-back N``: a walk of N frames down the hall on one side and back on the other
+  (:func:`hall_there_and_back`): each stretch seen twice, from both sides, a shape between the hall's
+  open chain and the loop walk's room seen round and round;
 * an object capture (:func:`object_orbit`): ``--object`` photos of 800x533 taken hand-held in three
   rings around the coffee table of the same room, named ``IMG_0001.jpg``... as a phone names them.
 
@@ -157,7 +161,31 @@ def hall_walk(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_de
                    names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
 
 
-SCENES = {"walk": "livingroom", "object": "livingroom", "hall": "gallery"}
+def hall_there_and_back(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_deg: float = 60.0):
+    """(Cameras [n], angular speed [n]) of a walk down :func:`hall_scene`'s hall and back: the first
+    ``n - n // 2`` frames as :func:`hall_walk`, 0.5 m right of the hall's middle, then a second such walk
+    turned round (half a turn about the vertical through the middle of the stretch walked), 0.5 m to the
+    other side, ending where the first began. Every stretch is seen on the way there and again on the way
+    back, from the other side: a chain of photos tied to a second chain all along, neither the hall's
+    open chain nor the loop walk's room seen round and round (docs/sfm.md, part 5's solver choice).
+    The hall: ``hall_scene(n - n // 2)``. Names ``frame_00000.jpg``..."""
+    from curate.core.cameras import Cameras
+    m = n - n // 2
+    there, w_there = hall_walk(m, seed, width, height, fov_deg)
+    back, w_back = hall_walk(n - m, seed + 1, width, height, fov_deg)
+    c2w_there, c2w_back = there.c2w.copy(), back.c2w.copy()
+    c2w_there[:, 1, 3] -= 0.5
+    c2w_back[:, 1, 3] -= 0.5
+    x0 = 4.0 + (m - 1) * HALL_SPEED / FPS        # x -> x0 - x, y -> W - y: the first frame back at the far end
+    turn = np.diag([-1.0, -1.0, 1.0])
+    c2w_back[:, :3, :3] = turn @ c2w_back[:, :3, :3]
+    c2w_back[:, :3, 3] = c2w_back[:, :3, 3] @ turn.T + [x0, HALL_WIDTH, 0.0]
+    c2w = np.concatenate([c2w_there, c2w_back])
+    return Cameras(c2w, there.fx[0], there.fy[0], width / 2, height / 2, width, height,
+                   names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), np.concatenate([w_there, w_back])
+
+
+SCENES = {"walk": "livingroom", "object": "livingroom", "hall": "gallery", "hall_back": "gallery"}
 
 
 def capture_cameras(kind: str, n: int, seed: int = 0):
@@ -171,6 +199,8 @@ def capture_cameras(kind: str, n: int, seed: int = 0):
                        names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
     if kind == "hall":
         return hall_walk(n, seed)
+    if kind == "hall_back":
+        return hall_there_and_back(n, seed)
     return object_orbit(n, seed), None
 
 
@@ -182,7 +212,8 @@ def capture_scene(kind: str, n: int, seed: int = 0):
     key = (kind, n, seed)
     if key not in _SCENE:
         from curate.simulate.synthetic import make_scene
-        _SCENE[key] = hall_scene(n, seed) if kind == "hall" else make_scene("livingroom", seed)
+        _SCENE[key] = hall_scene(n, seed) if kind == "hall" else hall_scene(n - n // 2, seed) \
+            if kind == "hall_back" else make_scene("livingroom", seed)
         _SCENE[key]._raycaster()                     # built once, shared by _lit_near's copies
     return _SCENE[key]
 
@@ -480,7 +511,7 @@ def summarize(work: Path, tag: str = "") -> dict:
         rows.append(row)
     out = {"rows": rows}
     for capture, key in (("walk", "growth_exponents"), ("hall", "hall_growth_exponents")):
-        walks = sorted((r for r in rows if r["name"].startswith(capture + "_") and "error" not in r),
+        walks = sorted((r for r in rows if r["name"].removeprefix(capture + "_").isdigit() and "error" not in r),
                        key=lambda r: r["n_kept"])
         n = [r["n_kept"] for r in walks]
         fits = {"sizes": n, "sfm_before_cpu": fit_exponent(n, [r["before_cpu_s"] for r in walks])}
@@ -513,6 +544,9 @@ def main(argv=None) -> int:
     ap.add_argument("--hall", type=int, nargs="*", default=[],
                     help="pool sizes of the hall walk (new ground all the way: :func:`hall_walk`)")
     ap.add_argument("--hall-frames", type=int, default=3000, help="frames of the whole hall walk")
+    ap.add_argument("--hall-back", type=int, nargs="*", default=[],
+                    help="pool sizes of the walk down the hall and back (:func:`hall_there_and_back`; pools are "
+                         "whole walks, not prefixes)")
     ap.add_argument("--object", type=int, nargs="*", default=[300], help="photos of each object capture")
     ap.add_argument("--mappers", nargs="*", default=["global", "hierarchical"],
                     help="mappers to run again on each pool's matches (the SfM run itself maps with --sfm-mapper)")
@@ -526,7 +560,7 @@ def main(argv=None) -> int:
     (a.work / "results").mkdir(parents=True, exist_ok=True)
     out = []
     todo = [("object", n, n) for n in a.object] + [("walk", a.walk_frames, n) for n in sorted(a.walk)] \
-        + [("hall", a.hall_frames, n) for n in sorted(a.hall)]
+        + [("hall", a.hall_frames, n) for n in sorted(a.hall)] + [("hall_back", n, n) for n in sorted(a.hall_back)]
     for capture, total, n in todo:
         frames = render(a.work, capture, total, n, jobs=a.jobs)
         photos = pool_folder(a.work, frames, n)

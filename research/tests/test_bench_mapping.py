@@ -37,3 +37,20 @@ def test_the_hall_is_furnished_along_both_walls_and_lit_near_the_camera():
     lit = _lit_near(scene, cams.centres[150])
     assert len(lit.lights) == 3 and lit._rc is scene._rc
     assert np.linalg.norm(lit.lights - cams.centres[150], axis=1).max() < 10
+
+
+def test_the_walk_there_and_back_sees_each_stretch_from_both_sides():
+    from research.bench.bench_mapping import hall_there_and_back
+    cams, omega = hall_there_and_back(600)
+    scene = capture_scene("hall_back", 600)
+    lo, hi = scene.interior
+    c = cams.centres
+    assert np.all((c > lo + 0.5) & (c < hi - 0.5)) and not scene.occupied(c).any()
+    there, back = c[:300], c[300:]
+    assert np.all(np.diff(there[:, 0]) > 0) and np.all(np.diff(back[:, 0]) < 0)   # down the hall, then back
+    assert there[:, 1].max() < HALL_WIDTH / 2 - 0.1 and back[:, 1].min() > HALL_WIDTH / 2 + 0.1   # other side
+    assert abs(back[-1, 0] - there[0, 0]) < 0.1 and abs(back[0, 0] - there[-1, 0]) < 0.1     # the same stretch
+    ahead = cams.rotations[:, :, 2]
+    assert np.mean(ahead[:300, 0]) > 0.3 and np.mean(ahead[300:, 0]) < -0.3                 # facing the way walked
+    assert np.allclose(np.linalg.det(cams.rotations), 1.0) and np.all(np.isfinite(omega))
+    assert len(capture_cameras("hall_back", 600)[0]) == 600
