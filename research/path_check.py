@@ -1,4 +1,4 @@
-"""Each video take of a finished SfM run along its path: the islands `curate.sfm.continuity.off_path`
+"""Each video take (and take of numbered photos) of a finished SfM run along its path: the islands `curate.sfm.continuity.off_path`
 finds, the largest steps between consecutive frames as multiples of the take's median speed, and the
 largest as multiples of the speed around them (`step_ratios`: what `path_jumps` reports a fold by).
 
@@ -19,17 +19,27 @@ import numpy as np
 
 
 def takes_along(run: Path):
-    """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and video take."""
+    """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and take: video
+    takes, and takes of numbered photos in name order (their rank as the time), as
+    ``curate.sfm.colmap.jumps_along`` reads them."""
     import pycolmap
-    recs = {r["working"]: r for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]}
+
+    from curate.sfm.colmap import _frame_times
+    from curate.sfm.ingest import PhotoRecord
+    kept = []
+    for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]:
+        if r.get("status") == "kept":
+            pr = PhotoRecord(original=r.get("original", r["rel"]), rel=r["rel"], working=r["working"])
+            pr.extra.update(r.get("extra") or {})
+            kept.append(pr)
+    when = _frame_times(kept, numbered=True)
     for model in sorted((run / "sfm" / "sparse").iterdir()):
         rec = pycolmap.Reconstruction(model)
         takes: dict[str, list] = {}
         for im in rec.images.values():
-            e = (recs.get(im.name) or {}).get("extra") or {}
-            if im.has_pose and e.get("video_rel") is not None and e.get("time") is not None:
-                takes.setdefault(e["video_rel"], []).append((float(e["time"]), im.name,
-                                                             np.asarray(im.projection_center())))
+            if im.has_pose and im.name in when:
+                take, t = when[im.name]
+                takes.setdefault(take, []).append((t, im.name, np.asarray(im.projection_center())))
         for take, fr in sorted(takes.items()):
             fr.sort(key=lambda x: x[0])
             yield model.name, take, np.array([x[0] for x in fr]), [x[1] for x in fr], np.array([x[2] for x in fr])

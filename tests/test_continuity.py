@@ -190,3 +190,35 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     w = path_warning({"path_jumps": {"b.mp4": two["b.mp4"]}, "parts": parts})
     assert w.startswith("video b.mp4: ") and "; in the other model of 60 photos, video walk.mp4: " in w, w
     assert path_warning({"parts": parts[:1] + [{"model": "sparse/1", "n_registered": 60}]}) is None
+
+
+def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_not(tmp_path):
+    """Frames a user extracted from a video into a folder (frame_00000.jpg, ...) are matched in sequence
+    and folded like a video (a walk down a hall and back, rendered: one model of 1,558 photos, every one
+    37 deg off, three jumps of 150-460 times the steps around them): they get the warning too. Only the
+    warning: the island check, which leaves frames out, stays with videos (a ring of photos taken in a
+    jumping order, the temple ring, would lose 18 of its 46)."""
+    pytest.importorskip("pycolmap")
+    from curate.core.cameras import Cameras, look_at
+    from curate.sfm.colmap import drop_off_path, jumps_along, reconstruction_from_cameras
+    from curate.sfm.ingest import PhotoRecord
+    from curate.sfm.stage import path_warning
+    t, c = walk(60)
+    c[30:] += [3.0, 0.0, 0.0]
+    for numbered, names in ((True, [f"frame_{i:05d}.jpg" for i in range(60)]),
+                            (False, [f"IMG_{chr(65 + i % 26)}{i // 26}.jpg" for i in range(60)])):
+        cams = Cameras(look_at(c, np.zeros((60, 3)) + [0, 0, 0.1]), 300, 300, 160, 120, 320, 240, names=tuple(names))
+        recs = []
+        for n in names:
+            r = PhotoRecord(original=f"/p/{n}", rel=n, working=n)
+            r.extra["take"] = "photos"
+            recs.append(r)
+        rec = reconstruction_from_cameras(cams)
+        assert drop_off_path({0: rec}, recs) == {} and rec.num_reg_images() == 60
+        jumps = jumps_along(rec, recs)
+        if numbered:
+            assert [(j["from"], j["to"]) for j in jumps["photos"]] == [(names[29], names[30])]
+            w = path_warning({"path_jumps": jumps})
+            assert w.startswith(f"photos (in name order): the camera path jumps from {names[29]} to {names[30]} ("), w
+        else:
+            assert jumps == {}

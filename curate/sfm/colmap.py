@@ -500,10 +500,25 @@ def _video_takes(rec, when: dict) -> dict[str, list]:
     return dict(sorted(takes.items()))
 
 
-def _frame_times(kept: list) -> dict:
-    """{working name: (take, seconds)} of the video frames among the PhotoRecords ``kept``."""
-    return {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
-            if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+def _frame_times(kept: list, numbered: bool = False) -> dict:
+    """{working name: (take, seconds)} of the video frames among the PhotoRecords ``kept``; with
+    ``numbered``, also the photos of each photo take (:func:`curate.sfm.prep.take_name`) whose names
+    are numbered frames (:func:`curate.sfm.prep.looks_sequential`, which also makes them matched in
+    sequence), their number standing for the time (a photo dropped or deleted between two is a
+    longer time, not a faster step)."""
+    from curate.sfm.prep import _trailing_number, looks_sequential, take_name
+    out = {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
+           if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+    if numbered:
+        takes: dict[str, list] = {}
+        for r in kept:
+            if r.working not in out and not r.extra.get("video"):
+                takes.setdefault(take_name(r), []).append(r)
+        for take, recs in takes.items():
+            recs.sort(key=lambda r: r.rel)
+            if looks_sequential([Path(r.rel).name for r in recs]):
+                out.update((r.working, (take, float(_trailing_number(Path(r.rel).name)[1]))) for r in recs)
+    return out
 
 
 def _along(frames: list) -> tuple[np.ndarray, np.ndarray]:
@@ -527,11 +542,13 @@ def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
 
 def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
     """{take: [{"from", "to", "x_around"}]}: the one-way jumps (:func:`curate.sfm.continuity.path_jumps`)
-    of every video take in the model ``rec``, each between two consecutive registered frames, at
-    ``x_around`` times the speed around the step (``step_ratios``). Run after :func:`drop_off_path`."""
+    of every video take in the model ``rec``, and of every take of numbered photos (in name order:
+    frames a user extracted from a video), each between two consecutive registered frames, at
+    ``x_around`` times the speed around the step (``step_ratios``). Run after :func:`drop_off_path`
+    (which leaves numbered photos alone: only a warning rests on their order)."""
     from curate.sfm.continuity import path_jumps
     out: dict[str, list[dict]] = {}
-    for tk, frames in _video_takes(rec, _frame_times(kept)).items():
+    for tk, frames in _video_takes(rec, _frame_times(kept, numbered=True)).items():
         for i, r in path_jumps(*_along(frames)):
             out.setdefault(tk, []).append({"from": frames[i - 1][1].name, "to": frames[i][1].name,
                                            "x_around": round(r, 1) if np.isfinite(r) else None})
