@@ -1,5 +1,6 @@
-"""Each video take (and take of numbered photos) of a finished SfM run along its path: the islands `curate.sfm.continuity.off_path`
-finds, the largest steps between consecutive frames as multiples of the take's median speed, and the
+"""Each video take (and take of numbered photos) of a finished SfM run along its path: the islands
+`curate.sfm.continuity.off_path` finds (for numbered photos only reported: curate leaves none out),
+the largest steps between consecutive frames as multiples of the take's median speed, and the
 largest as multiples of the speed around them (`step_ratios`: what `path_jumps` reports a fold by).
 
 Reads ``RUN/sfm/images.json`` and every model under ``RUN/sfm/sparse/`` (the frames the run already
@@ -20,7 +21,7 @@ import numpy as np
 
 def takes_along(run: Path):
     """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and take: video
-    takes, and takes of numbered photos in name order (their rank as the time), as
+    takes, and takes of numbered photos in name order (their numbers as the time), as
     ``curate.sfm.colmap.jumps_along`` reads them."""
     import pycolmap
 

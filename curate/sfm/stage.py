@@ -133,7 +133,8 @@ def path_warning(stats: dict) -> str | None:
             j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
             how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
             more = f"; {len(js) - 1} more such jump{'s' * (len(js) > 2)}" if len(js) > 1 else ""
-            what = f"{take} (in name order)" if take.startswith("photos") else f"video {take}"
+            photos = take == "photos" or take.startswith("photos in ")          # curate.sfm.prep.take_name
+            what = f"{take} (in name order)" if photos else f"video {take}"
             each.append(f"{prefix}{what}: the camera path jumps from {j['from']} to {j['to']} ({how}{more}) "
                         "and does not come back")
     if not each:
