@@ -4,7 +4,8 @@ order, model against truth (no alignment needed, so a fold shows as one step, no
     python3 -m research.fold_check RUN FRAMES KIND     # KIND and FRAMES as research.bench.bench_mapping renders
 
 Prints one JSON line: the photos compared, the median and largest disagreement between consecutive
-photos' relative rotations (model against truth), and every step where it is over ``--over`` degrees.
+photos' relative rotations (model against truth), every step where it is over ``--over`` degrees, and
+every 100th photo's disagreement from the first photo (where a bend spreads over many steps).
 """
 from __future__ import annotations
 
@@ -26,6 +27,16 @@ def relative_turns(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
 
 
+def relative_turns_to(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
+    """[n] degrees: for each photo, the angle between the model's rotation from the first photo to it
+    and the truth's (0 for the first): a bend shows as a value that grows along the photos."""
+    Rm, Rt = np.asarray(model_c2w)[:, :3, :3], np.asarray(truth_c2w)[:, :3, :3]
+    a = np.einsum("ji,njk->nik", Rm[0], Rm)
+    b = np.einsum("ji,njk->nik", Rt[0], Rt)
+    d = np.einsum("nji,njk->nik", a, b)
+    return np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
@@ -40,7 +51,9 @@ def main(argv=None) -> dict:
     order = sorted(range(len(got.names)), key=lambda i: at[got.names[i]])
     names = [got.names[i] for i in order]
     d = relative_turns(got.c2w[order], truth.c2w[[at[n] for n in names]])
+    from_first = [float(x) for x in relative_turns_to(got.c2w[order], truth.c2w[[at[n] for n in names]])]
     out = {"run": str(a.run), "photos": len(names), "median_deg": round(float(np.median(d)), 3),
+           "from_first_every_100": [(names[k], round(from_first[k], 1)) for k in range(0, len(names), 100)],
            "max_deg": round(float(d.max()), 2),
            "steps_over": [(names[k], names[k + 1], round(float(d[k]), 1)) for k in np.flatnonzero(d > a.over)]}
     print(json.dumps(out), flush=True)

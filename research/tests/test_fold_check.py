@@ -2,7 +2,7 @@
 import numpy as np
 
 from curate.core.cameras import look_at
-from research.fold_check import relative_turns
+from research.fold_check import relative_turns, relative_turns_to
 
 
 def test_a_part_turned_as_a_whole_shows_at_its_seam_only():
@@ -16,3 +16,5 @@ def test_a_part_turned_as_a_whole_shows_at_its_seam_only():
     assert np.flatnonzero(d > 1.0).tolist() == [19] and abs(d[19] - 37.0) < 1e-6
     assert np.allclose(relative_turns(truth, truth), 0.0, atol=1e-5)
     assert np.all(np.isfinite(relative_turns(model[:2], truth[:2])))
+    f = relative_turns_to(model, truth)
+    assert np.allclose(f[:20], 0.0, atol=1e-5) and np.allclose(f[20:], 37.0, atol=1e-5)
