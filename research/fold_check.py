@@ -16,6 +16,11 @@ from pathlib import Path
 import numpy as np
 
 
+def _angle_deg(R: np.ndarray) -> np.ndarray:
+    """[n] degrees turned by each rotation of R [n, 3, 3]."""
+    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
+
+
 def relative_turns(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
     """[n - 1] degrees: for each pair of consecutive photos, the angle between the model's rotation from
     one to the next and the truth's. model_c2w, truth_c2w: [n, 4, 4] (or [n, 3, 3]) camera-to-world, in
@@ -23,8 +28,7 @@ def relative_turns(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
     Rm, Rt = np.asarray(model_c2w)[:, :3, :3], np.asarray(truth_c2w)[:, :3, :3]
     a = np.einsum("nji,njk->nik", Rm[:-1], Rm[1:])            # R_i^T R_{i+1}
     b = np.einsum("nji,njk->nik", Rt[:-1], Rt[1:])
-    d = np.einsum("nji,njk->nik", a, b)                       # a^T b
-    return np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
+    return _angle_deg(np.einsum("nji,njk->nik", a, b))         # a^T b
 
 
 def relative_turns_to(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
@@ -33,8 +37,7 @@ def relative_turns_to(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarra
     Rm, Rt = np.asarray(model_c2w)[:, :3, :3], np.asarray(truth_c2w)[:, :3, :3]
     a = np.einsum("ji,njk->nik", Rm[0], Rm)
     b = np.einsum("ji,njk->nik", Rt[0], Rt)
-    d = np.einsum("nji,njk->nik", a, b)
-    return np.degrees(np.arccos(np.clip((np.trace(d, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
+    return _angle_deg(np.einsum("nji,njk->nik", a, b))
 
 
 def main(argv=None) -> dict:

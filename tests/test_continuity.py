@@ -218,7 +218,8 @@ def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_n
         jumps = jumps_along(rec, recs)
         if numbered:
             assert [(j["from"], j["to"]) for j in jumps["photos"]] == [(names[29], names[30])]
-            w = path_warning({"path_jumps": jumps})
+            takes = [{"take": "photos", "kind": "photos", "n_frames": 60, "n_in_model": 60, "n_in_other_parts": 0}]
+            w = path_warning({"path_jumps": jumps, "takes": takes})   # the stage's stats carry both
             assert w.startswith(f"photos (in name order): the camera path jumps from {names[29]} to {names[30]} ("), w
         else:
             assert jumps == {}

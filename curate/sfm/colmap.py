@@ -489,8 +489,8 @@ def without_contained(models: dict) -> dict:
 
 
 def _video_takes(rec, when: dict) -> dict[str, list]:
-    """{take: [(time, Image)] in time order} of the registered video frames of ``rec``; ``when``:
-    {name: (take, time)}."""
+    """{take: [(time, Image)] in time order} of the registered frames of ``rec`` that ``when``
+    ({name: (take, time)}, :func:`_frame_times`) places in time: video frames, numbered photos."""
     takes: dict[str, list] = {}
     for im in rec.images.values():
         if im.has_pose and im.name in when:

@@ -123,7 +123,9 @@ def path_warning(stats: dict) -> str | None:
     :data:`curate.sfm.continuity.FOLD_FACTOR` times the speed around the step and does not come back (a model
     folded there keeps every frame, the ones on one side wrong); None without such a jump.
     ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`, of the
-    model curate uses; each other part of a split capture, ``parts[k]``, may carry its own)."""
+    model curate uses; each other part of a split capture, ``parts[k]``, may carry its own; ``takes``
+    tells a take of numbered photos from a video)."""
+    kinds = {t["take"]: t["kind"] for t in stats.get("takes") or []}          # curate.sfm.prep.take_counts
     where = [("", stats.get("path_jumps") or {})]
     where += [(f"in the other model of {p['n_registered']} photos, ", p.get("path_jumps") or {})
               for p in (stats.get("parts") or [])[1:]]
@@ -133,8 +135,7 @@ def path_warning(stats: dict) -> str | None:
             j = max(js, key=lambda x: x["x_around"] if x["x_around"] is not None else float("inf"))
             how = f"{j['x_around']:g} times the steps around it" if j["x_around"] is not None else "an unbounded step"
             more = f"; {len(js) - 1} more such jump{'s' * (len(js) > 2)}" if len(js) > 1 else ""
-            photos = take == "photos" or take.startswith("photos in ")          # curate.sfm.prep.take_name
-            what = f"{take} (in name order)" if photos else f"video {take}"
+            what = f"{take} (in name order)" if kinds.get(take) == "photos" else f"video {take}"
             each.append(f"{prefix}{what}: the camera path jumps from {j['from']} to {j['to']} ({how}{more}) "
                         "and does not come back")
     if not each:
