@@ -16,33 +16,10 @@ from __future__ import annotations
 import json
 import sys
 
-import numpy as np
+from curate.sfm.mapping import fill_per_photo
 
 
-def fill_of_tracks(tracks: list, n: int) -> dict:
-    """Fill of the reduced camera system of ``n`` photos whose points are seen by ``tracks`` (each a
-    sequence of photo indices in [0, n), tracks of fewer than 2 distinct photos ignored).
-
-    Returns ``{"n", "pattern_per_photo", "nnz_L_per_photo", "flops"}``: nonzeros per photo of the
-    system's pattern (diagonal included) and of its Cholesky factor, and the factor's scalar flops."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
-    rows, cols = [np.arange(n)], [np.arange(n)]
-    for t in tracks:
-        a = np.unique(np.asarray(t, dtype=np.int64))
-        if len(a) >= 2:
-            r, c = np.meshgrid(a, a)
-            rows.append(r.ravel())
-            cols.append(c.ravel())
-    r, c = np.concatenate(rows), np.concatenate(cols)
-    S = sp.csc_matrix((np.ones(len(r)), (r, c)), shape=(n, n))
-    S.data[:] = 1.0
-    pattern = S.nnz
-    S = sp.csc_matrix(S + sp.identity(n) * (S.sum(axis=1).max() + 1))   # diagonally dominant: no pivoting
-    L = splu(S, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True)).L.tocsc()
-    col = np.diff(L.indptr).astype(float)
-    return {"n": n, "pattern_per_photo": round(pattern / n, 1), "nnz_L_per_photo": round(L.nnz / n, 1),
-            "flops": float((col ** 2).sum())}
+fill_of_tracks = fill_per_photo   # the product's measure (curate.sfm.mapping), by its research name
 
 
 def model_fill(model: str, prefixes: list[int]) -> list[dict]:

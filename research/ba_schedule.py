@@ -7,16 +7,17 @@ error and the time of each global refinement, one JSON line (docs/sfm.md, "Mappi
 Without ``--curate``: COLMAP's schedule of global adjustments, or OPTION=VALUE overrides of
 pycolmap.IncrementalPipelineOptions (dotted for nested options: ``mapper.ba_global_ignore_redundant_points3D=1``).
 With ``--curate``: curate's own mapping (``_map``, as ``curate sfm`` maps) under SfmConfig
-FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set on top; with ``--direct-ba N`` the loop of
-research.incremental_loop maps instead, its global adjustments factored directly up to N photos
-(COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
+FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set on top (past 1,000 photos
+curate's loop, :mod:`curate.sfm.mapping`, choosing each global adjustment's solver by the fill:
+``direct_ba_max_fill=0`` keeps Ceres' choice, COLMAP's own); with ``--direct-ba N`` that loop maps with
+every global adjustment factored directly up to N photos (COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
 matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
-video), ``walk``, ``hall`` or ``hall_back`` (TRUTH a folder research.bench.bench_mapping rendered of that capture, with
+video), ``walk``, ``hall``, ``hall_back`` or ``grid`` (TRUTH a folder research.bench.bench_mapping rendered of that capture, with
 truth.npy) or ``takes``
 (TRUTH ``CASE.truth.json:OFFICE``, a case of research.takes and the office folder).
 
-``global_refinements``: [registered frames, seconds] of each global refinement; for the research loop
-timed around each call, for COLMAP's pipeline read from the
+``global_refinements``: [registered frames, seconds] of each global refinement; for curate's loop
+timed around each call (and ``global_adjustments``, its choices past 1,000 photos), for COLMAP's pipeline read from the
 timestamps of its log (from the refinement's log line to the next registration).
 """
 from __future__ import annotations
@@ -96,7 +97,7 @@ def main(argv: list[str]) -> dict:
     import pycolmap
 
     import curate.sfm.colmap as C
-    import research.incremental_loop as I
+    import curate.sfm.mapping as M
     from curate.sfm.config import SfmConfig
     from research.sfm_mappers import sfm_config_overrides
     run, truth, capture, rest = Path(argv[0]), argv[1], argv[2], list(argv[3:])
@@ -130,13 +131,14 @@ def main(argv: list[str]) -> dict:
             return o
         C.incremental_options = only_first
     timed: list = []
-    plain = I._global_refinement
+    plain = M._Loop.global_refinement
 
-    def timed_refinement(pipeline, mapper, mapper_options, global_ba):
+    def timed_refinement(self, pipeline, mapper, mapper_options):
         t = time.perf_counter()
-        plain(pipeline, mapper, mapper_options, global_ba)
+        plain(self, pipeline, mapper, mapper_options)
         timed.append([mapper.reconstruction.num_reg_frames(), round(time.perf_counter() - t, 2)])
-    I._global_refinement = timed_refinement
+    M._Loop.global_refinement = timed_refinement
+    adjustments: list = []
 
     pycolmap.set_random_seed(0)
     r0 = resource.getrusage(resource.RUSAGE_SELF)
@@ -146,17 +148,19 @@ def main(argv: list[str]) -> dict:
             opts = C.incremental_options(cfg, len(names))
             ba = opts.get_global_bundle_adjustment()
             ba.ceres.max_num_images_direct_sparse_cpu_solver = direct
-            models = I.incremental_mapping(db, sfm / "images", tmp / "m", opts, ba)
+            models = M.incremental_mapping(db, sfm / "images", tmp / "m", opts, global_ba=ba)
         else:
-            models = C._map(cfg, db, sfm / "images", tmp / "m", len(names), False)
+            models = C._map(cfg, db, sfm / "images", tmp / "m", len(names), False, adjustments)
+    M._Loop.global_refinement = plain
     r1 = resource.getrusage(resource.RUSAGE_SELF)
     rec = {"run": str(run), "mode": "curate" if curate_mode else "colmap_schedule", "overrides": ov,
            "n_photos": len(names), "wall_s": round(time.perf_counter() - t0, 1),
            "cpu_s": round(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, 1),
            "peak_rss_mb": round(r1.ru_maxrss / 1024),
-           "loop": "research.incremental_loop" if direct else "colmap", "direct_ba_up_to": direct or
+           "loop": "curate.sfm.mapping" if timed else "colmap", "direct_ba_up_to": direct or
            pycolmap.BundleAdjustmentOptions().ceres.max_num_images_direct_sparse_cpu_solver,
-           "global_refinements": timed or refinements_from_log(tmp / "colmap.log")}
+           "global_refinements": timed or refinements_from_log(tmp / "colmap.log"),
+           "global_adjustments": adjustments}
     if capture in ("video", "takes"):
         best = max(models.values(), key=lambda r: r.num_reg_images())
         cams = C.cameras_from_reconstruction(best, warn=False)[0]

@@ -4,7 +4,7 @@ registrations of a finished run's matches, one JSON line (docs/sfm.md, "Mapping 
     python3 -m research.mapping_profile RUN POOL REGISTRATIONS [FIELD=VALUE ...]
 
 POOL: the first POOL photos (name order) of RUN's matches form the pool; the mapping stops after
-REGISTRATIONS photos. The mapping is research.incremental_loop (COLMAP's pipeline as a loop of pycolmap's
+REGISTRATIONS photos. The mapping is curate.sfm.mapping (COLMAP's pipeline as a loop of pycolmap's
 steps) under curate's options for a pool of that size (SfmConfig FIELD=VALUE overrides), each step of ``pycolmap.IncrementalMapper`` timed.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ def main(argv: list[str]) -> dict:
     import pycolmap
 
     import curate.sfm.colmap as C
-    import research.incremental_loop as I
+    import curate.sfm.mapping as M
     from curate.sfm.config import SfmConfig
     from research.sfm_mappers import sfm_config_overrides
     run, pool, stop = Path(argv[0]), int(argv[1]), int(argv[2])
@@ -70,8 +70,7 @@ def main(argv: list[str]) -> dict:
         pycolmap.set_random_seed(0)
         t0 = time.perf_counter()
         try:
-            I.incremental_mapping(db, sfm / "images", tmp / "m", opts, opts.get_global_bundle_adjustment(),
-                                  on_image=on_image)
+            M.incremental_mapping(db, sfm / "images", tmp / "m", opts, on_image=on_image)
         except _Enough:
             pass
         wall = time.perf_counter() - t0

@@ -349,32 +349,55 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
 
 
 @pytest.mark.slow
-def test_research_mapping_loop_maps_as_colmaps_pipeline(fox_run, tmp_path):
-    """The fox's matches mapped by COLMAP's pipeline and by research.incremental_loop, its steps in
-    Python with the global adjustment's options passed in (same options): the same photos
-    registered in one model, at the same poses."""
+def test_curates_mapping_loop_maps_as_colmaps_pipeline_with_either_solver(fox_run, tmp_path, monkeypatch):
+    """The fox's matches mapped by COLMAP's pipeline and by curate.sfm.mapping (COLMAP's steps in Python,
+    each global adjustment's solver chosen by the fill), with Ceres' direct-solve limit lowered to 55
+    photos (above its dense-solve limit, 50) so that the choice is made: with a fill bar no model reaches (every adjustment direct, as
+    COLMAP solves a model of 67 photos) and with one every model passes (iterative past 55 photos), the
+    same photos registered in one model, at the same poses; ``_map`` takes that path past the limit and
+    ``map_capture`` records each choice in the stage's stats."""
     import shutil
-    from curate.sfm.colmap import cameras_from_reconstruction, incremental_options
-    from research.incremental_loop import incremental_mapping
+
+    from curate.sfm import mapping
+    from curate.sfm.colmap import _map, cameras_from_reconstruction, incremental_options, map_capture
     sfm_dir, cfg = fox_run / "sfm", small_cfg()
     n = sum(1 for _ in (sfm_dir / "images").iterdir())
-    models = {}
-    for who in ("colmap", "loop"):
+    models, choices = {}, {}
+    for who, max_fill in (("colmap", None), ("direct", 1e9), ("iterative", 1.0)):
         db = tmp_path / f"{who}.db"
         shutil.copy2(sfm_dir / "database.db", db)
         opts = incremental_options(cfg, n)
         pycolmap.set_random_seed(0)
-        models[who] = (pycolmap.incremental_mapping(db, sfm_dir / "images", tmp_path / who, options=opts)
-                       if who == "colmap" else
-                       incremental_mapping(db, sfm_dir / "images", tmp_path / who, opts, opts.get_global_bundle_adjustment()))
+        if who == "colmap":
+            models[who] = pycolmap.incremental_mapping(db, sfm_dir / "images", tmp_path / who, options=opts)
+        else:
+            choices[who] = mapping.SolverChoice(max_fill, 55)
+            models[who] = mapping.incremental_mapping(db, sfm_dir / "images", tmp_path / who, opts, choices[who])
+    assert {e["solver"] for e in choices["direct"].record} == {"direct"}
+    assert {e["solver"] for e in choices["iterative"].record} == {"iterative"}
+    assert choices["direct"].record and choices["iterative"].record
+    assert all(e["photos"] > 55 and e["seconds"] >= 0 and e["fill_per_photo"] > 1 for e in choices["direct"].record)
     sizes = {k: sorted((r.num_reg_images() for r in m.values()), reverse=True) for k, m in models.items()}
-    assert sizes["loop"] == sizes["colmap"] and sizes["colmap"][0] >= 0.95 * n, sizes
+    assert sizes["direct"] == sizes["iterative"] == sizes["colmap"] and sizes["colmap"][0] >= 0.95 * n, sizes
     cams = {k: cameras_from_reconstruction(max(m.values(), key=lambda r: r.num_reg_images()), warn=False)[0]
             for k, m in models.items()}
-    assert set(cams["loop"].names) == set(cams["colmap"].names)
-    e = pose_errors(cams["loop"], cams["colmap"])
-    assert e["rotation_deg_max"] < 0.05 and e["centre_rel_median"] < 1e-3, e
-    assert (tmp_path / "loop" / "0" / "images.bin").is_file()   # written where COLMAP writes its models
+    for who in ("direct", "iterative"):
+        assert set(cams[who].names) == set(cams["colmap"].names)
+        e = pose_errors(cams[who], cams["colmap"])
+        assert e["rotation_deg_max"] < (0.05 if who == "direct" else 0.5) and e["centre_rel_median"] < 1e-2, (who, e)
+    assert (tmp_path / "direct" / "0" / "images.bin").is_file()   # written where COLMAP writes its models
+
+    monkeypatch.setattr(mapping, "ceres_direct_limit", lambda: 55)
+    shutil.copy2(sfm_dir / "database.db", tmp_path / "map.db")
+    adj: list = []
+    got = _map(small_cfg(direct_ba_max_fill=1e9), tmp_path / "map.db", sfm_dir / "images", tmp_path / "map", n, False, adj)
+    assert adj and {e["solver"] for e in adj} == {"direct"} and sorted(
+        (r.num_reg_images() for r in got.values()), reverse=True) == sizes["colmap"]
+    shutil.copy2(sfm_dir / "database.db", tmp_path / "cap.db")
+    stats: dict = {}
+    map_capture(small_cfg(mapper="incremental"), tmp_path / "cap.db", sfm_dir / "images", tmp_path / "cap", n, stats)
+    assert stats["mapper"] == "incremental" and stats["global_adjustments"]
+    assert {e["solver"] for e in stats["global_adjustments"]} == {"direct"}     # the fox fills < 270 per photo
 
 
 # ------------------------------------------------------------------ fox: accuracy, import

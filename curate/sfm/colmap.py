@@ -437,11 +437,19 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     return opts
 
 
-def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool):
+def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool,
+         adjustments: list | None = None):
+    """{id: Reconstruction} of COLMAP's incremental mapper on the matches of ``db``, with curate's options
+    (:func:`incremental_options`). Pools of more photos than Ceres' direct-solve limit (1,000) are mapped by
+    :func:`curate.sfm.mapping.incremental_mapping`, the same steps with each global adjustment's solver chosen
+    from the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
+    global adjustment past the limit (photos, fill per photo, solver, seconds)."""
     import pycolmap
     from tqdm import tqdm
 
+    from curate.sfm import mapping
     opts = incremental_options(cfg, n_images)
+    limit = mapping.ceres_direct_limit()
     bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
     count = [0]
 
@@ -451,8 +459,15 @@ def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progr
         bar.update(k)
 
     try:
-        models = pycolmap.incremental_mapping(db, images, out, options=opts, initial_image_pair_callback=
-                                              lambda: on_image(2), next_image_callback=on_image)
+        if n_images > limit and cfg.direct_ba_max_fill > 0:
+            choice = mapping.SolverChoice(cfg.direct_ba_max_fill, limit)
+            models = mapping.incremental_mapping(db, images, out, opts, choice, on_pair=lambda: on_image(2),
+                                                 on_image=on_image)
+            if adjustments is not None:
+                adjustments.extend(choice.record)
+        else:
+            models = pycolmap.incremental_mapping(db, images, out, options=opts, initial_image_pair_callback=
+                                                  lambda: on_image(2), next_image_callback=on_image)
     finally:
         bar.close()
     return models
@@ -575,8 +590,11 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     work.mkdir(parents=True, exist_ok=True)
     if cfg.mapper != "global":
         t = time.perf_counter()
-        inc = _map(cfg, db, images, work / "incremental", n_images, cfg.progress)
+        adjustments: list = []
+        inc = _map(cfg, db, images, work / "incremental", n_images, cfg.progress, adjustments)
         tried["incremental"] = {"model_sizes": _sizes(inc), "seconds": round(time.perf_counter() - t, 2)}
+        if adjustments:
+            stats["global_adjustments"] = adjustments
         largest = tried["incremental"]["model_sizes"][:1] or [0]
         if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
             stats["mapper"] = "incremental"

@@ -110,6 +110,11 @@ class SfmConfig:
     #                                   (COLMAP: 1.1)
     global_ba_refinements: int = 1    # ... each refined (adjust, retriangulate, filter) at most this many times
     #                                   (COLMAP: 5)
+    direct_ba_max_fill: float = 270.0  # pools past 1,000 photos: a global bundle adjustment of more than 1,000
+    #                                   photos solves directly (sparse Cholesky) while the factor's fill stays
+    #                                   under this many nonzeros per photo (a walk that covers new ground), else
+    #                                   iteratively, Ceres' choice past 1,000 (a room seen round and round);
+    #                                   0: Ceres' choice always (docs/sfm.md, "Which solver ...")
     min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
     min_global_gain: float = 0.05     # 'auto': the global model (the less accurate of the two on real walks) replaces
     #                                   the incremental ones only when it holds at least this share of the photos
@@ -157,6 +162,8 @@ class SfmConfig:
         if not self.global_ba_growth > 1 or self.global_ba_refinements < 1 or self.global_ba_above < 0:
             raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements >= 1 and "
                              "global_ba_above >= 0")
+        if not self.direct_ba_max_fill >= 0:
+            raise ValueError("SfmConfig.direct_ba_max_fill must be >= 0")
         if self.cross_take_period < 1 or self.cross_take_num_images < 1:
             raise ValueError("SfmConfig.cross_take_period and cross_take_num_images must be >= 1")
         if self.vocab_tree_descriptors < 256 * 40:

@@ -4,6 +4,7 @@
     python3 -m research.bench.bench_mapping --walk 1000 2000 3000 --object 300 [--mappers incremental global]
     python3 -m research.bench.bench_mapping --walk --object --hall 1000 3000 --mappers
     python3 -m research.bench.bench_mapping --walk --object --hall-back 1600 --mappers
+    python3 -m research.bench.bench_mapping --walk --object --grid 2000 --mappers
 
 Renders (once, cached under ``--work``, resumable frame by frame):
 
@@ -18,6 +19,8 @@ Renders (once, cached under ``--work``, resumable frame by frame):
 * ``--hall-back N``: a walk of N frames down the hall on one side and back on the other
   (:func:`hall_there_and_back`): each stretch seen twice, from both sides, a shape between the hall's
   open chain and the loop walk's room seen round and round;
+* ``--grid N``: a drone's mapping flight of N frames, straight down over a large room's floor in
+  strips back and forth (:func:`grid_flight`): a 2-D pattern of overlaps with no loop along the way;
 * an object capture (:func:`object_orbit`): ``--object`` photos of 800x533 taken hand-held in three
   rings around the coffee table of the same room, named ``IMG_0001.jpg``... as a phone names them.
 
@@ -185,7 +188,103 @@ def hall_there_and_back(n: int, seed: int = 0, width: int = 640, height: int = 4
                    names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), np.concatenate([w_there, w_back])
 
 
-SCENES = {"walk": "livingroom", "object": "livingroom", "hall": "gallery", "hall_back": "gallery"}
+GRID_SPEED = 1.0           # m/s: the drone's ground speed (0.1 m a frame at FPS)
+GRID_SPACING = 1.2         # m between strips: 65% side overlap at GRID_ALTITUDE
+GRID_ALTITUDE = 3.0        # m above the floor
+GRID_MARGIN = 2.5          # m of floor beyond the flight on every side
+
+
+def grid_plan(n: int) -> tuple[int, float]:
+    """(strips, strip length m) of a square grid flight of ``n`` frames: strips along x, ``GRID_SPACING``
+    apart, joined by short legs along y; about as many strips as the strip is long over the spacing."""
+    path = n * GRID_SPEED / FPS
+    k = max(2, int(round(np.sqrt(path / GRID_SPACING))))
+    return k, (path - (k - 1) * GRID_SPACING) / k
+
+
+def grid_scene(n: int, seed: int = 0):
+    """A large room under :func:`grid_flight`'s flight of ``n`` frames (``GRID_MARGIN`` m of floor beyond it,
+    4.2 m high): the floor tiled with rugs of 0.6-2 m, each its own procedural texture, and every ~2 m2 a
+    thing on it (a crate, a drum, a ball, a low table with something on it, a stack of two boxes), none
+    taller than 1.3 m; a ceiling light every 4 m. Deterministic from (n, seed)."""
+    from curate.simulate.synthetic import Scene, _Builder
+    b = _Builder(seed * 1000 + 91)
+    k, ls = grid_plan(n)
+    L, W, H = ls + 2 * GRID_MARGIN, (k - 1) * GRID_SPACING + 2 * GRID_MARGIN, 4.2
+    b.room(L, W, H)
+    r = b.rng
+    y = 0.0
+    while y < W:                                     # rugs: rows of rectangles of their own texture
+        d = float(r.uniform(0.6, 2.0))
+        x = float(r.uniform(-0.5, 0.0))
+        while x < L:
+            w = float(r.uniform(0.6, 2.0))
+            b.box([max(x, 0.0), y, 0.0], [min(x + w, L), min(y + d, W), float(r.uniform(0.005, 0.02))])
+            x += w + float(r.uniform(0.0, 0.3))
+        y += d + float(r.uniform(0.0, 0.3))
+    for _ in range(int(L * W / 2)):
+        cx, cy = float(r.uniform(0.3, L - 0.3)), float(r.uniform(0.3, W - 0.3))
+        kind = int(r.integers(5))
+        if kind == 0:
+            sx, sy = float(r.uniform(0.2, 0.8)), float(r.uniform(0.2, 0.8))
+            b.box([cx, cy, 0], [cx + sx, cy + sy, float(r.uniform(0.1, 1.2))])              # crate
+        elif kind == 1:
+            b.cyl([cx, cy, 0], float(r.uniform(0.1, 0.35)), float(r.uniform(0.2, 1.1)))      # drum
+        elif kind == 2:
+            rad = float(r.uniform(0.1, 0.35))
+            b.sphere([cx, cy, rad], rad)                                                     # ball
+        elif kind == 3:
+            w, d, h = float(r.uniform(0.6, 1.2)), float(r.uniform(0.4, 0.8)), float(r.uniform(0.4, 0.8))
+            b.table(cx, cy, w, d, h)
+            b.box([cx + 0.1, cy + 0.1, h], [cx + 0.1 + w / 3, cy + 0.1 + d / 3, h + float(r.uniform(0.05, 0.3))])
+        else:
+            s1, s2 = float(r.uniform(0.4, 0.9)), float(r.uniform(0.2, 0.5))
+            h1 = float(r.uniform(0.2, 0.6))
+            b.box([cx, cy, 0], [cx + s1, cy + s1, h1])                                       # two boxes stacked
+            b.box([cx + 0.05, cy + 0.05, h1], [cx + 0.05 + s2, cy + 0.05 + s2, h1 + float(r.uniform(0.1, 0.5))])
+    lights = np.array([[x, y, H - 0.15] for x in np.arange(2.0, L, 4.0) for y in np.arange(2.0, W, 4.0)])
+    lo, hi = np.zeros(3), np.array([L, W, H])
+    free = ([1.0, 1.0, 1.5], [L - 1.0, W - 1.0, H - 0.5])
+    return Scene("grid", (lo, hi), b.solids, lights, (np.asarray(free[0]), np.asarray(free[1])),
+                 np.array([L / 2, W / 2, 0.5]))
+
+
+def grid_flight(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_deg: float = 60.0):
+    """(Cameras [n], angular speed [n] radians a frame) of a drone's mapping flight over :func:`grid_scene`'s
+    floor, one frame at ``FPS``: back and forth along x in :func:`grid_plan`'s strips, ``GRID_SPACING`` apart
+    (a short leg along y between them), at ``GRID_SPEED`` and ``GRID_ALTITUDE``, the camera straight down with
+    the image's top towards +x throughout (a mapping mission's fixed heading), a few degrees of gimbal
+    wobble and a few centimetres of height wobble. Each photo overlaps its neighbours along the strip
+    (2.6 m footprint along it, 0.1 m a frame) and the strips beside it (3.5 m across, 65% side overlap):
+    a 2-D pattern of overlaps with no loop along the way, the shape part 5's solver choice is to be tested
+    on (docs/sfm.md). Names ``frame_00000.jpg``..."""
+    from curate.core.cameras import Cameras
+    from curate.simulate.walks import _smooth_noise
+    rng = np.random.default_rng(seed + 11)
+    k, ls = grid_plan(n)
+    step = GRID_SPEED / FPS
+    s = np.arange(n) * step
+    leg = ls + GRID_SPACING                          # a strip and the leg after it
+    j = np.minimum((s // leg).astype(int), k - 1)
+    t = s - j * leg
+    along = np.minimum(t, ls)
+    x = GRID_MARGIN + np.where(j % 2 == 0, along, ls - along)
+    y = GRID_MARGIN + j * GRID_SPACING + np.clip(t - ls, 0, GRID_SPACING)
+    z = GRID_ALTITUDE + _smooth_noise(rng, n, 0.03, int(FPS))
+    c = np.stack([x, y, z], 1)
+    R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])   # columns: image x, y, optical axis
+    ang = np.stack([_smooth_noise(rng, n, np.radians(2.0), int(FPS)) for _ in range(3)], 1)
+    from scipy.spatial.transform import Rotation
+    R = R0[None] @ Rotation.from_rotvec(ang).as_matrix()
+    c2w = np.tile(np.eye(4), (n, 1, 1))
+    c2w[:, :3, :3], c2w[:, :3, 3] = R, c
+    fx = width / 2 / np.tan(np.radians(fov_deg) / 2)
+    omega = np.r_[0.0, np.linalg.norm(np.diff(ang, axis=0), axis=1)]
+    return Cameras(c2w, fx, fx, width / 2, height / 2, width, height,
+                   names=tuple(f"frame_{i:05d}.jpg" for i in range(n))), omega
+
+
+SCENES = {"walk": "livingroom", "object": "livingroom", "hall": "gallery", "hall_back": "gallery", "grid": "floor"}
 
 
 def capture_cameras(kind: str, n: int, seed: int = 0):
@@ -201,6 +300,8 @@ def capture_cameras(kind: str, n: int, seed: int = 0):
         return hall_walk(n, seed)
     if kind == "hall_back":
         return hall_there_and_back(n, seed)
+    if kind == "grid":
+        return grid_flight(n, seed)
     return object_orbit(n, seed), None
 
 
@@ -213,7 +314,7 @@ def capture_scene(kind: str, n: int, seed: int = 0):
     if key not in _SCENE:
         from curate.simulate.synthetic import make_scene
         _SCENE[key] = hall_scene(n, seed) if kind == "hall" else hall_scene(n - n // 2, seed) \
-            if kind == "hall_back" else make_scene("livingroom", seed)
+            if kind == "hall_back" else grid_scene(n, seed) if kind == "grid" else make_scene("livingroom", seed)
         _SCENE[key]._raycaster()                     # built once, shared by _lit_near's copies
     return _SCENE[key]
 
@@ -547,6 +648,8 @@ def main(argv=None) -> int:
     ap.add_argument("--hall-back", type=int, nargs="*", default=[],
                     help="pool sizes of the walk down the hall and back (:func:`hall_there_and_back`; pools are "
                          "whole walks, not prefixes)")
+    ap.add_argument("--grid", type=int, nargs="*", default=[],
+                    help="pool sizes of the drone's grid flight (:func:`grid_flight`; pools are whole flights)")
     ap.add_argument("--object", type=int, nargs="*", default=[300], help="photos of each object capture")
     ap.add_argument("--mappers", nargs="*", default=["global", "hierarchical"],
                     help="mappers to run again on each pool's matches (the SfM run itself maps with --sfm-mapper)")
@@ -560,7 +663,8 @@ def main(argv=None) -> int:
     (a.work / "results").mkdir(parents=True, exist_ok=True)
     out = []
     todo = [("object", n, n) for n in a.object] + [("walk", a.walk_frames, n) for n in sorted(a.walk)] \
-        + [("hall", a.hall_frames, n) for n in sorted(a.hall)] + [("hall_back", n, n) for n in sorted(a.hall_back)]
+        + [("hall", a.hall_frames, n) for n in sorted(a.hall)] + [("hall_back", n, n) for n in sorted(a.hall_back)] \
+        + [("grid", n, n) for n in sorted(a.grid)]
     for capture, total, n in todo:
         frames = render(a.work, capture, total, n, jobs=a.jobs)
         photos = pool_folder(a.work, frames, n)

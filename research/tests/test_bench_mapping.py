@@ -54,3 +54,31 @@ def test_the_walk_there_and_back_sees_each_stretch_from_both_sides():
     assert np.mean(ahead[:300, 0]) > 0.3 and np.mean(ahead[300:, 0]) < -0.3                 # facing the way walked
     assert np.allclose(np.linalg.det(cams.rotations), 1.0) and np.all(np.isfinite(omega))
     assert len(capture_cameras("hall_back", 600)[0]) == 600
+
+
+def test_the_grid_flight_looks_down_in_strips_that_overlap_side_by_side():
+    from research.bench.bench_mapping import GRID_ALTITUDE, GRID_SPACING, grid_flight, grid_plan
+    n = 1200
+    cams, omega = grid_flight(n)
+    scene = capture_scene("grid", n)
+    lo, hi = scene.interior
+    c = cams.centres
+    assert np.all((c > lo + 1.0) & (c < hi - 1.0)) and not scene.occupied(c).any()
+    assert np.all(np.abs(c[:, 2] - GRID_ALTITUDE) < 0.2)
+    k, ls = grid_plan(n)
+    rows = np.round((c[:, 1] - c[0, 1]) / GRID_SPACING, 6)
+    strips = sorted(set(r for r in rows if float(r).is_integer()))
+    assert len(strips) == k and k >= 8 and abs(ls - (k - 1) * GRID_SPACING) < 3.0       # about square
+    ahead = cams.rotations[:, :, 2]
+    assert np.all(ahead[:, 2] < -0.99)                                                   # straight down, within 8 deg
+    top = -cams.rotations[:, :, 1]                                                       # the image's top
+    assert np.all(top[:, 0] > 0.99)                                                      # fixed heading
+    step = np.linalg.norm(np.diff(c[:, :2], axis=0), axis=1)
+    assert np.all(step < 0.1 + 1e-9) and np.mean(np.abs(step - 0.1) < 1e-9) > 0.97       # 1 m/s at 10 frames a second
+    assert step.min() > 0.07                                                             # (a corner cut short)
+    # photos of neighbouring strips, abreast of each other, see overlapping ground (65% of 3.5 m)
+    half_w = GRID_ALTITUDE * np.tan(np.radians(30))
+    assert 2 * half_w - GRID_SPACING > 0.6 * 2 * half_w
+    assert np.all(np.isfinite(omega)) and omega.max() < 0.05                             # under 3 deg a frame
+    assert np.allclose(grid_flight(n)[0].c2w, cams.c2w)                                  # deterministic
+    assert len(capture_cameras("grid", n)[0]) == n
