@@ -44,7 +44,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("frames", type=Path, help="the rendered capture's folder (truth.npy)")
-    ap.add_argument("kind", help="walk, hall or hall_back")
+    ap.add_argument("kind", help="walk, hall, hall_back or grid")
     ap.add_argument("--over", type=float, default=2.0, help="report steps disagreeing by more (deg)")
     a = ap.parse_args(argv)
     from curate.sfm.io import load_sfm

@@ -572,7 +572,8 @@ def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
 
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
     """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
-    kept) and, when both ran, ``mappers_tried`` ({mapper: model sizes, seconds}).
+    kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), and past 1,000 photos
+    ``global_adjustments`` (the incremental mapper's solver of each global adjustment, :func:`_map`).
 
     ``auto`` runs the incremental mapper and, when its largest model holds less than
     ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames

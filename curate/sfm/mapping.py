@@ -54,7 +54,7 @@ def fill_per_photo(tracks: list, n: int) -> dict:
     if n <= 0:
         return {"n": 0, "pattern_per_photo": 0.0, "nnz_L_per_photo": 0.0, "flops": 0.0}
     rows, cols = [], []
-    for k, t in enumerate(tracks):
+    for t in tracks:
         a = np.unique(np.asarray(t, dtype=np.int64))
         if len(a) >= 2:
             rows.append(np.full(len(a), len(rows), np.int64))
@@ -67,7 +67,7 @@ def fill_per_photo(tracks: list, n: int) -> dict:
         S = sp.identity(n, format="csc")
     S.data[:] = 1.0
     pattern = S.nnz
-    S = sp.csc_matrix(S + sp.identity(n) * (abs(S).sum(axis=1).max() + 1))   # diagonally dominant: no pivoting
+    S = sp.csc_matrix(S + sp.identity(n) * (S.sum(axis=1).max() + 1))   # diagonally dominant: no pivoting
     L = splu(S, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True)).L.tocsc()
     col = np.diff(L.indptr).astype(float)
     return {"n": n, "pattern_per_photo": round(pattern / n, 1), "nnz_L_per_photo": round(L.nnz / n, 1),
