@@ -174,9 +174,13 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     jumps = jumps_along(rec, recs)
     assert [(j["from"], j["to"]) for j in jumps["walk.mp4"]] == [(names[29], names[30])]
     assert jumps["walk.mp4"][0]["x_around"] > FOLD_FACTOR and rec.num_reg_images() == 60
-    w = path_warning({"path_jumps": jumps})
+    w = path_warning({"path_jumps": jumps, "mapper": "incremental"})
     assert w.startswith(f"video walk.mp4: the camera path jumps from {names[29]} to {names[30]} ("), w
     assert "does not come back: SfM may have folded the model there" in w
+    assert w.endswith("run again with --mapper global, COLMAP's global mapper, which does not grow the model photo "
+                      "by photo")                                      # the incremental mapper folded it: the way out
+    assert "--mapper global" not in path_warning({"path_jumps": jumps, "mapper": "global"})
+    assert "--mapper global" not in path_warning({"path_jumps": jumps})                  # known poses: no mapper
     assert path_warning({}) is None and path_warning({"path_jumps": {}}) is None
     two = {"walk.mp4": jumps["walk.mp4"] * 2, "b.mp4": [{"from": "b_1.jpg", "to": "b_2.jpg", "x_around": None}]}
     w = path_warning({"path_jumps": two})

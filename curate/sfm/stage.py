@@ -124,7 +124,9 @@ def path_warning(stats: dict) -> str | None:
     folded there keeps every frame, the ones on one side wrong); None without such a jump.
     ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`, of the
     model curate uses; each other part of a split capture, ``parts[k]``, may carry its own; ``takes``
-    tells a take of numbered photos from a video)."""
+    tells a take of numbered photos from a video; ``mapper``: a model of the incremental mapper gets the
+    hint to map again with the global one, which kept a rendered walk down a hall and back whole where the
+    incremental one folded it: docs/sfm.md)."""
     kinds = {t["take"]: t["kind"] for t in stats.get("takes") or []}          # curate.sfm.prep.take_counts
     where = [("", stats.get("path_jumps") or {})]
     where += [(f"in the other model of {p['n_registered']} photos, ", p.get("path_jumps") or {})
@@ -140,9 +142,11 @@ def path_warning(stats: dict) -> str | None:
                         "and does not come back")
     if not each:
         return None
+    other = ("; if they are wrong, run again with --mapper global, COLMAP's global mapper, which does not grow the "
+             "model photo by photo" if stats.get("mapper") == "incremental" else "")
     return ("; ".join(each) + ": SfM may have folded the model there, the cameras on one side of the jump then "
             "being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or transforms.json in "
-            "nerfstudio's viewer) before training on them")
+            "nerfstudio's viewer) before training on them" + other)
 
 
 def import_warning(run_dir: Path) -> str | None:
