@@ -1,0 +1,65 @@
+"""A folded incremental model mapped again by the global mapper (measured, not adopted: docs/sfm.md, "A walk
+down a hall and back"): on a finished run whose incremental model's path jumps and does not come back
+(``curate.sfm.colmap.jumps_along``), the global mapper on a copy of the same matches, the jumps of its own
+path, and both models' pose errors against the rendered truth, one JSON line. The variant tried was
+"keep the global model when its path does not jump and it holds as many photos": on the walk down a hall
+and back the global model was far the better one (38 frames over 5 deg against 1,556) and its path still
+jumped, so that rule would not have used it.
+
+    python3 -m research.fold_remap RUN FRAMES KIND     # RUN: a `curate sfm` run of a research.bench.bench_mapping
+                                                       # capture, FRAMES its rendered folder, KIND its capture kind
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def kept_records(run: Path) -> list:
+    """The run's kept PhotoRecords, as ``curate sfm`` held them (``sfm/images.json``)."""
+    from curate.sfm.ingest import PhotoRecord
+    out = []
+    for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]:
+        if r.get("status") == "kept":
+            pr = PhotoRecord(original=r.get("original", r["rel"]), rel=r["rel"], working=r["working"])
+            pr.extra.update(r.get("extra") or {})
+            out.append(pr)
+    return out
+
+
+def main(argv: list[str]) -> dict:
+    import pycolmap
+
+    import curate.sfm.colmap as C
+    from curate.sfm.config import SfmConfig
+    from research.bench.bench_mapping import pose_record, truth_cameras
+    run, frames, kind = Path(argv[0]), Path(argv[1]), argv[2]
+    sfm = run / "sfm"
+    kept = kept_records(run)
+    truth = truth_cameras(frames, kind)
+    best = pycolmap.Reconstruction(sfm / "sparse" / "0")
+    rec: dict = {"run": str(run), "incremental": {
+        "photos": int(best.num_reg_images()), "jumps": C.jumps_along(best, kept),
+        **pose_record(C.cameras_from_reconstruction(best, warn=False)[0], truth)}}
+    tmp = Path(tempfile.mkdtemp())
+    shutil.copy2(sfm / "database.db", tmp / "g.db")
+    t = time.perf_counter()
+    with C.colmap_log(tmp / "colmap.log"):
+        glob = C.without_contained(C._map_global(SfmConfig(progress=False), tmp / "g.db", sfm / "images", tmp / "g"))
+    rec["seconds"] = round(time.perf_counter() - t, 1)
+    if glob:
+        off = C.drop_off_path(glob, kept)
+        g = max(glob.values(), key=lambda r: r.num_reg_images())
+        rec["global"] = {"model_sizes": C._sizes(glob), "photos": int(g.num_reg_images()), "off_path": off,
+                         "jumps": C.jumps_along(g, kept),
+                         **pose_record(C.cameras_from_reconstruction(g, warn=False)[0], truth)}
+    shutil.rmtree(tmp)
+    return rec
+
+
+if __name__ == "__main__":
+    print(json.dumps(main(sys.argv[1:])), flush=True)
