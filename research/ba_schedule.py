@@ -60,12 +60,10 @@ def path_record(rec, sfm: Path) -> dict:
     """Per video take of the model ``rec``: its largest step as a multiple of the speed around it
     (curate.sfm.continuity.step_ratios) and the one-way jumps ``curate sfm`` would warn of
     (curate.sfm.colmap.jumps_along); ``sfm``: the run's sfm folder (images.json)."""
-    from types import SimpleNamespace
-
     import curate.sfm.colmap as C
     from curate.sfm.continuity import step_ratios
-    kept = [SimpleNamespace(working=r["working"], extra=r.get("extra") or {})
-            for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+    from research.path_check import kept_records
+    kept = kept_records(sfm.parent)      # PhotoRecords: jumps_along reads numbered photos by their names too
     out = {}
     for take, frames in C._video_takes(rec, C._frame_times(kept)).items():
         r = step_ratios(*C._along(frames)) if len(frames) > 1 else np.zeros(0)

@@ -19,24 +19,13 @@ import time
 from pathlib import Path
 
 
-def kept_records(run: Path) -> list:
-    """The run's kept PhotoRecords, as ``curate sfm`` held them (``sfm/images.json``)."""
-    from curate.sfm.ingest import PhotoRecord
-    out = []
-    for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]:
-        if r.get("status") == "kept":
-            pr = PhotoRecord(original=r.get("original", r["rel"]), rel=r["rel"], working=r["working"])
-            pr.extra.update(r.get("extra") or {})
-            out.append(pr)
-    return out
-
-
 def main(argv: list[str]) -> dict:
     import pycolmap
 
     import curate.sfm.colmap as C
     from curate.sfm.config import SfmConfig
     from research.bench.bench_mapping import pose_record, truth_cameras
+    from research.path_check import kept_records
     run, frames, kind = Path(argv[0]), Path(argv[1]), argv[2]
     sfm = run / "sfm"
     kept = kept_records(run)

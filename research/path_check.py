@@ -19,13 +19,8 @@ from pathlib import Path
 import numpy as np
 
 
-def takes_along(run: Path):
-    """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and take: video
-    takes, and takes of numbered photos in name order (their numbers as the time), as
-    ``curate.sfm.colmap.jumps_along`` reads them."""
-    import pycolmap
-
-    from curate.sfm.colmap import _frame_times
+def kept_records(run: Path) -> list:
+    """The kept PhotoRecords of a run's SfM stage, as ``curate sfm`` held them (``RUN/sfm/images.json``)."""
     from curate.sfm.ingest import PhotoRecord
     kept = []
     for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]:
@@ -33,17 +28,21 @@ def takes_along(run: Path):
             pr = PhotoRecord(original=r.get("original", r["rel"]), rel=r["rel"], working=r["working"])
             pr.extra.update(r.get("extra") or {})
             kept.append(pr)
-    when = _frame_times(kept, numbered=True)
+    return kept
+
+
+def takes_along(run: Path):
+    """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and take: video
+    takes, and takes of numbered photos in name order (their numbers as the time), as
+    ``curate.sfm.colmap.jumps_along`` reads them."""
+    import pycolmap
+
+    from curate.sfm.colmap import _along, _frame_times, _video_takes
+    when = _frame_times(kept_records(run), numbered=True)
     for model in sorted((run / "sfm" / "sparse").iterdir()):
-        rec = pycolmap.Reconstruction(model)
-        takes: dict[str, list] = {}
-        for im in rec.images.values():
-            if im.has_pose and im.name in when:
-                take, t = when[im.name]
-                takes.setdefault(take, []).append((t, im.name, np.asarray(im.projection_center())))
-        for take, fr in sorted(takes.items()):
-            fr.sort(key=lambda x: x[0])
-            yield model.name, take, np.array([x[0] for x in fr]), [x[1] for x in fr], np.array([x[2] for x in fr])
+        for take, frames in _video_takes(pycolmap.Reconstruction(model), when).items():
+            t, c = _along(frames)
+            yield model.name, take, t, [im.name for _, im in frames], c
 
 
 def main(argv=None) -> None:
