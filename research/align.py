@@ -11,7 +11,7 @@ from typing import Callable
 
 import numpy as np
 
-from curate.core.cameras import Cameras
+from curate.core.cameras import Cameras, rotation_angle_deg
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> tuple[float, np.ndarray, np.ndarray]:
@@ -81,9 +81,7 @@ def pose_errors(est: Cameras, ref: Cameras, key: Callable[[str], str] = basename
     extent = float(np.linalg.norm(cr.max(0) - cr.min(0)))
     cerr = np.linalg.norm(s * ce @ R.T + t - cr, axis=1) / max(extent, 1e-12)
     Ra = R @ est.rotations[ie]                      # [M, 3, 3] estimated c2w rotations in the ref frame
-    rel = np.einsum("nji,njk->nik", ref.rotations[ir], Ra)
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)
-    rdeg = np.degrees(np.arccos(cos))
+    rdeg = rotation_angle_deg(np.einsum("nji,njk->nik", ref.rotations[ir], Ra))
     return {"n_matched": int(len(ie)), "rotation_deg_median": float(np.median(rdeg)),
             "rotation_deg_max": float(rdeg.max()), "centre_rel_median": float(np.median(cerr)),
             "centre_rel_max": float(cerr.max()), "extent": extent, "scale": float(s),

@@ -15,10 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _angle_deg(R: np.ndarray) -> np.ndarray:
-    """[n] degrees turned by each rotation of R [n, 3, 3]."""
-    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
+from curate.core.cameras import rotation_angle_deg
 
 
 def relative_turns(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
@@ -28,7 +25,7 @@ def relative_turns(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
     Rm, Rt = np.asarray(model_c2w)[:, :3, :3], np.asarray(truth_c2w)[:, :3, :3]
     a = np.einsum("nji,njk->nik", Rm[:-1], Rm[1:])            # R_i^T R_{i+1}
     b = np.einsum("nji,njk->nik", Rt[:-1], Rt[1:])
-    return _angle_deg(np.einsum("nji,njk->nik", a, b))         # a^T b
+    return rotation_angle_deg(np.einsum("nji,njk->nik", a, b))         # a^T b
 
 
 def relative_turns_to(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarray:
@@ -37,7 +34,7 @@ def relative_turns_to(model_c2w: np.ndarray, truth_c2w: np.ndarray) -> np.ndarra
     Rm, Rt = np.asarray(model_c2w)[:, :3, :3], np.asarray(truth_c2w)[:, :3, :3]
     a = np.einsum("ji,njk->nik", Rm[0], Rm)
     b = np.einsum("ji,njk->nik", Rt[0], Rt)
-    return _angle_deg(np.einsum("nji,njk->nik", a, b))
+    return rotation_angle_deg(np.einsum("nji,njk->nik", a, b))
 
 
 def main(argv=None) -> dict:

@@ -180,3 +180,15 @@ def test_rotation_disagreement_ignores_the_frame_and_finds_the_bent_camera():
     assert rotation_disagreement(np.zeros((0, 3, 3)), np.zeros((0, 3, 3))).shape == (0,)
     noisy = Rotation.from_rotvec(rng.normal(0, 1e-3, (40, 3))).as_matrix() @ Ra
     assert np.isfinite(rotation_disagreement(noisy, Rb)).all()
+
+
+def test_rotation_angle_is_the_turn_of_each_rotation_and_never_nan():
+    from scipy.spatial.transform import Rotation
+
+    from curate.core.cameras import rotation_angle_deg
+    angles = np.array([0.0, 1e-7, 5.0, 90.0, 179.999, 180.0])
+    R = Rotation.from_rotvec(np.radians(angles)[:, None] * [[0.0, 0.6, 0.8]]).as_matrix()
+    assert np.allclose(rotation_angle_deg(R), angles, atol=1e-3)
+    assert rotation_angle_deg(R[3]).shape == () and abs(float(rotation_angle_deg(R[3])) - 90.0) < 1e-9
+    noisy = np.eye(3) * (1 + 1e-12)                      # a trace just over 3, as rounding gives
+    assert float(rotation_angle_deg(noisy)) == 0.0 and rotation_angle_deg(np.zeros((0, 3, 3))).shape == (0,)

@@ -362,6 +362,13 @@ def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str) -> None
                 raise ValueError(f"{what}: {k} = {x} is not a usable value")
 
 
+def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
+    """Degrees turned by each rotation of R [..., 3, 3] (shape [...]; a single [3, 3] gives a 0-d array),
+    the trace clipped so that rounding never makes a NaN."""
+    R = np.asarray(R, np.float64)
+    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)))
+
+
 def rotation_disagreement(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     """[n] degrees: how far two reconstructions of the same n cameras disagree on each camera's
     orientation, once one rotation brings frame b onto frame a.
@@ -376,5 +383,4 @@ def rotation_disagreement(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     U, _, Vt = np.linalg.svd((Ra @ np.transpose(Rb, (0, 2, 1))).sum(0))
     Q = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
     E = np.transpose(Ra, (0, 2, 1)) @ Q @ Rb                   # identity where they agree
-    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
-    return np.degrees(np.arccos(cos))
+    return rotation_angle_deg(E)

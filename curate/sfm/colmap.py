@@ -69,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from curate.core.cameras import Cameras
+from curate.core.cameras import Cameras, rotation_angle_deg
 from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
 from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
@@ -751,7 +751,7 @@ def verify_frames(rec, names: list[str], max_rot_deg: float, trusted: set[str] |
             continue
         mine, model = res["cam_from_world"], im.cam_from_world()
         Rm, Rg = np.asarray(mine.rotation.matrix()), np.asarray(model.rotation.matrix())
-        rot = float(np.degrees(np.arccos(np.clip((np.trace(Rm @ Rg.T) - 1) / 2, -1.0, 1.0))))   # same world frame
+        rot = float(rotation_angle_deg(Rm @ Rg.T))                                   # same world frame
         cm, cg = -Rm.T @ np.asarray(mine.translation), -Rg.T @ np.asarray(model.translation)
         depth = float(np.median(np.linalg.norm(xyz - cg, axis=1)))
         step = float(np.linalg.norm(cm - cg) / max(depth, 1e-12))
