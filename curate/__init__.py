@@ -4,4 +4,4 @@ Implements and extends Kopanas & Drettakis, "Improving NeRF Quality by Progressi
 Camera Placement for Free-Viewpoint Navigation" (VMV 2023).
 """
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

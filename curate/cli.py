@@ -203,7 +203,10 @@ GRID = [Opt("--res", "occupancy.res", parse=int),
 TRAIN = [Opt("--holdout-every", "evaluate.holdout_every", parse=int),
          Opt("--iters", "evaluate.iters", parse=int),
          Opt("--eval-size", "evaluate.max_side", parse=int)]
-EVAL = [Opt("--random-seeds", "evaluate.random_seeds", parse=int),
+EVAL = [Opt("--eval-minutes", "evaluate.minutes", parse=float, metavar="MIN"),
+        Opt("--folds", "evaluate.folds", parse=int),
+        Opt("--equivalence-db", "evaluate.margin_db", parse=float, metavar="DB"),
+        Opt("--random-seeds", "evaluate.random_seeds", parse=int),
         Opt("--workers", "evaluate.workers", parse=int)]
 NO_EVAL = [Opt("--no-evaluate", "run_evaluation", const=False,
                help="skip the trainings: selection, report and export only")]
@@ -253,7 +256,7 @@ SUGGEST = [Opt("--add", "add", parse=int, metavar="K"),
 COMMAND_OPTS: dict[str, list[Opt]] = {
     "run": RUN, "batch": RUN, "sfm": SFM, "score": ENERGY + GRID,
     "select": BUDGET + METHOD + ENERGY + GRID,
-    "occupancy": GRID + TRAIN, "evaluate": EVAL + BUDGET_CHECK, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
+    "occupancy": GRID, "evaluate": TRAIN + EVAL, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
     "report": [], "simulate": SIMULATE, "suggest": SUGGEST,
 }
 
@@ -303,14 +306,14 @@ def _grid(cfg, cams):
 
 def saved_config(run_dir: Path):
     """(the RunConfig saved in RUN/run.json, the whole record)."""
-    from curate.config import RunConfig
+    from curate.config import RunConfig, upgrade_config
     from curate.core.stage import config_from_dict
     p = run_dir / "run.json"
     if not p.is_file():
         raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
     try:
         rec = json.loads(p.read_text())
-        return config_from_dict(RunConfig, rec["config"]), rec
+        return config_from_dict(RunConfig, upgrade_config(rec["config"], (rec.get("versions") or {}).get("curate"))), rec
     except (ValueError, KeyError, TypeError) as e:
         raise CliError(f"{p}: not a run record of this curate version ({e})")
 
@@ -796,14 +799,18 @@ def main(argv: list[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    from curate.core import signals
+    signals.install(f"curate {args.command}")   # SIGTERM and SIGHUP stop curate as Ctrl-C does
     try:
         return args.func(args)
     except CliError as e:
         print(f"curate {args.command}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"curate {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:       # Ctrl-C, or SIGTERM / SIGHUP (curate.core.signals.Terminated)
+        signals.unwound()
+        word, code = signals.said(e)
+        print(f"curate {args.command}: {word}", file=sys.stderr)
+        return code
     except Exception as e:  # noqa: BLE001 - an internal error: one line, the trace in a file
         log = _crash_log(e)
         print(f"curate {args.command}: internal error: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''} "

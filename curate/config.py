@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from curate.core.budget import parse_budget
-from curate.evaluate.units import EvalConfig
+from curate.evaluate.config import EvalConfig
 from curate.occupancy.masks import OccupancyConfig, RefineConfig
 from curate.select.select import SelectConfig
 from curate.sfm.config import SfmConfig
@@ -75,3 +75,28 @@ class RunConfig:
             if any(b[i + 3] <= b[i] for i in range(3)):
                 raise ValueError("--box: each max (x1,y1,z1) must be > its min (x0,y0,z0)")
             self.box = b
+
+
+OLD_DEFAULTS = {("evaluate", "methods"): ["selection", "random", "fvs", "all"], ("evaluate", "random_seeds"): 3,
+                ("evaluate", "iters"): 800, ("evaluate", "max_side"): 240}
+"""Options whose default changed in curate 0.3 (the evaluation over folds, with every n-th frame as a rival,
+one random draw per fold and a cheaper field), with their 0.1-0.2 default."""
+
+
+def upgrade_config(d: dict, version: str | None) -> dict:
+    """A ``run.json`` config ``d`` written by curate ``version``: before 0.3, an option still at that version's
+    default (:data:`OLD_DEFAULTS`) takes today's, so a stage command on an older run evaluates as a new run
+    would; an option the user had changed is kept."""
+    try:
+        major, minor = (int(x) for x in str(version).split(".")[:2])
+    except ValueError:
+        return d
+    if (major, minor) >= (0, 3):
+        return d
+    import copy
+    d = copy.deepcopy(d)
+    for (section, name), old in OLD_DEFAULTS.items():
+        sub = d.get(section)
+        if isinstance(sub, dict) and sub.get(name) == old:
+            del sub[name]
+    return d

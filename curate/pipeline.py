@@ -31,7 +31,8 @@ def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> N
                                                    "poses": str(poses) if poses else None, "versions": versions()})
 
 
-STARTS = {"sfm": "photos to cameras", "occupancy": "where the scene is", "select": "choosing photos",
+STARTS = {"sfm": "photos to cameras", "occupancy": "where the scene is",
+          "budget": "measuring how many photos this capture needs", "select": "choosing photos",
           "evaluate": "training on the subsets", "export": "writing the export", "report": "writing the report"}
 """What a stage's start line says (on a terminal; its end line replaces it)."""
 
@@ -49,7 +50,8 @@ def _done(res: StageResult, results: list[StageResult]) -> StageResult:
     return res
 
 
-RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "select", "evaluate", "export", "parts")
+RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "budget", "select", "evaluate", "export",
+              "parts")
 """Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
 
 
@@ -145,7 +147,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     transforms.json) the folder the poses' image paths are relative to. ``executor``:
     a ``concurrent.futures.Executor`` for the evaluation's trainings (None: local processes).
     """
-    from curate.evaluate import stage as evaluate
+    from curate.evaluate import budget, stage as evaluate
     from curate.export import stage as export
     from curate.occupancy import stage as occupancy
     from curate.report import stage as report
@@ -168,7 +170,10 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
                                               sum(p["n_registered"] for p in parts)))
         print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {cfg.budget} -> {run_dir}", flush=True)
     check_budget(cfg.budget, run_dir)   # before any training
-    steps = [("occupancy", occupancy.run), ("select", select.run)]
+    steps = [("occupancy", occupancy.run)]
+    if budget.wanted(cfg):   # --budget auto, evaluated: how many photos, measured before choosing them
+        steps.append(("budget", lambda c, d, f: budget.run(c, d, f, executor=executor)))
+    steps.append(("select", select.run))
     if cfg.run_evaluation:
         steps.append(("evaluate", lambda c, d, f: evaluate.run(c, d, f, executor=executor)))
     steps.append(("export", export.run))

@@ -123,7 +123,7 @@ COMMANDS = {
     "score": lambda p, out: ["score", str(p), "--res", "8"],
     "select": lambda p, out: ["select", str(p), "--budget", "4", "--res", "8", "--out", str(out)],
     "sfm": lambda p, out: ["sfm", "--poses", str(p), "--out", str(out)],
-    "run": lambda p, out: ["run", "--poses", str(p), "--out", str(out), "--budget", "4", "--iters", "2"],
+    "run": lambda p, out: ["run", "--poses", str(p), "--out", str(out), "--budget", "4", "--iters", "2", "--folds", "2"],
 }
 
 
@@ -171,7 +171,7 @@ OPTIONS = [
 @pytest.mark.parametrize("extra, msg", OPTIONS, ids=[" ".join(a) for a, _ in OPTIONS])
 def test_bad_options_fail_before_any_training(good, tmp_path, capsys, extra, msg):
     argv = ["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(tmp_path / "out"),
-            "--budget", "4", "--iters", "2", *extra]
+            "--budget", "4", "--iters", "2", "--folds", "2", *extra]
     check(argv, capsys, msg, good)
     assert not list((tmp_path / "out").glob("evaluate/*/stage.json")) and not (tmp_path / "out" / "occupancy" /
                                                                                 "field.pt").exists()

@@ -16,7 +16,7 @@ from curate.batch.runner import find_poses, plan, read_list
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8"]
+FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8", "--folds", "2"]
 
 
 def make_pool(dst: Path, frames: range) -> Path:
@@ -116,10 +116,12 @@ def test_batch_ray_agrees_with_local(folders, local_run, tmp_path):
     res = _batch(folders, out, "--executor", "ray")
     rows = _check(out, res)
     _same(rows_l, rows)
-    # the trainings ran as Ray tasks, in parallel: every unit's record is there
+    # the trainings ran as Ray tasks, in parallel: every unit of every fold has its record
     for name in ("pool_a", "pool_b"):
+        summ = json.loads((out / name / "evaluate" / "summary.json").read_text())
+        want = sorted(u for f in summ["protocol"]["folds"] for u in f["units"])
         units = sorted(p.parent.name for p in (out / name / "evaluate").glob("*/stage.json"))
-        assert units == ["all", "fvs", "random_s0", "random_s1", "selection"]
+        assert units == want and len(summ["protocol"]["folds"]) == 2 and "f00_random_s1" in units
 
 
 @pytest.mark.slow

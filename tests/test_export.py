@@ -195,3 +195,48 @@ def test_connectivity_warning():
     assert connectivity_warning({"n_points3D_source": 0, "components": [1] * 12}) is None   # poses without points
     w = connectivity_warning({"n_points3D_source": 100, "components": [9, 3]})
     assert "12 exported images form 2 groups" in w and "9, 3" in w
+
+
+@pytest.mark.parametrize("first", ["link", "copy"])
+def test_a_file_the_user_changed_in_the_export_is_never_removed(import_run, first):
+    """Issue 49: an image editor's save replaces an exported link by a file (or rewrites a copied file), or the
+    user edits transforms.json: a new export refuses, naming the file, and removes nothing; an untouched
+    export (links, or copies equal to their originals) is replaced as before."""
+    cams, src, run = import_run
+    out = export_subset(run, list(cams.names[:4]), mode=first)
+    export_subset(run, list(cams.names[1:5]), out, mode=first)          # untouched: replaced
+    img = out / "images" / Path(cams.names[2]).name
+    img.unlink()
+    img.write_bytes(b"edited by the user")
+    listing = sorted(p.name for p in (out / "images").iterdir())
+    for mode in ("link", "copy"):
+        with pytest.raises(ValueError, match=f"{img.name} was changed since curate exported it"):
+            export_subset(run, list(cams.names[:3]), out, mode=mode)
+        assert img.read_bytes() == b"edited by the user" and sorted(p.name for p in (out / "images").iterdir()) == listing
+    img.unlink()                                                           # the user moved it out
+    export_subset(run, list(cams.names[:3]), out, mode="copy")
+    tj = out / "transforms.json"
+    tj.write_text(tj.read_text().replace('"w"', '"w" ', 1))                # an edit of curate's own file
+    with pytest.raises(ValueError, match="transforms.json was changed"):
+        export_subset(run, list(cams.names[:2]), out, mode="copy")
+    assert tj.is_file() and (out / "images" / Path(cams.names[0]).name).is_file()
+
+
+@pytest.mark.slow
+def test_curate_export_on_a_run_keeps_an_edited_image(tmp_path, capsys):
+    """`curate export RUN --mode copy` after the user replaced an exported link by an edited file: a one-line
+    error naming the file, exit 2, the file kept; `curate select RUN --budget 5` likewise."""
+    from curate.cli import main
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    run = tmp_path / "run"
+    assert main(["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--out", str(run),
+                 "--budget", "8", "--no-evaluate", "--res", "12", "--triangulate", "off"]) == 0
+    img = sorted((run / "export" / "images").iterdir())[3]
+    img.unlink()
+    img.write_bytes(b"edited")
+    for argv in (["export", str(run), "--mode", "copy"], ["select", str(run), "--budget", "5"]):
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert f"{img} was changed since curate exported it" in err and "Traceback" not in err
+        assert img.read_bytes() == b"edited"

@@ -14,7 +14,8 @@ from curate.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12", "--triangulate", "off"]
+TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12", "--triangulate", "off",
+        "--folds", "2"]
 
 
 def _run(out: Path, *extra: str) -> list[str]:
@@ -42,12 +43,18 @@ def test_fast_and_evaluated_runs_export_the_same_frames(tmp_path, capsys, method
     sel = json.loads((fast / "select" / "selection.json").read_text())
     assert sel["pool"] == list(range(160)) and sel["holdout"] == []
     rep = _rep(full)
-    assert rep["evaluation"]["status"] == "current" and rep["estimate"]["n_pool"] + rep["estimate"]["n_holdout"] == 160
+    est = rep["estimate"]     # fold 0 holds out photos 0, 14, ..., 154; two folds hold out twice as many
+    assert rep["evaluation"]["status"] == "current" and est["n_pool"] == 160 - 12 and est["n_holdout"] == 12 + 11
     # the estimate chose the same share of the photos left after the hold-out, by the same method
     assert rep["estimate"]["budget"] == round(12 * rep["estimate"]["n_pool"] / 160)
     assert _rep(fast)["evaluation"]["status"] == "not run" and "methods" not in _rep(fast)
     out = capsys.readouterr().out
     assert "12 of 160 photos chosen" in out and "verdict:" in out
+    assert set(rep["paired"]) == {"selection-random", "selection-fvs", "selection-stride"}   # a walk: every n-th too
+    page = (full / "report.html").read_text()
+    assert "every n-th frame" in page and "2 folds" in page
+    renders = page[page.index('class="renders"'):]
+    assert "missing" not in renders[:renders.index("</table>")]      # each fold's renders found in its own unit
 
 
 @pytest.mark.slow
@@ -127,43 +134,59 @@ def test_the_refresh_command_redoes_the_first_stale_stage(tmp_path):
 
 @pytest.mark.parametrize("p, words", [({"mean": 1.2, "lo": 0.3, "hi": 2.1}, "ahead of"),
                                       ({"mean": -0.8, "lo": -1.5, "hi": -0.1}, "behind"),
-                                      ({"mean": 0.5, "lo": -0.2, "hi": 1.2}, "level with"),
-                                      ({"mean": 0.5, "lo": -math.inf, "hi": math.inf, "n": 1}, "level with")])
-def test_compare_says_ahead_only_when_the_interval_excludes_zero(p, words):
+                                      ({"mean": 0.5, "lo": -0.2, "hi": 1.2}, "not told apart from"),
+                                      ({"mean": 0.05, "lo": -0.2, "hi": 0.25}, "level with"),
+                                      ({"mean": 0.05, "lo": -0.2, "hi": 0.25, "margin": 0.1, "decision": "undecided"},
+                                       "not told apart from"),
+                                      ({"mean": 0.5, "lo": -math.inf, "hi": math.inf, "n": 1}, "not told apart from")])
+def test_compare_says_ahead_only_when_the_interval_excludes_zero_and_level_only_within_the_margin(p, words):
     from curate.report.verdict import compare
     assert compare(p) == words
 
 
-def test_the_verdict_names_both_rivals_with_intervals_and_the_coverage():
+def test_the_verdict_names_every_rival_with_its_interval_what_it_decides_and_the_coverage():
     from curate.report.verdict import verdict
-    rep = {"n_candidates": 282, "selection": {"chosen": list(range(60)), "method": "path",
-                                              "coverage": {"seen": 0.97, "seen_twice": 0.88, "n_nodes_seen": 500}},
+    rep = {"n_candidates": 282, "run_dir": "RUN",
+           "selection": {"chosen": list(range(60)), "method": "path",
+                         "coverage": {"seen": 0.97, "seen_twice": 0.88, "n_nodes_seen": 500}},
            "evaluation": {"status": "current"}, "methods": {"selection": {}},
-           "paired": {"selection-random": {"mean": 1.77, "lo": 0.52, "hi": 3.02},
-                      "selection-fvs": {"mean": 1.06, "lo": -0.28, "hi": 2.40}}, "gap_closed": 0.67,
-           "estimate": {"budget": 55, "n_pool": 261, "n_holdout": 21, "holdout_every": 14}}
+           "paired": {"selection-random": {"mean": 1.77, "lo": 0.52, "hi": 3.02, "decision": "ahead"},
+                      "selection-fvs": {"mean": 1.06, "lo": -0.28, "hi": 2.40, "decision": "undecided"},
+                      "selection-stride": {"mean": 0.05, "lo": -0.2, "hi": 0.25, "decision": "level", "margin": 0.3}},
+           "gap_closed": 0.67,
+           "estimate": {"budget": 55, "n_pool": 261, "n_holdout": 130, "holdout_every": 14, "n_folds": 6,
+                        "planned_folds": 14, "stopped": "time", "minutes": 15}}
     v = verdict(rep)
     assert v["exported"].startswith("60 of 282 photos chosen") and "97%" in v["coverage"] and "88%" in v["coverage"]
     assert "ahead of random subsets of the same size (+1.77 dB, 95% interval +0.52 to +3.02)" in v["quality"]
-    assert "level with farthest-view sampling (FVS) (+1.06 dB, 95% interval -0.28 to +2.40)" in v["quality"]
-    assert "67% of the gap" in v["quality"] and "55 of the 261" in v["quality"]
-    assert v["short"] == "ahead of random +1.77 dB [+0.52, +3.02]; level with FVS +1.06 dB [-0.28, +2.40]; gap closed 67%"
-    assert v["against"] == {"random": "ahead of", "fvs": "level with"}
+    assert "not told apart from farthest-view sampling (FVS) (+1.06 dB, 95% interval -0.28 to +2.40)" in v["quality"]
+    assert "level with every n-th frame, within 0.3 dB (+0.05 dB" in v["quality"]
+    assert "67% of the gap" in v["quality"] and "55 of the 261" in v["quality"] and "6 of 14 hold-out folds" in v["quality"]
+    assert "`curate evaluate RUN --eval-minutes 30`" in v["quality"]          # how to narrow it: more time
+    assert v["short"] == ("ahead of random +1.77 dB [+0.52, +3.02]; not told apart from FVS +1.06 dB [-0.28, +2.40]; "
+                          "level with every n-th frame +0.05 dB [-0.20, +0.25]; gap closed 67%; 6 of 14 folds")
+    assert v["against"] == {"random": "ahead of", "fvs": "not told apart from", "stride": "level with"}
+    rep["estimate"] = {**rep["estimate"], "n_holdout": 12, "stopped": "every photo"}     # a small capture: said
+    assert "Only 12 photos could be held out" in verdict(rep)["quality"]
+    rep["estimate"] = {**rep["estimate"], "n_holdout": 282}                           # all held out, still undecided
+    assert "Every photo has been held out once" in verdict(rep)["quality"]
 
 
-def test_the_budget_advice_says_its_range_and_whether_it_was_measured_on_the_capture():
-    """`--budget auto` without the evaluation: the range and a warning that the rule was fitted on other
-    captures; with the check: the measured advice, and the command when the export holds too few."""
+def test_the_budget_advice_says_what_was_measured_and_exported_beside_the_law_and_its_error():
+    """`--budget auto` without the evaluation: the law's range, and how far off it was on real captures;
+    with the measurement before the selection: what was measured and exported, the law beside it."""
     from curate.report.verdict import verdict
-    auto = {"budget": 60, "low": 48, "high": 62, "tolerance_db": 0.5}
+    auto = {"budget": 60, "low": 48, "high": 62, "tolerance_db": 0.5, "kind": "walk"}
     rep = {"n_candidates": 160, "selection": {"chosen": list(range(60)), "budget_auto": auto}}
     hm = verdict(rep)["how_many"]
     assert hm.startswith("How many: --budget auto predicted 60 (48 to 62) for 0.5 dB from the poses alone")
-    assert "fitted on other captures" in hm and "measured on this capture" not in hm
-    rep.update(run_dir="RUN", budget_check={"budget": 90, "low": 75, "high": 110, "tolerance_db": 0.5})
+    assert "a quarter" in hm and "An evaluated run measures it" in hm and "measured on this capture" not in hm
+    measured = {**auto, "budget": 90, "predicted": 60, "source": "measured",
+                "measured": {"budget": 90, "low": 75, "high": 110, "tolerance_db": 0.5}}
+    rep = {"n_candidates": 160, "selection": {"chosen": list(range(90)), "budget_auto": measured}}
     hm = verdict(rep)["how_many"]
-    assert "measured on this capture, about 90 (75 to 110) come within 0.5 dB" in hm
-    assert "`curate select RUN --budget 90`" in hm and "fitted on other captures" not in hm
+    assert "measured on this capture, about 90 (75 to 110) photos come within 0.5 dB of all of them; 90 were exported" in hm
+    assert "predicted 60 (48 to 62)" in hm
 
 
 def test_coverage_counts_what_the_chosen_see_of_what_the_capture_sees():
@@ -195,3 +218,29 @@ def test_the_budget_check_recovers_a_capture_that_needs_more_than_the_law_says()
     chk = fit_check(small, p, rho_full, 0.5, 300 / 280)
     assert chk.budget is None and chk.high == round(20 * 300 / 280) and "or fewer" in chk.note
     assert check_budgets(40, 280) == [20, 80] and check_budgets(3, 6) == [4] and check_budgets(2, 4) == []
+
+
+@pytest.mark.slow
+def test_budget_auto_on_an_evaluated_run_exports_the_budget_it_measured(tmp_path, capsys):
+    """`--budget auto` with the evaluation: the budget stage measures the method's learning curve on two folds
+    before the selection, the selection exports that budget (the law's prediction kept beside it), the
+    evaluation estimates that export and reuses the curve's trainings on all photos; without the evaluation
+    the law's budget is exported and no training is made for it."""
+    run, fast = tmp_path / "run", tmp_path / "fast"
+    assert main(_run(run, "--budget", "auto")) == 0
+    b = json.loads((run / "budget" / "budget.json").read_text())
+    sel = json.loads((run / "select" / "selection.json").read_text())
+    assert sel["budget"] == b["budget"] == len(_names(run)) and sel["budget_auto"]["source"] == "measured"
+    assert sel["budget_auto"]["predicted"] == b["predicted"]["budget"] and sel["budget_auto"]["measured"]["points"]
+    rep = _rep(run)
+    assert rep["estimate"]["budget"] == round(b["budget"] * rep["estimate"]["n_pool"] / 160)
+    assert f"{b['budget']} were exported" in rep["verdict"]["how_many"]
+    curve_units = json.loads((run / "budget" / "stage.json").read_text())["units"]
+    folds = json.loads((run / "evaluate" / "summary.json").read_text())["protocol"]["folds"]
+    shared = set(curve_units) & {u for f in folds for u in f["units"]}
+    assert shared == {"f00_all", "f07_all"}          # trained once, for the curve, and reused by the evaluation
+    assert main(_run(fast, "--budget", "auto", "--no-evaluate")) == 0
+    fsel = json.loads((fast / "select" / "selection.json").read_text())
+    assert not (fast / "budget").exists() and fsel["budget_auto"]["source"] == "law"
+    assert fsel["budget"] == fsel["budget_auto"]["predicted"] == b["predicted"]["budget"]
+    assert "An evaluated run measures it" in _rep(fast)["verdict"]["how_many"]

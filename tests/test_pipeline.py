@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.evaluate.units import summarize
 from curate.occupancy.stage import surface_band
 from curate.pipeline import RunConfig
 from curate.core.stage import config_dict, config_from_dict
@@ -21,7 +20,7 @@ from curate.core.stage import config_dict, config_from_dict
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
 FAST = ["--iters", "50", "--eval-size", "48", "--random-seeds", "2", "--workers", "1", "--res", "16",
-        "--budget", "12", "--triangulate", "off"]
+        "--budget", "12", "--triangulate", "off", "--folds", "2"]
 
 
 def _cmd(out: Path, *extra: str) -> list[str]:
@@ -46,16 +45,17 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
                             start_new_session=True)
     t0 = time.time()
     # wait until the selection's unit has finished and the next training has started
-    while not ((run / "evaluate" / "selection" / "stage.json").is_file() and (run / "evaluate" / "random_s0").is_dir()):
+    while not ((run / "evaluate" / "f00_selection" / "stage.json").is_file()
+               and (run / "evaluate" / "f00_random_s0").is_dir()):
         assert proc.poll() is None, proc.stdout.read().decode()
         assert time.time() - t0 < 600, "the run never reached the evaluation"
         time.sleep(0.2)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (run / "report.json").exists()
-    assert not (run / "evaluate" / "random_s0" / "stage.json").exists()
+    assert not (run / "evaluate" / "f00_random_s0" / "stage.json").exists()
     before = _mtimes(run)
-    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/selection/stage.json"} <= set(before)
+    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/f00_selection/stage.json"} <= set(before)
 
     res = subprocess.run(_cmd(run), env=_env(), capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -65,8 +65,8 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     for line in ("occupancy  skipped", "select     skipped"):
         assert line in res.stdout
     rep = json.loads((run / "report.json").read_text())
-    assert set(rep["methods"]) == {"selection", "random", "fvs", "all"}
-    assert len(rep["methods"]["random"]["runs"]) == 2
+    assert set(rep["methods"]) == {"selection", "random", "fvs", "stride", "all"}
+    assert rep["methods"]["random"]["units"] == 2 * 2          # two draws in each of the two folds
     n_hold = len(range(0, 160, 14))
     for m in rep["methods"].values():
         assert len(m["per_view"]) == n_hold
@@ -122,25 +122,38 @@ def test_surface_band():
     assert walls[0].all() and walls[:, -1].all() and not walls[1:-1, 1:-1, 1:-1].any()
 
 
-def _metrics(method, seed, psnrs):
+def _metrics(method, seed, psnrs, names):
     return {"method": method, "seed": seed, "n_train": 5, "psnr": float(np.mean(psnrs)), "ssim": 0.5,
-            "per_view": [{"name": f"v{i}", "psnr": p, "ssim": 0.5} for i, p in enumerate(psnrs)],
+            "per_view": [{"name": n, "psnr": p, "ssim": 0.5} for n, p in zip(names, psnrs)],
             "train_seconds": 1.0, "iters": 10}
 
 
-def test_summarize_random_over_seeds_paired_and_gap():
-    res = {"selection": _metrics("selection", None, [20, 22, 24]), "random_s0": _metrics("random", 0, [19, 20, 21]),
-           "random_s1": _metrics("random", 1, [17, 20, 23]), "fvs": _metrics("fvs", None, [20, 21, 22]),
-           "all": _metrics("all", None, [24, 25, 26])}
-    methods, paired, gap = summarize(res)
-    assert methods["random"]["psnr"] == pytest.approx(20.0)
-    assert methods["random"]["psnr_std"] == pytest.approx(0.0)
-    assert [v["psnr"] for v in methods["random"]["per_view"]] == [18, 20, 22]
-    assert paired["selection-random"]["mean"] == pytest.approx(2.0)
-    assert paired["selection-fvs"]["mean"] == pytest.approx(1.0)
+def test_summarize_pools_the_folds_averages_random_draws_per_view_and_closes_the_gap():
+    from curate.evaluate.folds import Fold, summarize
+    from curate.evaluate.units import Unit
+    folds, res = [], {}
+    for o, hold in ((0, [0, 2, 4]), (1, [1, 3, 5])):
+        names = [f"v{i}" for i in hold]
+        units = [Unit(f"f{o:02d}_{m}", m.split("_")[0], None, [9]) for m in
+                 ("selection", "random_s0", "random_s1", "fvs", "all")]
+        folds.append(Fold(o, hold, [6, 7, 8, 9], 1, "path", [9], units))
+        res.update({f"f{o:02d}_selection": _metrics("selection", None, [20, 22, 24], names),
+                    f"f{o:02d}_random_s0": _metrics("random", 0, [19, 20, 21], names),
+                    f"f{o:02d}_random_s1": _metrics("random", 1, [17, 20, 23], names),
+                    f"f{o:02d}_fvs": _metrics("fvs", None, [20, 21, 22 + o], names),
+                    f"f{o:02d}_all": _metrics("all", None, [24, 25, 26], names)})
+    methods, paired, gap = summarize(res, folds, 0.95, 0.3)
+    assert methods["random"]["psnr"] == pytest.approx(20.0) and methods["random"]["units"] == 4
+    assert [v["psnr"] for v in methods["random"]["per_view"]] == [18, 18, 20, 20, 22, 22]   # in camera order
+    assert [v["fold"] for v in methods["selection"]["per_view"]] == [0, 1, 0, 1, 0, 1]
+    assert paired["selection-random"]["mean"] == pytest.approx(2.0) and paired["selection-random"]["n_folds"] == 2
+    assert paired["selection-fvs"]["mean"] == pytest.approx(1.0 - 1 / 6) and paired["selection-fvs"]["n"] == 6
+    assert paired["selection-random"]["decision"] in ("ahead", "undecided")
+    assert "selection-stride" not in paired                     # no stride units: no comparison
     assert gap == pytest.approx((22 - 20) / (25 - 20))
-    res["all"] = _metrics("all", None, [19, 20, 21])  # no room above random: no gap figure
-    assert summarize(res)[2] is None
+    for o in (0, 1):
+        res[f"f{o:02d}_all"] = _metrics("all", None, [19, 20, 21], [f"v{i}" for i in folds[o].holdout])
+    assert summarize(res, folds, 0.95, 0.3)[2] is None          # no room above random: no gap figure
 
 
 @pytest.mark.slow

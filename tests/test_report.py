@@ -87,7 +87,7 @@ def test_report_with_evaluation(tmp_path):
     page = out.read_text()
     for v in ("25.12", "22.38 ± 0.62", "23.50", "26.75", "+2.75", "+1.12 .. +4.38", "+1.62", "63%", "2.1 min",
               "near-duplicate", "not an image &lt;txt&gt;", "img_03.jpg", "this method, 3 of 8", "all 8 photos",
-              "<b>ahead of</b> random subsets", "<b>level with</b> farthest-view sampling"):
+              "<b>ahead of</b> random subsets", "<b>not told apart from</b> farthest-view sampling"):
         assert v in page, v
     body = page[page.index("<body"):]
     # the first screen: the verdict, then the chosen photos, before any table

@@ -24,7 +24,8 @@ from curate.core import runfolder as rf
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-QUICK = ["--budget", "4", "--iters", "20", "--eval-size", "32", "--res", "8", "--random-seeds", "1", "--workers", "1"]
+QUICK = ["--budget", "4", "--iters", "20", "--eval-size", "32", "--res", "8", "--random-seeds", "1", "--workers", "1",
+         "--folds", "2"]
 
 
 def _env() -> dict:
@@ -536,7 +537,7 @@ def test_two_runs_on_one_out_the_second_is_refused(tmp_path):
     run = tmp_path / "run"
     base = [sys.executable, "-m", "curate", "run", str(photos / "images"), "--poses", str(photos / "transforms.json"),
             "--out", str(run), "--iters", "20", "--eval-size", "32", "--res", "8", "--random-seeds", "1",
-            "--workers", "1"]
+            "--workers", "1", "--folds", "2"]
     a = subprocess.Popen(base + ["--budget", "8"], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                          text=True, start_new_session=True)
     try:

@@ -442,6 +442,21 @@ class RunLock:
                 os.close(fd)
 
 
+def release_all() -> None:
+    """Release every run folder lock this process holds (the process is about to end without unwinding: a
+    signal during native work, :mod:`curate.core.signals`)."""
+    with _held_mutex:
+        for run_dir, rec in list(_held.items()):
+            del _held[run_dir]
+            try:
+                os.ftruncate(rec[0], 0)
+                if fcntl is not None:
+                    fcntl.flock(rec[0], fcntl.LOCK_UN)
+                os.close(rec[0])
+            except OSError:
+                pass
+
+
 @contextlib.contextmanager
 def claimed(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
             writes: Iterable[str] = (), must_exist: bool = False, command: str | None = None) -> Iterator[Path]:

@@ -24,10 +24,12 @@ from typing import Any, Iterable
 
 STAGE_FILE = "stage.json"
 
-STAGES = ("sfm", "occupancy", "select", "evaluate", "export", "report")
-"""The stages of ``curate run``, in order; each but ``report`` writes ``RUN/<stage>/``."""
+STAGES = ("sfm", "occupancy", "budget", "select", "evaluate", "export", "report")
+"""The stages of ``curate run``, in order; each but ``report`` writes ``RUN/<stage>/`` (``budget`` only with
+``--budget auto`` on an evaluated run)."""
 
-READS = {"occupancy": ("sfm",), "select": ("occupancy",), "evaluate": ("select",), "export": ("select",)}
+READS = {"occupancy": ("sfm",), "budget": ("occupancy",), "select": ("occupancy", "budget"), "evaluate": ("select",),
+         "export": ("select",)}
 """The stages each stage's result is computed from (its record's ``inputs``: their keys when it ran)."""
 
 

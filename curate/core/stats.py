@@ -62,3 +62,48 @@ def seeds_summary(per_seed_means) -> dict:
     v = np.asarray(per_seed_means, float)
     return {"mean": float(v.mean()) if v.size else float("nan"),
             "std": float(v.std(ddof=1)) if v.size > 1 else 0.0, "n_seeds": int(v.size)}
+
+
+def folds_paired(diffs, level: float = 0.95) -> dict:
+    """Per-view differences pooled over hold-out folds, with an interval that counts each fold as one draw.
+
+    ``diffs``: one array per fold ([n_f] differences, one per held-out view of that fold). The mean is over
+    every view (each counts once); its variance is the cluster-robust one, ``F / (F - 1) * sum_f (S_f - n_f
+    m)^2 / N^2`` with ``S_f`` a fold's sum, so that what a fold's views share (its trainings' own noise, its
+    random draw) widens the interval, with a t quantile on ``F - 1`` degrees of freedom. One fold: the per-view
+    t interval (:func:`mean_ci`), which cannot see that noise. Non-finite differences are dropped, empty folds
+    ignored. Returns {"mean", "lo", "hi", "n" (views), "n_folds", "dof", "level", "sd" (of the views)}.
+    """
+    folds = [np.asarray(d, float) for d in diffs]
+    folds = [d[np.isfinite(d)] for d in folds]
+    folds = [d for d in folds if d.size]
+    F = len(folds)
+    if F == 0:
+        return {"mean": float("nan"), "lo": float("nan"), "hi": float("nan"), "n": 0, "n_folds": 0, "dof": 0,
+                "level": level, "sd": float("nan")}
+    x = np.concatenate(folds)
+    sd = float(x.std(ddof=1)) if x.size > 1 else 0.0
+    if F == 1:
+        out = mean_ci(x, level)
+        return {**out, "n_folds": 1, "dof": max(x.size - 1, 0), "level": level, "sd": sd}
+    N, m = x.size, float(x.mean())
+    s = np.array([d.sum() - d.size * m for d in folds])                  # [F] each fold's deviation
+    se = math.sqrt(F / (F - 1) * float(np.sum(s * s))) / N
+    half = t_quantile(0.5 + level / 2, F - 1) * se
+    return {"mean": m, "lo": m - half, "hi": m + half, "n": int(N), "n_folds": F, "dof": F - 1, "level": level,
+            "sd": sd}
+
+
+def decision(p: dict | None, margin: float) -> str | None:
+    """What an interval ``p`` (``lo``, ``hi``) decides about a difference: 'ahead' (above 0), 'behind' (below
+    0), 'level' (inside ``[-margin, margin]``), 'undecided' (none of these); None without an interval."""
+    if not p or p.get("lo") is None or p.get("hi") is None:
+        return None
+    lo, hi = float(p["lo"]), float(p["hi"])
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return "undecided"
+    if lo > 0:
+        return "ahead"
+    if hi < 0:
+        return "behind"
+    return "level" if -margin <= lo and hi <= margin else "undecided"

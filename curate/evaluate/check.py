@@ -1,16 +1,14 @@
-"""The budget check: how many photos this capture needs, measured on the capture itself.
+"""The budget check's fit: how many photos this capture needs, from losses measured on the capture itself.
 
 ``--budget auto`` predicts a budget from the poses alone, with a law fitted on other captures
-(:mod:`curate.select.auto_budget`); a capture may need more (exposure changes, blur, texture, pose
-error: what the law never sees). With the evaluation on, the check trains the same field at two
-more budgets of the evaluation's split, half and twice the estimate's own, so that three measured
-points of the loss against all photos (``loss(k)``, dB, per held-out photo) sit beside the
-prediction. It fits the law's shape to them, ``loss = alpha * rho(k) ** p`` with ``p`` the law's
-and ``alpha`` this capture's (least squares in log, points losing at least :data:`MIN_LOSS`),
-and advises the fewest photos of the whole capture whose predicted loss is within the tolerance,
-on the whole capture's spacing curve. Its range: the same with ``alpha`` from each measured point
-alone (how far the points disagree with the law's shape). Validation on real captures: docs/evaluation.md,
-"How many photos".
+(:mod:`curate.select.auto_budget`); a capture may need more (exposure changes, blur, texture, pose error: what
+the law never sees). The budget stage (:mod:`curate.evaluate.budget`) measures the loss against all photos
+(``loss(k)``, dB, per held-out photo) at about half, once and twice the law's advice on two hold-out folds;
+:func:`fit_check` fits the law's shape to those points, ``loss = alpha * rho(k) ** p`` with ``p`` the law's
+and ``alpha`` this capture's (least squares in log, points losing at least :data:`MIN_LOSS`), and advises the
+fewest photos of the whole capture whose predicted loss is within the tolerance, on the whole capture's
+spacing curve. Its range: the same with ``alpha`` from each measured point alone (how far the points disagree
+with the law's shape). Validation on real captures: docs/evaluation.md, "How many photos".
 """
 
 from __future__ import annotations

@@ -1,25 +1,28 @@
-"""The evaluate stage: how good is the exported selection? -> ``RUN/evaluate``.
+"""The evaluate stage: how good is the exported selection, against its rivals? -> ``RUN/evaluate``.
 
-The exported selection is chosen from every registered photo (:mod:`curate.select.stage`), so no
-photo of it can be held out to test it. Its quality is estimated as cross-validation estimates a
-model trained on all the data: every ``holdout_every``-th registered photo is held out, the same
-method (same options) chooses the same fraction of the photos left, and the same field is trained
-on that choice, on ``random_seeds`` random subsets of its size, on farthest-view sampling (FVS) of
-its size and on all the photos left, each scored on the held-out photos
-(:mod:`curate.evaluate.units`). Each unit is a stage of its own (``RUN/evaluate/<unit>/stage.json``),
-so a killed evaluation resumes.
+The exported selection is chosen from every registered photo (:mod:`curate.select.stage`), so no photo of it
+can be held out to test it. Its quality is estimated as cross-validation estimates a model trained on all the
+data, over hold-out folds (:mod:`curate.evaluate.folds`): each fold holds out every ``holdout_every``-th
+registered photo from its own offset, the same method (same options) chooses the same share of the photos
+left, and the same field is trained on that choice, on random subsets of its size, on farthest-view sampling
+(FVS), on every n-th frame (photos in capture order) and on all the photos left, each scored on the fold's
+held-out photos. The differences are paired per held-out photo and pooled over the folds. Folds are added
+(:mod:`curate.evaluate.schedule`) until every rival is decided (ahead, behind, or level within
+``margin_db``), every photo has been held out once, or ``minutes`` are spent; ``--folds N`` trains exactly N.
+Each training is a stage of its own (``RUN/evaluate/<unit>/stage.json``), so a killed evaluation resumes, and
+a later one with more time reuses them.
 
-``RUN/evaluate/summary.json``: ``key`` (of this evaluation: settings and units), ``inputs``
-({"select": the key of the selection it estimates}: a later selection makes it out of date,
+``RUN/evaluate/summary.json`` (then ``stage.json``, last): ``key`` (the evaluation's options and the
+selection it estimates), ``inputs`` ({"select": its key}: a later selection makes it out of date,
 :func:`curate.core.stage.stale_stages`), ``methods``, ``paired``, ``gap_closed``
-(:func:`curate.evaluate.units.summarize`) and ``protocol`` (:func:`plan`: the split, the budgets,
-the estimate's own subset and how many of its photos the exported selection shares).
+(:func:`curate.evaluate.folds.summarize`) and ``protocol`` (:func:`protocol`). How many photos ``--budget auto``
+exports is measured before the selection, by :mod:`curate.evaluate.budget`.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,147 +31,100 @@ from curate.core.stage import StageResult
 if TYPE_CHECKING:
     from curate.config import RunConfig
 
-
-def eval_budget(n_exported: int, n_all: int, n_pool: int) -> int:
-    """The estimate's budget: the exported fraction ``n_exported / n_all`` of the ``n_pool`` photos
-    left after the hold-out, rounded, at least 2 and fewer than ``n_pool``."""
-    k = int(round(n_exported * n_pool / max(n_all, 1)))
-    return int(min(max(k, 2), max(n_pool - 1, 2)))
+STOPPED = {"decided": "every rival decided", "every photo": "every photo held out once",
+           "folds asked": "the folds asked for done", "time": "the time given was spent"}
+"""Why the evaluation stopped adding folds (``protocol.stopped``), in words."""
 
 
-@dataclass
-class Plan:
-    """What the evaluation trains: its units, their stage keys and the protocol record."""
-
-    units: list
-    """[curate.evaluate.units.Unit]: selection, random_s<k>, fvs, all."""
-    keys: dict
-    """{unit key: stage key}."""
-    protocol: dict
-    """``holdout_every``, ``holdout`` and ``pool`` (camera indices), ``n_registered``, ``budget`` (the
-    estimate's), ``exported_budget``, ``method`` (what the estimate's selection ran), ``chosen`` (its
-    camera indices), ``shared_with_export`` (how many of them the exported selection has too)."""
-    key: str
-    """The evaluation's key: its settings and every unit's key."""
+def eval_key(cfg: "RunConfig", run_dir: Path) -> str:
+    """The evaluation's key: its options (not the workers) and the selection it estimates."""
+    from curate.core.stage import current_key, stage_key
+    parts = {"evaluate": replace(cfg.evaluate, workers=0), "select": cfg.select}
+    return stage_key(parts, [current_key(run_dir, "select") or "", current_key(run_dir, "sfm") or ""])
 
 
-def plan(cfg: "RunConfig", run_dir: Path) -> Plan:
-    """The evaluation of the run's exported selection (see the module docstring)."""
+def unit_key(cfg: "RunConfig", sfm_key: str, unit, fold) -> str:
+    """A training's stage key: the training settings, its subset and its fold's held-out photos."""
     from curate.core.stage import stage_key
-    from curate.core.stats import holdout_split
-    from curate.evaluate.units import Unit
-    from curate.occupancy.stage import key_of, load_node_grid
-    from curate.select.baselines import farthest_view, random_subset
-    from curate.select.select import select
-    from curate.select.stage import read_selection
-    from curate.sfm.io import load_sfm
+    return stage_key({"train": cfg.evaluate.training(), "subset": unit.subset, "holdout": fold.holdout}, [sfm_key])
+
+
+def protocol(cfg: "RunConfig", folds: list, exported: list[int], n_registered: int, planned: int, looks: list[int],
+             level: float, stopped: str, seconds: float) -> dict:
+    """``summary.json``'s ``protocol``: the folds (each :meth:`curate.evaluate.folds.Fold.record`), how many were
+    planned, when they were looked at and at which level, why it stopped; and, for a reader of one figure, the
+    first fold's ``budget``, ``method`` and ``shared_with_export``, ``n_pool`` and the held-out photos of all."""
     ev = cfg.evaluate
-    exported = read_selection(run_dir)
-    cams = load_sfm(run_dir).cameras
-    n_all = len(cams)
-    pool, hold = (v.tolist() for v in holdout_split(n_all, ev.holdout_every))
-    if not hold:
-        raise ValueError(f"no photo to hold out from {n_all} registered photos: register more photos, or lower "
-                         "--holdout-every (at least 2)")
-    if len(pool) < 3:
-        raise ValueError(f"only {len(pool)} registered photos left after holding out every {ev.holdout_every}th: "
-                         "too few to evaluate (use --no-evaluate)")
-    k = eval_budget(len(exported["chosen"]), n_all, len(pool))
-    grid = load_node_grid(run_dir)
-    sel = select(cams[pool], grid, k, cfg.select)
-    chosen = [pool[i] for i in sel.chosen]
-    units = []
-    for m in ev.methods:
-        if m == "selection":
-            units.append(Unit("selection", "selection", None, chosen))  # whatever its method
-        elif m == "random":
-            units += [Unit(f"random_s{s}", "random", s, [pool[i] for i in random_subset(len(pool), k, s)])
-                      for s in range(ev.random_seeds)]
-        elif m == "fvs":
-            units.append(Unit("fvs", "fvs", None, [pool[i] for i in farthest_view(cams[pool], k)]))
-        elif m == "all":
-            units.append(Unit("all", "all", None, list(pool)))
-        else:
-            raise ValueError(f"unknown evaluation method {m!r}")
-    check = []
-    if exported.get("budget_auto") and cfg.budget_check and "all" in ev.methods:
-        from curate.evaluate.check import check_budgets
-        for b in check_budgets(k, len(pool)):   # the same method at other budgets: the loss curve here
-            units.append(Unit(f"check_b{b}", "check", None, [pool[i] for i in select(cams[pool], grid, b,
-                                                                                     cfg.select).chosen]))
-            check.append(b)
-    # a unit's key: the training settings, its subset and the held-out views
-    train = replace(ev, workers=0, methods=(), random_seeds=0)
-    sfm_key = key_of(run_dir / "sfm")
-    keys = {u.key: stage_key({"train": train, "subset": u.subset, "holdout": hold}, [sfm_key]) for u in units}
-    protocol = {"holdout_every": ev.holdout_every, "holdout": hold, "pool": pool, "n_registered": n_all,
-                "budget": k, "exported_budget": len(exported["chosen"]), "method": sel.method, "chosen": chosen,
-                "shared_with_export": len(set(chosen) & set(exported["chosen"])), "check_budgets": check}
-    return Plan(units, keys, protocol, stage_key({"units": keys, "protocol": protocol}))
-
-
-def budget_check(cfg: "RunConfig", run_dir: Path, cams, protocol: dict, res: dict):
-    """The measured check (:mod:`curate.evaluate.check`) from the trained units ``res``: the loss of the
-    estimate's selection and of the check's budgets against all photos, on the split's held-out photos."""
-    from curate.core.stats import paired_difference
-    from curate.evaluate.check import fit_check
-    from curate.occupancy.stage import load_node_grid
-    from curate.select.auto_budget import LOSS_MODEL, pool_views
-    from curate.select.spacing import spacing_curve
-    from curate.select.stage import read_selection
-    from curate.select.visibility import build_pair_index
-    nodes = load_node_grid(run_dir).nodes()
-    bins = cfg.select.energy.bins
-
-    def curve(c):
-        return spacing_curve(*pool_views(c, nodes, build_pair_index(c, nodes, bins)))[1]
-    pool = protocol["pool"]
-    rho_pool, rho_full = curve(cams[pool]), curve(cams)
-    all_pv = [v["psnr"] for v in res["all"]["per_view"]]
-    points = []
-    for key, r in res.items():
-        if r["method"] in ("check", "selection"):
-            d = paired_difference(all_pv, [v["psnr"] for v in r["per_view"]])
-            points.append({"k": r["n_train"], "rho": float(rho_pool[r["n_train"] - 1]), "loss": d["mean"],
-                           "lo": d["lo"], "hi": d["hi"]})
-    auto = read_selection(run_dir)["budget_auto"]
-    return fit_check(sorted(points, key=lambda x: x["k"]), LOSS_MODEL[auto["kind"]][1], rho_full,
-                     auto["tolerance_db"], len(cams) / len(pool))
+    f0 = folds[0]
+    return {"holdout_every": ev.holdout_every, "n_registered": n_registered, "exported_budget": len(exported),
+            "folds": [f.record(exported) for f in folds], "n_folds": len(folds), "planned_folds": planned,
+            "looks": looks, "level": level, "margin_db": ev.margin_db, "minutes": ev.minutes, "stopped": stopped,
+            "seconds": round(seconds, 1), "budget": f0.budget, "method": f0.method, "n_pool": len(f0.pool),
+            "shared_with_export": f0.record(exported)["shared_with_export"],
+            "holdout": sorted(c for f in folds for c in f.holdout)}
 
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
-    """Train every unit of :func:`plan` (finished units are skipped) -> ``RUN/evaluate``.
+    """Train the folds' units until decided (finished units are reused) -> ``RUN/evaluate``.
 
     ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
-    from curate.core.stage import current_key, inputs_of, is_fresh, write_json_atomic
-    from curate.evaluate.units import clear_evaluation, eval_cameras, run_units, summarize
+    from curate.core.stage import current_key, inputs_of, write_json_atomic
+    from curate.evaluate.folds import (ALL_FOLDS, decided, fold_order, in_capture_order, look_level, looks, plan_fold,
+                                       planned_folds, summarize)
+    from curate.evaluate.schedule import run_folds
+    from curate.evaluate.units import clear_evaluation, eval_cameras
     from curate.field.train import default_box
+    from curate.occupancy.stage import load_node_grid
+    from curate.select.stage import read_selection
     from curate.sfm.io import image_paths, load_sfm
 
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "evaluate"
-    p = plan(cfg, run_dir)
+    ev = cfg.evaluate
+    key = eval_key(cfg, run_dir)
     if force:
         clear_evaluation(run_dir)  # only what curate wrote there (curate.core.runfolder)
-    fresh = current_key(run_dir, "evaluate") == p.key and all(is_fresh(d / u.key, p.keys[u.key]) for u in p.units)
+    elif current_key(run_dir, "evaluate") == key:
+        return StageResult("evaluate", d, False, time.perf_counter() - t0)
+    sel = read_selection(run_dir)
+    exported = [int(c) for c in sel["chosen"]]
     sfm = load_sfm(run_dir)
-    paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
-    cams = eval_cameras(sfm.cameras, cfg.evaluate.max_side)
-    hold = p.protocol["holdout"]
-    res = run_units(run_dir, p.units, p.keys, cfg.evaluate, cams, paths, hold, default_box(sfm.cameras),
-                    executor=executor)
-    methods, paired, gap = summarize({k: v for k, v in res.items() if v["method"] != "check"})
-    summary = {"key": p.key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
-               "gap_closed": gap, "protocol": p.protocol}
-    if p.protocol["check_budgets"] and "all" in res and "selection" in res:
-        summary["budget_check"] = budget_check(cfg, run_dir, sfm.cameras, p.protocol, res).to_dict()
+    cams = sfm.cameras
+    n = len(cams)
+    grid = load_node_grid(run_dir)
+    ordered = "stride" in ev.methods and in_capture_order(cams, grid.nodes())
+    order = fold_order(ev.holdout_every)[:planned_folds(ev, n)]
+    if not order:
+        raise ValueError(f"no photo to hold out from {n} registered photos: register more photos")
+    adaptive = ev.folds == 0
+    look_at, level = looks(len(order), adaptive), look_level(adaptive)
+    sfm_key = current_key(run_dir, "sfm") or ""
+
+    def make_fold(offset: int):
+        return plan_fold(ev, cfg.select, cams, grid, len(exported), offset, ordered,
+                         with_all=order.index(offset) < ALL_FOLDS)
+
+    def stop_at(folds, res) -> bool:
+        return decided(summarize(res, folds, level, ev.margin_db)[1])
+
+    def keyed(u, f):
+        return unit_key(cfg, sfm_key, u, f)
+    paths = image_paths(run_dir, list(cams.names), sfm.records)
+    folds, res, stopped = run_folds(run_dir, ev, make_fold, order, look_at, stop_at, eval_cameras(cams, ev.max_side),
+                                    paths, default_box(cams), keyed, adaptive, executor=executor)
+    if stopped == "all folds":
+        stopped = "every photo" if len(order) == min(ev.holdout_every, n) else "folds asked"
+    methods, paired, gap = summarize(res, folds, level, ev.margin_db)
+    seconds = time.perf_counter() - t0
+    summary = {"key": key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
+               "gap_closed": gap,
+               "protocol": protocol(cfg, folds, exported, n, len(order), look_at, level, stopped, seconds)}
     write_json_atomic(d / "summary.json", summary)
-    pr = p.protocol
-    order = ("selection", "random", "fvs", "all")      # as the report lists them
-    txt = ", ".join(f"{m} {methods[m]['psnr']:.2f}" for m in sorted(methods, key=lambda m: (
-        order.index(m) if m in order else len(order), m)))
-    return StageResult("evaluate", d, not fresh, time.perf_counter() - t0,
-                       f"estimate: {pr['method']} chose {pr['budget']} of {len(pr['pool'])} with {len(hold)} held out; "
+    txt = ", ".join(f"{m} {v['psnr']:.2f}" for m, v in methods.items())
+    views = sum(len(f.holdout) for f in folds)
+    return StageResult("evaluate", d, True, seconds,
+                       f"{len(folds)} of {len(order)} folds ({views} held-out photos; {STOPPED[stopped]}); "
                        f"held-out PSNR {txt}")
+

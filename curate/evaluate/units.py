@@ -1,11 +1,8 @@
-"""Evaluation stage: train the same radiance field on each subset and score the held-out views.
+"""The evaluation's trainings: the same radiance field trained on each subset, scored on held-out views.
 
-The protocol (the paper's real-scene test): every ``holdout_every``-th registered image
-is held out; each *unit* trains the same field (same :class:`curate.field.model.FieldConfig`,
-same iterations, same scene box, same training seed) on one subset of the pool and
-renders the held-out views. Units: ``energy`` (the selection), ``random_s<k>`` (random
-subsets of the same size, one per seed), ``fvs`` (farthest-view sampling), ``all`` (the
-whole pool: the ceiling).
+Each *unit* trains the same field (same :class:`curate.field.config.FieldConfig`, same iterations, same
+scene box, same training seed) on one subset of the registered photos and renders the held-out views of its
+fold (:mod:`curate.evaluate.folds` says which units a fold has; :mod:`curate.evaluate.schedule` runs them).
 
 Training length is a number of iterations, not seconds, so results do not depend on
 how loaded the machine is (``EvalConfig.time_budget_s`` adds an optional cap).
@@ -30,7 +27,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -38,46 +35,9 @@ import numpy as np
 
 from curate.core.cameras import Cameras
 from curate.core.executors import available_memory, cpu_count
-from curate.field.model import FieldConfig
+from curate.evaluate.config import EvalConfig  # noqa: F401  (re-exported: research imports it from here)
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class EvalConfig:
-    """How subsets are compared."""
-
-    holdout_every: int = 14
-    """Every n-th registered image (0, n, 2n, ... in name order) is a held-out test view."""
-    max_side: int = 240
-    """Training and test images are resized so that their longer side is at most this (pixels)."""
-    iters: int = 800
-    """Training iterations per subset (the same for every subset); ~3 minutes of one CPU core."""
-    time_budget_s: float | None = None
-    """Optional cap on each training's seconds (None: iterations only, independent of machine load)."""
-    random_seeds: int = 3
-    """Random subsets of the selection's size, one per seed 0..n-1."""
-    train_seed: int = 0
-    """Seed of every field training (weights, ray batches)."""
-    methods: tuple[str, ...] = ("selection", "random", "fvs", "all")
-    """Which subsets to train: the selection (whatever its method), 'random', 'fvs', 'all'."""
-    workers: int = 0
-    """Trainings in parallel (0: one per CPU core, capped by memory; 1 on CUDA)."""
-    field: FieldConfig = field(default_factory=FieldConfig)
-    """The radiance field and its training settings."""
-
-    def __post_init__(self) -> None:
-        checks = (("--holdout-every", self.holdout_every, 2), ("--iters", self.iters, 1),
-                  ("--eval-size", self.max_side, 16), ("--random-seeds", self.random_seeds, 0),
-                  ("--workers", self.workers, 0))
-        for flag, v, lo in checks:
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-                raise ValueError(f"{flag} must be an integer >= {lo}, got {v!r}")
-        if self.time_budget_s is not None and not (np.isfinite(self.time_budget_s) and self.time_budget_s > 0):
-            raise ValueError(f"time_budget_s must be > 0 or None, got {self.time_budget_s}")
-        unknown = set(self.methods) - {"selection", "random", "fvs", "all"}
-        if unknown:
-            raise ValueError(f"unknown evaluation methods {sorted(unknown)}")
 
 
 @dataclass
@@ -85,11 +45,16 @@ class Unit:
     """One training: a subset of the registered cameras, scored on the held-out ones."""
 
     key: str
-    """Folder name under RUN/evaluate ('selection', 'random_s0', 'fvs', 'all')."""
+    """Its folder under RUN/evaluate: ``f<offset>_<method>`` for a fold's units (``f03_selection``,
+    ``f03_random_s0``; :mod:`curate.evaluate.folds`), any name for research's."""
     method: str
+    """'selection', 'random', 'fvs', 'stride', 'all' or 'check' (the budget check's other budgets)."""
     seed: int | None
+    """The random draw's seed (random subsets only)."""
     subset: list[int]
     """Indices into the registered cameras."""
+    fold: int = 0
+    """The hold-out fold's offset."""
 
 
 def eval_cameras(cams: Cameras, max_side: int) -> Cameras:
@@ -151,7 +116,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
                 write_text_atomic(d / PROGRESS_FILE, str(it))
         fld, st = train_field(cfg.field, cams[sub], [paths[i] for i in sub], d, time_budget_s=cfg.time_budget_s,
                               iters=cfg.iters, seed=cfg.train_seed, box=box, callback=report)
-        (d / PROGRESS_FILE).unlink(missing_ok=True)
+        write_text_atomic(d / PROGRESS_FILE, str(cfg.iters))   # trained: the bar stays full while it renders
     check_holder(run_dir, lock_token)  # after the long training: do not render into a folder taken since
     per = []
     test = cams[list(holdout)]
@@ -166,11 +131,17 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
          "per_view": per, "train_seconds": round(st.train_seconds, 2), "iters": st.iters}
     check_holder(run_dir, lock_token)  # a worker whose run lost the folder writes nothing
     write_json_atomic(d / "metrics.json", m)
+    (d / PROGRESS_FILE).unlink(missing_ok=True)
     finish_stage(d, key, cfg, t0, outputs={"metrics": "metrics.json", "renders": "renders/"}, seed=cfg.train_seed,
                  method=unit.method, psnr=m["psnr"])
     log.info("evaluate %s: %d images, PSNR %.2f, SSIM %.3f (%.0fs)", unit.key, len(sub), m["psnr"], m["ssim"],
              time.perf_counter() - t0)
     return m
+
+
+def read_metrics(unit_dir: Path) -> dict:
+    """A finished unit's ``metrics.json``."""
+    return json.loads((Path(unit_dir) / "metrics.json").read_text())
 
 
 PROGRESS_FILE = ".progress"
@@ -191,6 +162,18 @@ def _unit_progress(ev_dir: Path, units: list, iters: int, done: set) -> int:
         except (OSError, ValueError):
             pass
     return n
+
+
+def worker_start(parent_pid: int) -> None:
+    """A training worker's start: it dies with the process that started it
+    (:func:`curate.core.runfolder.die_with_parent`), and its progress bars take a thread lock instead of
+    tqdm's default multiprocessing one, so that a worker killed by Ctrl-C or SIGTERM leaves no semaphore
+    behind (the "leaked semaphore" warning at exit)."""
+    import threading
+    from curate.core.runfolder import die_with_parent
+    from tqdm import tqdm
+    die_with_parent(parent_pid)
+    tqdm.set_lock(threading.RLock())
 
 
 def _unit_entry(args: tuple) -> dict:
@@ -329,48 +312,6 @@ def clear_evaluation(run_dir: str | Path) -> None:
     (:class:`curate.core.runfolder.RunFolderError`)."""
     from curate.core.runfolder import clear_tree
     clear_tree(Path(run_dir) / "evaluate", own=EVAL_OWN)
-
-
-def summarize(results: dict[str, dict]) -> tuple[dict, dict, float | None]:
-    """(methods, paired, gap_closed) for report.json from the units' metrics.
-
-    ``methods[m]``: ``psnr``, ``ssim``, ``per_view`` (random: means over seeds, plus
-    ``psnr_std``/``ssim_std`` over the seeds' means and ``runs`` per seed). ``paired``:
-    per-view differences energy - random (random averaged over seeds per view) and
-    energy - fvs with 95% confidence intervals. ``gap_closed``: (energy - random) /
-    (all - random), None when not defined.
-    """
-    from curate.core.stats import paired_difference, seeds_summary
-    methods: dict[str, dict] = {}
-    rand = {k: v for k, v in results.items() if v["method"] == "random"}
-    for k, v in results.items():
-        if v["method"] != "random":
-            methods[v["method"]] = {**_brief(v), "key": k}
-    if rand:
-        runs = {str(v["seed"]): {**_brief(v), "key": k} for k, v in rand.items()}
-        ps, ss = seeds_summary([v["psnr"] for v in rand.values()]), seeds_summary([v["ssim"] for v in rand.values()])
-        names = [r["name"] for r in next(iter(rand.values()))["per_view"]]
-        pv = [{"name": n, "psnr": float(np.mean([v["per_view"][i]["psnr"] for v in rand.values()])),
-               "ssim": float(np.mean([v["per_view"][i]["ssim"] for v in rand.values()]))} for i, n in enumerate(names)]
-        methods["random"] = {"psnr": ps["mean"], "psnr_std": ps["std"], "ssim": ss["mean"], "ssim_std": ss["std"],
-                             "seeds": [int(s) for s in runs], "runs": runs, "per_view": pv,
-                             "n_train": next(iter(rand.values()))["n_train"]}
-    paired = {}
-    if "selection" in methods:
-        e = [r["psnr"] for r in methods["selection"]["per_view"]]
-        for other in ("random", "fvs"):
-            if other in methods:
-                paired[f"selection-{other}"] = paired_difference(e, [r["psnr"] for r in methods[other]["per_view"]])
-    gap = None
-    if all(m in methods for m in ("selection", "random", "all")):
-        room = methods["all"]["psnr"] - methods["random"]["psnr"]
-        if room > 1e-6:
-            gap = (methods["selection"]["psnr"] - methods["random"]["psnr"]) / room
-    return methods, paired, gap
-
-
-def _brief(v: dict) -> dict:
-    return {k: v[k] for k in ("psnr", "ssim", "per_view", "n_train", "train_seconds", "iters", "seed") if k in v}
 
 
 LEGACY_KEYS = {"energy": "selection", "energy-random": "selection-random", "energy-fvs": "selection-fvs",

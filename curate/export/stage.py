@@ -19,14 +19,16 @@ EXPORTED = {"link": "linked", "copy": "copied"}
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
-    from curate.core.stage import begin_stage, finish_stage, read_stage, stage_key
-    from curate.export.subset import export_subset
+    from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, stage_key
+    from curate.export.subset import check_unchanged, export_subset
     from curate.occupancy.stage import key_of
     from curate.select.stage import read_selection
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "export"
     key = stage_key({"mode": cfg.export_mode}, [key_of(run_dir / "select")])
+    if force or not is_fresh(d, key):
+        check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
     if begin_stage(d, key, force):  # unchanged: its warning still holds
         return StageResult("export", d, False, time.perf_counter() - t0,
                            warning=(read_stage(d) or {}).get("export_warning"))

@@ -91,9 +91,58 @@ _WRITES = ("images", "sparse", "transforms.json", "images.txt", "export.json")
 _MODEL_FILES = tuple(f"{n}.{e}" for n in ("cameras", "images", "points3D", "rigs", "frames") for e in ("bin", "txt"))
 
 
+def _sha256(p: Path) -> str:
+    import hashlib
+    h = hashlib.sha256()
+    with open(p, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_unchanged(out: str | Path) -> None:
+    """``ValueError`` naming the first file of the export in ``out`` that was changed since curate wrote it
+    (:func:`_changed`): clearing the export would delete a user's edit. Nothing without a readable
+    ``export.json`` (:func:`_clear` refuses such a folder on its own)."""
+    out = Path(out)
+    try:
+        changed = _changed(out, json.loads((out / "export.json").read_text()))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return
+    if changed:
+        raise ValueError(_changed_said(changed, out))
+
+
+def _changed_said(path: str, out: Path) -> str:
+    return (f"{path} was changed since curate exported it: curate does not remove it; move it out of {out} (or "
+            "keep the export as it is), then run again")
+
+
+def _changed(out: Path, prev: dict) -> str | None:
+    """The first file an earlier export wrote (per its ``export.json`` ``prev``) that is no longer what it wrote:
+    an image that is not the link to its original any more, nor a copy equal to it (an image editor's save
+    replaces a link by a file), or a file whose checksum changed (``files``, recorded since curate 0.3)."""
+    import filecmp
+    for it in prev.get("images", []):
+        p = out / "images" / it["name"]
+        if p.is_symlink():
+            if os.readlink(p) != it["original"]:
+                return str(p)
+        elif p.is_file():
+            orig = Path(it["original"])
+            if not (orig.is_file() and filecmp.cmp(p, orig, shallow=False)):
+                return str(p)
+    for rel, digest in (prev.get("files") or {}).items():
+        p = out / rel
+        if p.is_file() and not p.is_symlink() and _sha256(p) != digest:
+            return str(p)
+    return None
+
+
 def _clear(out: Path) -> None:
     """Remove what an earlier export wrote, as its ``export.json`` lists it (links are removed,
-    never their targets); never anything else.
+    never their targets); never anything else, and nothing at all when one of those files was changed since
+    (``ValueError`` naming it: a user's edit is theirs).
 
     Without an ``export.json`` (no earlier export) a folder already holding one of the names an
     export writes (``images``, ``sparse``, ``transforms.json``, ``images.txt``) is refused
@@ -111,8 +160,11 @@ def _clear(out: Path) -> None:
     try:
         prev = json.loads(man.read_text())
         names = [it["name"] for it in prev.get("images", [])]
+        changed = _changed(out, prev)
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         raise ValueError(f"{man}: not an export record of curate; choose an empty folder") from None
+    if changed:   # a user's edit is theirs: nothing is removed
+        raise ValueError(_changed_said(changed, out))
     for n in names:
         p = out / "images" / n
         if p.is_symlink() or p.is_file():
@@ -202,9 +254,12 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     from curate.core.transforms_json import write_transforms
     write_transforms(out / "transforms.json", sub, [f"images/{n}" for n in names])
     (out / "images.txt").write_text("".join(r + "\n" for r in rels))
+    files = ["transforms.json", "images.txt"] + sorted(f"sparse/0/{p.name}" for p in (out / "sparse" / "0").iterdir()
+                                                       if p.is_file())
     manifest = {"config": asdict(cfg), "run_dir": str(run_dir), "n_images": len(chosen), "model": model,
                 "images": [{"camera": c, "name": n, "original": o, "rel": r}
-                           for c, n, o, r in zip(chosen, names, originals, rels)]}
+                           for c, n, o, r in zip(chosen, names, originals, rels)],
+                "files": {f: _sha256(out / f) for f in files}}
     (out / "export.json").write_text(json.dumps(manifest, indent=1))
     logger.info("export: %d images (%s), %d sparse points -> %s", len(chosen), cfg.mode, model["n_points3D"], out)
     return out

@@ -151,10 +151,21 @@ class RefineConfig:
     """When a radiance field refines the occupancy: 'auto' (only for the paper's energy, when the
     sparse points are too few to give the scene's surface, e.g. poses without points) or 'always'
     (the paper's refinement on every run: one more training)."""
+    iters: int = 800
+    """Training iterations of the refining field.
+
+    Its own, not the evaluation's: the evaluation's field is chosen for decisions per CPU-minute
+    (docs/evaluation.md), this one for the scene's surface."""
+    max_side: int = 240
+    """Longer side, in pixels, of the images the refining field trains on."""
 
     def __post_init__(self) -> None:
         if self.field not in REFINE_FIELD:
             raise ValueError(f"refine field must be one of {REFINE_FIELD}, got {self.field!r}")
+        for name, lo in (("iters", 1), ("max_side", 16)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+                raise ValueError(f"refine {name} must be an integer >= {lo}, got {v!r}")
 
 
 REFINE_FIELD = ("auto", "always")

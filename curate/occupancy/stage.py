@@ -70,10 +70,11 @@ def check_budget_fits(text: str, n_budget: int, n_pool: int, what: str = "regist
 
 
 def train_settings(cfg: "RunConfig") -> dict:
-    """The field's training settings (part of the stage key)."""
+    """The refining field's training settings (part of the stage key): its own iterations and image size
+    (:class:`curate.occupancy.masks.RefineConfig`), the evaluation's field and training seed."""
     ev = cfg.evaluate
-    return {"field": ev.field, "iters": ev.iters, "time_budget_s": ev.time_budget_s, "max_side": ev.max_side,
-            "train_seed": ev.train_seed}
+    return {"field": ev.field, "iters": cfg.refine.iters, "time_budget_s": ev.time_budget_s,
+            "max_side": cfg.refine.max_side, "train_seed": ev.train_seed}
 
 
 def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
@@ -129,9 +130,9 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence
         log.info("occupancy: training a field (%s)", why)
         paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
         on = list(range(len(sfm.cameras))) if train_on is None else [int(i) for i in train_on]
-        cams = eval_cameras(sfm.cameras, ev.max_side)
+        cams = eval_cameras(sfm.cameras, cfg.refine.max_side)
         fld, st = train_field(ev.field, cams[on], [paths[i] for i in on], d, time_budget_s=ev.time_budget_s,
-                              iters=ev.iters, seed=ev.train_seed, box=box, progress_desc="occupancy (field)")
+                              iters=cfg.refine.iters, seed=ev.train_seed, box=box, progress_desc="occupancy (field)")
         write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds,
                                              "stop_reason": st.stop_reason, "n_train": len(on)})
     else:

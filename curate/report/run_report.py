@@ -36,7 +36,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["write_html", "floorplan", "top_down_axes"]
 
-METHOD_ORDER = ("selection", "random", "fvs", "all")
+METHOD_ORDER = ("selection", "random", "fvs", "stride", "all")
 N_RENDER_VIEWS = 6
 THUMB_SIDE = 160
 
@@ -180,7 +180,7 @@ def _verdict(run: _Run) -> str:
     if v.get("coverage"):
         lines.append(f"<p>{esc(v['coverage'])}</p>")
     q = v.get("quality", "")
-    for words in ("ahead of", "behind", "level with"):   # the words that matter, in bold
+    for words in ("ahead of", "behind", "level with", "not told apart from"):   # the words that matter, in bold
         q = q.replace(words, f"\x00{words}\x01")
     q = esc(q).replace("\x00", "<b>").replace("\x01", "</b>")
     lines.append(f"<p>{q}</p>")
@@ -253,6 +253,8 @@ def _unit_label(run: _Run, k: str) -> str:
         return f"random subsets of {n}" if n else "random subsets"
     if k == "fvs":
         return f"farthest-view sampling, {n}" if n else "farthest-view sampling (FVS)"
+    if k == "stride":
+        return f"every n-th frame, {n}" if n else "every n-th frame"
     if k == "all":
         return f"all {m} photos" if m else "all photos"
     return k
@@ -271,15 +273,23 @@ def _method_table(run: _Run) -> str:
         cls = ' class="hl"' if k == "selection" else ""
         rows.append(f'<tr{cls}><td class="l">{esc(_unit_label(run, k))}</td><td>{psnr}</td><td>{ssim}</td>'
                     f'<td>{esc(v.get("n_train", "—"))}</td></tr>')
+    est = run.rep.get("estimate") or {}
     nseeds = len((m.get("random") or {}).get("seeds") or [])
+    draws = (m.get("random") or {}).get("units") or nseeds
     out = ['<table><tr><th class="l">trained on</th><th>PSNR (dB)</th><th>SSIM</th><th>photos</th></tr>'
            + "".join(rows) + "</table>",
            '<p class="small">PSNR: how close the trained model\'s render is to the real held-out photo, in dB (higher '
            'is better; 1 dB is a visible difference). SSIM: structural similarity, 0 to 1 (higher is better).'
-           + (f" Random: mean ± spread over {nseeds} draws." if nseeds else "") + "</p>"]
+           + (f" Random: mean ± spread over {draws} draws." if draws else "")
+           + (f" Each figure is the mean over the {est['n_holdout']} photos held out by {est['n_folds']} folds"
+              + (f"; all photos were trained on in the first folds only, and scored on their "
+                 f"{m['all']['n_views']} held-out photos (the gap closed compares the three on those)"
+                 if (m.get("all") or {}).get("n_views", est["n_holdout"]) < est["n_holdout"] else "") + "."
+              if est.get("n_folds") else "") + "</p>"]
     if run.paired:
         pr = []
-        names = {"selection-random": "this method − random", "selection-fvs": "this method − FVS"}
+        names = {"selection-random": "this method − random", "selection-fvs": "this method − FVS",
+                 "selection-stride": "this method − every n-th frame"}
         from curate.report.verdict import compare
         for k, p in run.paired.items():
             pr.append(f'<tr><td class="l">{esc(names.get(k, k))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
@@ -287,6 +297,13 @@ def _method_table(run: _Run) -> str:
                       f'<td class="l">{esc(compare(p) or "—")}</td><td>{esc(p.get("n", "—"))}</td></tr>')
         out.append('<table><tr><th class="l">difference, per held-out photo</th><th>mean (dB)</th>'
                    '<th>95% interval</th><th class="l">in words</th><th>photos</th></tr>' + "".join(pr) + "</table>")
+        if est.get("n_folds"):
+            margin = est.get("margin_db") or 0.3
+            out.append(f'<p class="small">Ahead or behind: the interval excludes 0. Level with: it lies within '
+                       f'±{margin:g} dB. Not told apart: neither; more folds would narrow it. The interval counts '
+                       "each fold as one draw (its trainings share their noise), and is widened so that stopping at "
+                       f"the first decided look keeps the verdict's error at 5% (each look at "
+                       f"{100 * (est.get('level') or 0.95):.1f}%).</p>")
     gap = run.rep.get("gap_closed")
     if gap is not None:
         out.append(f"<p>Gap closed: <b>{100 * float(gap):.0f}%</b> of the way from random subsets to all photos "
@@ -302,7 +319,7 @@ def _bars(run: _Run) -> str:
     keys = [k for k in METHOD_ORDER if k in m and m[k].get("psnr") is not None]
     if not keys:
         return ""
-    short = {"selection": "this method", "random": "random", "fvs": "FVS", "all": "all photos"}
+    short = {"selection": "this method", "random": "random", "fvs": "FVS", "stride": "every n-th", "all": "all photos"}
     return charts.bar_chart([short[k] for k in keys], [m[k]["psnr"] for k in keys],
                             [m[k].get("psnr_std") or 0.0 for k in keys],
                             title="Held-out PSNR (random: ± spread over draws)", ylabel="PSNR (dB)", width=560,
@@ -315,18 +332,19 @@ def _renders(run: _Run) -> str:
     if not gt_dir.is_dir():
         return note("No held-out renders in this run folder.")
     cols = []  # (label, key, per_view list)
-    for k, label in (("selection", "this method"), ("random", "random"), ("fvs", "FVS"), ("all", "all photos")):
+    for k, label in (("selection", "this method"), ("random", "random"), ("fvs", "FVS"), ("stride", "every n-th"),
+                     ("all", "all photos")):
         v = m.get(k)
         if not v:
             continue
-        if k == "random":
+        if k == "random" and v.get("runs"):   # curate 0.2: one hold-out, several draws
             runs = v.get("runs") or {}
             s = "0" if "0" in runs else (sorted(runs)[0] if runs else None)
             if s is None:
                 continue
             v = runs[s]
         cols.append((label, v.get("key", k), {r["name"]: r for r in v.get("per_view", [])}))
-    names = list(cols[0][2]) if cols else []
+    names = [n for n in cols[0][2] if all(n in c[2] for c in cols)] if cols else []   # rendered by every subset
     if not names:
         return note("No held-out views.")
     pick = [names[i] for i in np.unique(np.linspace(0, len(names) - 1, min(N_RENDER_VIEWS, len(names))).round()
@@ -341,14 +359,15 @@ def _renders(run: _Run) -> str:
         cells = [f"<td>{_img(plots.jpeg_data_uri(gt, 200, 85), 'held-out photo') if gt is not None else 'missing'}"
                  f"{esc(Path(n).name)}</td>"]
         for label, key, pv in cols:
-            r = _load_rgb(run.dir / "evaluate" / key / "renders" / f"{stem}.png", 200)
+            unit = pv.get(n, {}).get("unit", key)   # the fold's unit that rendered it
+            r = _load_rgb(run.dir / "evaluate" / unit / "renders" / f"{stem}.png", 200)
             score = pv.get(n, {})
             txt = f"{fmt_num(score.get('psnr'))} dB" if score else ""
             cells.append(f"<td>{_img(plots.jpeg_data_uri(r, 200, 85), label) if r is not None else 'missing'}"
                          f"{txt}</td>")
         rows.append("<tr>" + "".join(cells) + "</tr>")
     return (f'<p class="small">{len(pick)} of {len(names)} held-out photos, and what the model trained on each '
-            'subset renders in their place (random: its first draw).</p>'
+            "subset renders in their place (random: the fold's first draw).</p>"
             f'<div class="scroll"><table class="renders">{head}{"".join(rows)}</table></div>')
 
 
@@ -356,23 +375,27 @@ def _budget_auto(run) -> str:
     b = run.sel.get("budget_auto")
     if not b:
         return note(f"Budget given: {run.sel.get('budget_text', '—')} (--budget auto predicts one from the "
-                    "capture's views, and with the evaluation measures it on the capture).")
-    chk = (run.rep or {}).get("budget_check") if hasattr(run, "rep") else None
+                    "capture's views, and on an evaluated run measures it on the capture).")
+    rep = getattr(run, "rep", None) or {}
+    chk = b.get("measured") or rep.get("budget_check")
+    law = b.get("predicted", b["budget"])
     pts = (chk or {}).get("points") or []
-    measured = [(p["k"] * chk["pool"] / max(run.rep.get("estimate", {}).get("n_pool") or 1, 1), p["loss"])
-                for p in pts] if chk else []
+    n_pool = (chk or {}).get("n_pool") or (rep.get("estimate") or {}).get("n_pool") or 1
+    measured = [(p["k"] * chk["pool"] / max(n_pool, 1), p["loss"]) for p in pts] if chk else []
     ratio = (chk["alpha"] / b["alpha"]) if chk and chk.get("alpha") and b.get("alpha") else None
-    svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], b["budget"], measured,
+    svg = charts.budget_chart(b["curve_k"], b["curve_loss_db"], b["tolerance_db"], law, measured,
                               [x * ratio for x in b["curve_loss_db"]] if ratio else None,
                               chk.get("budget") if chk else None)
     rng = f" ({b['low']} to {b['high']})" if b.get("low") is not None and b["low"] != b["high"] else ""
-    txt = [f"<p>Predicted from the poses alone: <b>{b['budget']}{rng}</b> of {b['pool']} photos for "
+    txt = [f"<p>Predicted from the poses alone: <b>{law}{rng}</b> of {b['pool']} photos for "
            f"{b['tolerance_db']:g} dB ({esc(b['kind'])} law).</p>"]
     if chk:
-        txt.append(f"<p>Measured on this capture: {esc(chk['note'])}. The points: the same method at "
-                   + ", ".join(f"{p['k']}" for p in pts) + f" of the {run.rep.get('estimate', {}).get('n_pool', '?')} "
-                   "photos left after the hold-out, each trained and scored against all of them (shown at the "
-                   "capture's scale).</p>")
+        txt.append(f"<p>Measured on this capture: {esc(chk['note'])}"
+                   + (f"; <b>{esc(b['budget'])}</b> exported" if b.get("source") == "measured" else "")
+                   + ". The points: the same method at " + ", ".join(f"{p['k']}" for p in pts)
+                   + f" of the {n_pool} photos left after holding out every "
+                   f"{(rep.get('config') or {}).get('evaluate', {}).get('holdout_every', 14)}th, on two folds, each "
+                   "trained and scored against all of them (shown at the capture's scale).</p>")
     checked = (BUDGET_CHECK_OBJECT if b.get("kind") == "object" else BUDGET_CHECK_WALK)
     return ("".join(txt) + svg + "<p class=\"small\">The prediction reads how far each view of the capture is "
             "from the nearest chosen one relative to the scene's depth, through a law calibrated per kind of capture "
@@ -382,7 +405,8 @@ def _budget_auto(run) -> str:
 BUDGET_CHECK_WALK = ("Checked on a real walk the law was not fitted on: on the office (its ground-truth poses, "
                      "and its video through curate's SfM) it advised 87-90 frames for 0.5 dB where 69-70 were "
                      "enough (0.30-0.32 dB lost). On one real phone video of a living room it advised about a "
-                     "third of what was needed: evaluate the run for a measured check on the capture itself.")
+                     "quarter of what was needed: an evaluated run measures it on the capture itself and exports "
+                     "what it measured.")
 BUDGET_CHECK_OBJECT = ("Calibrated on three real objects, each left out: for 0.5 dB it advised 40 of 57 photos for the "
                        "fox (39 measured), 48 of 55 for the skull (41) and 34 of 40 for the templering (more than 30 "
                        "needed). Object captures of 40-60 photos need most of them.")
@@ -547,7 +571,8 @@ def _timings(run: _Run) -> str:
     st = run.rep.get("stages") or []
     if not st:
         return note("No stage timings recorded.")
-    labels = {"sfm": "photos to cameras (SfM)", "occupancy": "scene occupancy", "select": "selection",
+    labels = {"sfm": "photos to cameras (SfM)", "occupancy": "scene occupancy",
+              "budget": "how many photos (trainings)", "select": "selection",
               "evaluate": "evaluation (trainings)", "export": "export"}
     rows = "".join(f'<tr><td class="l">{esc(labels.get(t.get("name"), t.get("name")))}</td>'
                    f'<td>{duration(t.get("compute_seconds"))}</td></tr>' for t in st if t.get("name") in labels)

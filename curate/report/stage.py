@@ -102,9 +102,13 @@ def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: lis
         summ = json.loads((run_dir / "evaluate" / "summary.json").read_text())
         rep.update({k: summ[k] for k in ("methods", "paired", "gap_closed", "budget_check") if k in summ})
         pr = summ.get("protocol") or {}
-        rep["estimate"] = {"budget": pr.get("budget"), "n_pool": len(pr.get("pool", [])),
+        rep["estimate"] = {"budget": pr.get("budget"), "n_pool": pr.get("n_pool", len(pr.get("pool", []))),
                            "n_holdout": len(pr.get("holdout", [])), "holdout_every": pr.get("holdout_every"),
-                           "method": pr.get("method"), "shared_with_export": pr.get("shared_with_export")}
+                           "method": pr.get("method"), "shared_with_export": pr.get("shared_with_export"),
+                           **{k: pr.get(k) for k in ("n_folds", "planned_folds", "stopped", "minutes", "level",
+                                                     "margin_db", "seconds") if k in pr}}
+    if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
+        rep["budget_check"] = sel["budget_auto"]["measured"]
     rep["verdict"] = verdict(rep)
     write_json_atomic(run_dir / "report.json", rep)
     from curate.report.run_report import write_html

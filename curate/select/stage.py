@@ -86,8 +86,13 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     d = run_dir / "select"
     b = parse_budget(cfg.budget)
     parts = {"select": cfg.select, "budget": cfg.budget}
+    measured = None
     if b == AUTO:
+        from curate.evaluate.budget import measured_budget
         parts["budget_tolerance"] = cfg.budget_tolerance
+        measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
+        if measured is not None:
+            parts["measured"] = measured["budget"]
     key = stage_key(parts, [key_of(run_dir / "occupancy")])
     if begin_stage(d, key, force):
         return StageResult("select", d, False, time.perf_counter() - t0)
@@ -105,7 +110,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     if b == AUTO:
         from curate.select.auto_budget import choose_for_pool
         auto = choose_for_pool(pc, grid.nodes(), index, cfg.budget_tolerance)
-        budget = auto.budget
+        budget = auto.budget if measured is None else measured["budget"]
         log.info("%s", auto.note)
     sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
@@ -115,14 +120,17 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
                         res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
     rec = selection_record(sel, sfm.cameras, pool, [], 0, cfg.budget, grid)
     rec["coverage"] = coverage(index, sel.chosen)
-    if auto is not None:
-        rec["budget_auto"] = auto.to_dict()
+    if auto is not None:   # the law's prediction; with the measurement, what was measured and exported
+        rec["budget_auto"] = {**auto.to_dict(), "predicted": auto.budget, "source": "law" if measured is None else
+                              "measured", **({"measured": measured["check"]} if measured is not None else {})}
+        rec["budget_auto"]["budget"] = budget
     write_json_atomic(d / "selection.json", rec)
     finish_stage(d, key, parts, t0,
                  outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
     from curate.select.methods import method_label
     how = method_label(sel.method) + (" (auto)" if cfg.select.method == "auto" else "")
-    why = f"; {auto.note}" if auto is not None else ""
+    why = (f"; {auto.note}" if measured is None else
+           f"; budget auto: {budget} measured on this capture (the law predicted {auto.budget})") if auto else ""
     cov = rec["coverage"]
     sees = (f"; they see {100 * cov['seen']:.0f}% of the scene the capture sees" if cov["n_nodes_seen"] else "")
     return StageResult("select", d, True, time.perf_counter() - t0,

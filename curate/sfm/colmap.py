@@ -71,6 +71,7 @@ import numpy as np
 
 from curate.core.cameras import Cameras, rotation_angle_deg
 from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
+from curate.sfm.native import load as load_pycolmap
 from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
 from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
                              takes_not_joined, takes_of, too_few_message, write_outputs)
@@ -89,7 +90,7 @@ def colmap_log(path: Path):
     glog appends a timestamp and pid to the destination name, so it writes to
     ``path.part.*`` files that are appended to ``path`` on exit. Errors still reach stderr.
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
     L = pycolmap.logging
     saved = (L.logtostderr, L.alsologtostderr, L.stderrthreshold)
     prefix = str(path) + ".part."
@@ -187,7 +188,7 @@ def reconstruction_from_cameras(cams: Cameras, keypoints: list | None = None, im
     ``keypoints``: per camera, its [K_i, 2] keypoints (pixels) or None. ``image_ids`` / ``camera_ids``:
     per camera, the COLMAP ids to use (default: ``i + 1``, and one per distinct intrinsics).
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     from curate.core.cameras import w2c_from_c2w
 
@@ -213,7 +214,7 @@ def reconstruction_from_cameras(cams: Cameras, keypoints: list | None = None, im
 
 # ------------------------------------------------------------------ SfM
 def _extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: bool) -> None:
-    import pycolmap
+    pycolmap = load_pycolmap()
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = cfg.camera_model
     ext = pycolmap.FeatureExtractionOptions()
@@ -259,7 +260,7 @@ def _build_vocab_tree(db: Path, path: Path, seed: int, max_descriptors: int = 10
     with the pool. (Training on every image's 1,000 descriptors, with words growing with
     the pool, took 158 s of the office's 210 s of matching, and grows with its square.)
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
     rng = np.random.default_rng(seed)
     dbh = pycolmap.Database.open(db)
     images = dbh.read_all_images()
@@ -295,7 +296,7 @@ def _match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] |
     more takes, the frames of each take are also matched with their most similar frames of the other
     takes (:func:`_match_across_takes`; ``stats["cross_take"]`` says how many pairs).
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
     mo = pycolmap.FeatureMatchingOptions()
     mo.num_threads = cfg.num_threads
     mo.guided_matching = cfg.guided_matching
@@ -346,7 +347,7 @@ def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], t
     the other takes' best frames are kept: (frames / period) x num_images x (takes - 1) pairs at most,
     linear in the frames. Returns {"queries", "pairs", "new_pairs", "verified", "unlisted", "seconds"}.
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     from curate.sfm.prep import cross_take_pairs
     t0 = time.perf_counter()
@@ -395,7 +396,7 @@ def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], t
 
 def _pair_counts(db: Path, min_num_matches: int) -> tuple[int, int]:
     """(image pairs of ``db`` with a two-view geometry, those with at least ``min_num_matches`` verified inliers)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     dbh = pycolmap.Database.open(db)
     try:
         _, inliers = dbh.read_two_view_geometry_num_inliers()
@@ -407,7 +408,7 @@ def _pair_counts(db: Path, min_num_matches: int) -> tuple[int, int]:
 def _seeded_pipeline_options(cfg: SfmConfig):
     """COLMAP's incremental pipeline options with ``cfg``'s threads, seed (mapper and triangulation) and
     minimum matches: what mapping and the triangulation of known poses share."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     opts = pycolmap.IncrementalPipelineOptions()
     opts.num_threads = cfg.num_threads
     opts.random_seed = cfg.seed
@@ -444,7 +445,7 @@ def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progr
     :func:`curate.sfm.mapping.incremental_mapping`, the same steps with each global adjustment's solver chosen
     from the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
     global adjustment past the limit (photos, fill per photo, solver, seconds)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     from tqdm import tqdm
 
     from curate.sfm import mapping
@@ -476,7 +477,7 @@ def _map(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progr
 def _map_global(cfg: SfmConfig, db: Path, images: Path, out: Path):
     """{id: Reconstruction} of COLMAP's global mapper (rotation averaging, then global positioning)
     on the matches of ``db`` (written to: pass a copy to keep the original)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     opts = pycolmap.GlobalPipelineOptions()
     opts.num_threads = cfg.num_threads
     opts.random_seed = cfg.seed
@@ -723,7 +724,7 @@ def verify_frames(rec, names: list[str], max_rot_deg: float, trusted: set[str] |
     frame, or a part it belongs to, cannot vouch for itself (:func:`join_parts`).
 
     Returns {name: {"ok", "why", "inliers", "rot_deg", "step"}}."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     by_name = {im.name: im for im in rec.images.values() if im.has_pose}
     ok_ids = None if trusted is None else {by_name[m].image_id for m in trusted if m in by_name}
     out: dict[str, dict] = {}
@@ -805,7 +806,7 @@ def part_disagreements(glob: dict, parts: dict) -> list[tuple[np.ndarray, Camera
 
 
 def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
-    import pycolmap
+    pycolmap = load_pycolmap()
     if not pycolmap.has_cuda:
         return {"status": "skipped", "reason": "pycolmap has no CUDA (patch-match stereo needs it)"}
     dense = sfm / "dense"
@@ -829,7 +830,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     Skipped (returns at once) when ``RUN/sfm/stage.json`` has the same key: same config
     (``num_threads`` and ``progress`` excluded) and same photo files (names and content).
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     photos, run_dir = Path(photos).resolve(), Path(run_dir).resolve()
     out = _sfm_dir(run_dir)
@@ -928,7 +929,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
 # ------------------------------------------------------------------ import
 def read_colmap_model(model: Path, photos: Path | None):
     """A COLMAP model folder as :class:`curate.sfm.poses.Poses` (image paths under ``photos`` when given)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     from curate.sfm.poses import Poses
     try:
         rec = pycolmap.Reconstruction(model)
@@ -1141,7 +1142,7 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
 
 def pycolmap_reconstruction(path: str | Path):
     """The COLMAP model at ``path`` (pycolmap stays inside this module)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     return pycolmap.Reconstruction(str(path))
 
 
@@ -1194,7 +1195,7 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
     (``done``, ``failed``), ``n_points``, ``mean_track_length``, ``mean_reprojection_error_px``
     (at the working size), ``working_max_side``, seconds per step.
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     from curate.sfm.ingest import PhotoRecord
     from tqdm import tqdm
@@ -1324,7 +1325,7 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
         the sizes of the groups of kept images connected through shared points (largest first;
         one group: the subset is one connected set that 3DGS / NeRF tools can register as a whole).
     """
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     src = pycolmap.Reconstruction(str(sparse_dir)) if isinstance(sparse_dir, (str, Path)) else sparse_dir
     rename, sizes = rename or {}, sizes or {}

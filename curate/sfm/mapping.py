@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from curate.sfm.native import load as load_pycolmap
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ ALWAYS_DIRECT = 1 << 30    # Ceres' direct-solve limit that no model reaches
 
 def ceres_direct_limit() -> int:
     """Ceres' own limit in COLMAP: global adjustments of more photos than this are solved iteratively (1,000)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     return int(pycolmap.BundleAdjustmentOptions().ceres.max_num_images_direct_sparse_cpu_solver)
 
 
@@ -117,7 +118,7 @@ def incremental_mapping(database: Path, images: Path, out: Path, options, choice
     ``options.get_global_bundle_adjustment()``: Ceres' choice, as COLMAP). Models are written to
     ``out``/0, ``out``/1, ... as COLMAP writes them. ``on_pair`` is called when a model's initial pair
     is registered, ``on_image`` after each further registration."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     options.image_path = str(images)
     out.mkdir(parents=True, exist_ok=True)
@@ -150,7 +151,7 @@ class _Loop:
 def _run(pipeline, loop: _Loop) -> None:
     """``IncrementalPipeline::Run``: map, then relax the initial pair's inliers and angle twice while
     photos are left over."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     cache = pipeline.database_cache
     n_images = cache.num_images()
     if n_images == 0:
@@ -176,7 +177,7 @@ def _run(pipeline, loop: _Loop) -> None:
 def _reconstruct(pipeline, mapper, mapper_options, loop: _Loop) -> bool:
     """``IncrementalPipeline::Reconstruct``: new models until the photos are used up; False when the
     whole run must stop (COLMAP's STOP)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     S = pycolmap.IncrementalPipelineStatus
     opts, manager, cache = pipeline.options, pipeline.reconstruction_manager, pipeline.database_cache
     for _ in range(opts.init_num_trials):
@@ -211,7 +212,7 @@ def _reconstruct(pipeline, mapper, mapper_options, loop: _Loop) -> bool:
 
 def _sub_model(pipeline, mapper, mapper_options, rec, loop: _Loop):
     """``IncrementalPipeline::ReconstructSubModel``: one model grown photo by photo from its initial pair."""
-    import pycolmap
+    pycolmap = load_pycolmap()
     S = pycolmap.IncrementalPipelineStatus
     opts = pipeline.options
     mapper.begin_reconstruction(rec)

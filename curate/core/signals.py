@@ -1,0 +1,113 @@
+"""The signals a scheduler sends stop curate as Ctrl-C does.
+
+``timeout``, ``docker stop``, systemd, Slurm and Kubernetes send SIGTERM (a closed terminal SIGHUP). curate
+handles them as Ctrl-C: the main thread raises :class:`Terminated` (a ``KeyboardInterrupt``), the run folder's
+lock is released as the ``with`` blocks unwind, the training workers are killed, one line is printed and the
+exit status is 143 (130 for Ctrl-C); a re-run resumes from the stages and trainings that finished.
+
+Python runs a signal handler only between bytecodes of the main thread, and COLMAP's extraction, matching and
+mapping are native calls that run for minutes (they release the GIL, but do not return). So every such signal
+also wakes a watcher thread (``signal.set_wakeup_fd``): when the main thread has not finished unwinding
+within :data:`GRACE_S`, the watcher ends the process itself, with the same line, the locks released
+(:func:`curate.core.runfolder.release_all`) and ``os._exit``; the workers die with their parent.
+
+pycolmap installs glog's failure handler for SIGTERM when it is imported (it prints a native stack dump, and
+during mapping it deadlocked holding the lock): :func:`install` is called again after that import
+(:func:`curate.sfm.native.load`).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+
+GRACE_S = 3.0
+"""Seconds the main thread has to unwind after a signal before the watcher ends the process."""
+
+EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}
+"""Exit status by signal (128 + its number, as a shell reports a process it killed)."""
+
+WORD = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated (hang-up)"}
+"""What the last line says, by signal."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP: stop as Ctrl-C does. ``signum``: the signal."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+_state: dict = {"command": "curate", "pipe": None, "done": threading.Event(), "installed": False}
+
+
+def _raise(signum, frame) -> None:
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Terminated(signum)
+
+
+def install(command: str | None = None) -> None:
+    """Handle SIGINT, SIGTERM and SIGHUP as described above (the main thread only; elsewhere nothing).
+    ``command``: what the last line names ("curate run"). Calling it again re-installs the handlers (after an
+    import that replaced them) and keeps the watcher."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if command:
+        _state["command"] = command
+    for s in EXIT:
+        signal.signal(s, _raise)
+    if _state["pipe"] is None:
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        _state["pipe"] = (r, w)
+        threading.Thread(target=_watch, args=(r,), name="curate-signals", daemon=True).start()
+    signal.set_wakeup_fd(_state["pipe"][1], warn_on_full_buffer=False)
+    _state["installed"] = True
+
+
+def installed() -> bool:
+    return _state["installed"]
+
+
+def said(exc: BaseException) -> tuple[str, int]:
+    """(the word for the last line, the exit status) of a ``KeyboardInterrupt`` or :class:`Terminated`."""
+    s = getattr(exc, "signum", signal.SIGINT)
+    return WORD.get(s, "interrupted"), EXIT.get(s, 130)
+
+
+def unwound() -> None:
+    """The main thread has handled the signal (its last line is printed): the watcher leaves the exit to it."""
+    _state["done"].set()
+
+
+def _watch(r: int) -> None:
+    while True:
+        try:
+            data = os.read(r, 64)
+        except OSError:
+            return
+        sigs = [s for s in data if s in EXIT]
+        if not sigs:
+            continue
+        if _state["done"].wait(GRACE_S):
+            return
+        _force(sigs[-1])
+
+
+def _force(signum: int) -> None:
+    """End the process now: the main thread is inside native work and cannot unwind."""
+    from curate.core import runfolder
+    try:
+        runfolder.release_all()
+    finally:
+        word = WORD.get(signum, "terminated")
+        try:
+            sys.stderr.write(f"{_state['command']}: {word}\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(EXIT.get(signum, 143))
+

@@ -1,0 +1,113 @@
+"""The budget stage: how many photos this capture needs, measured on the capture itself -> ``RUN/budget``.
+
+``--budget auto`` predicts a budget from the poses alone, with a law fitted on other captures
+(:mod:`curate.select.auto_budget`); a capture may need more (exposure changes, blur, texture, pose error: what
+the law never sees). When the run is evaluated, this stage measures it before anything is chosen: on the first
+two hold-out folds (:func:`curate.evaluate.folds.fold_order`), the selection's method chooses about half, once
+and twice the law's advice, the same field as the evaluation's is trained on each and on all the photos left,
+and the losses against all photos, paired per held-out photo over the two folds, are fitted
+(:func:`curate.evaluate.check.fit_check`). The select stage then exports the measured budget
+(:func:`measured_budget`), and the evaluation estimates that export; the law's prediction is kept beside it.
+The trainings are evaluation units (``RUN/evaluate/f<offset>_curve_b<k>``, ``f<offset>_all``: the evaluation
+reuses the latter).
+
+``RUN/budget/budget.json``: ``predicted`` (the law's :class:`curate.select.auto_budget.BudgetChoice`),
+``check`` (:class:`curate.evaluate.check.BudgetCheck`, with ``n_pool``: the folds' pool size its points are
+counted in), ``budget`` (what the selection exports).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from curate.core.stage import StageResult
+
+if TYPE_CHECKING:
+    from curate.config import RunConfig
+
+FOLDS = 2
+"""Hold-out folds the learning curve is measured on."""
+
+
+def wanted(cfg: "RunConfig") -> bool:
+    """The stage runs: ``--budget auto`` on an evaluated run with the check on."""
+    from curate.core.budget import AUTO, parse_budget
+    return parse_budget(cfg.budget) == AUTO and cfg.run_evaluation and cfg.budget_check
+
+
+def key_for(cfg: "RunConfig", run_dir: Path) -> str:
+    """The stage's key: the tolerance, the selection's options, the trainings' settings and the scene."""
+    from curate.core.stage import current_key, stage_key
+    return stage_key({"tolerance": cfg.budget_tolerance, "select": cfg.select, "train": cfg.evaluate.training(),
+                      "holdout_every": cfg.evaluate.holdout_every, "folds": FOLDS},
+                     [current_key(run_dir, "occupancy") or "", current_key(run_dir, "sfm") or ""])
+
+
+def measured_budget(cfg: "RunConfig", run_dir: Path) -> dict | None:
+    """``RUN/budget/budget.json`` when it was measured for these options on this scene (its key is
+    :func:`key_for`'s), else None: the select stage then uses the law."""
+    from curate.core.stage import read_stage
+    rec = read_stage(Path(run_dir) / "budget")
+    if not rec or rec.get("key") != key_for(cfg, run_dir):
+        return None
+    try:
+        return json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
+    """Measure the learning curve of the selection's method on the first folds -> ``RUN/budget``."""
+    import numpy as np
+    from curate.core.stage import begin_stage, current_key, finish_stage, stage_key, write_json_atomic
+    from curate.evaluate.check import fit_check
+    from curate.evaluate.folds import curve_fold, curve_points, fold_order
+    from curate.evaluate.schedule import run_folds
+    from curate.evaluate.units import eval_cameras
+    from curate.field.train import default_box
+    from curate.occupancy.stage import load_node_grid
+    from curate.select.auto_budget import LOSS_MODEL, choose_for_pool, pool_views
+    from curate.select.spacing import spacing_curve
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import image_paths, load_sfm
+
+    t0 = time.perf_counter()
+    run_dir = Path(run_dir)
+    d = run_dir / "budget"
+    key = key_for(cfg, run_dir)
+    if begin_stage(d, key, force):
+        return StageResult("budget", d, False, time.perf_counter() - t0)
+    ev = cfg.evaluate
+    sfm = load_sfm(run_dir)
+    cams = sfm.cameras
+    grid = load_node_grid(run_dir)
+    nodes = grid.nodes()
+    index = build_pair_index(cams, nodes, cfg.select.energy.bins, device=cfg.select.device)
+    law = choose_for_pool(cams, nodes, index, cfg.budget_tolerance)
+    order = fold_order(ev.holdout_every)[:min(FOLDS, ev.holdout_every, len(cams))]
+    sfm_key = current_key(run_dir, "sfm") or ""
+
+    def keyed(u, f):   # as the evaluation keys its units: a shared one ('all') is trained once
+        return stage_key({"train": ev.training(), "subset": u.subset, "holdout": f.holdout}, [sfm_key])
+    folds, res, _ = run_folds(run_dir, ev, lambda o: curve_fold(ev, cfg.select, cams, grid, law.budget, o), order,
+                              [len(order)], lambda f, r: False, eval_cameras(cams, ev.max_side),
+                              image_paths(run_dir, list(cams.names), sfm.records), default_box(cams), keyed, False,
+                              executor=executor)
+    n_pool = int(np.median([len(f.pool) for f in folds]))
+
+    def rho(c):
+        return spacing_curve(*pool_views(c, nodes, build_pair_index(c, nodes, cfg.select.energy.bins)))[1]
+    rho_pool = rho(cams[folds[0].pool])
+    points = [{**p, "rho": float(rho_pool[min(p["k"], len(rho_pool)) - 1])} for p in curve_points(res, folds)]
+    check = fit_check(points, LOSS_MODEL[law.kind][1], rho(cams), cfg.budget_tolerance, len(cams) / n_pool)
+    budget = check.budget if check.budget is not None else check.high
+    budget = int(min(max(budget if budget is not None else law.budget, 2), len(cams) - 1))
+    write_json_atomic(d / "budget.json", {"predicted": law.to_dict(), "check": {**check.to_dict(), "n_pool": n_pool},
+                                          "budget": budget})
+    finish_stage(d, key, {"tolerance": cfg.budget_tolerance, "train": ev.training()}, t0,
+                 outputs={"budget": "budget.json"}, units=[u.key for f in folds for u in f.units])
+    return StageResult("budget", d, True, time.perf_counter() - t0,
+                       f"{budget} of {len(cams)} photos to export: {check.note} (the law predicted {law.budget})")

@@ -1,0 +1,271 @@
+"""The hold-out folds of the evaluation: which photos each holds out, what it trains, in what order, and what
+the folds say together.
+
+Fold ``o`` holds out the registered photos ``o, o + n, o + 2n, ...`` (``n`` = ``EvalConfig.holdout_every``);
+the same method, with the same options, chooses the exported share of the photos left, and the rivals
+(random subsets, farthest-view sampling, every n-th frame) take as many; all photos left are the ceiling.
+Over ``n`` folds every photo is held out once. Folds are trained in :func:`fold_order` (spread over the
+capture, so that a few folds already sample all of it), and their per-photo differences are pooled
+(:func:`curate.core.stats.folds_paired`).
+
+No torch here: the trainings are :mod:`curate.evaluate.units`, their scheduling :mod:`curate.evaluate.schedule`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from curate.evaluate.config import RIVALS, EvalConfig
+from curate.evaluate.units import Unit
+
+FOLD_SEED = 1000
+"""Random draw ``s`` of fold ``o`` uses seed ``FOLD_SEED * o + s``: every fold draws its own subsets."""
+
+ALL_FOLDS = 2
+"""Folds that also train on all the photos left (the ceiling of the gap closed): the first ones, which always
+run and which the budget stage's learning curve trains too; the comparisons with the rivals use every fold."""
+
+LOOKS = 2
+"""How often the pooled folds are looked at to decide whether to stop: after :data:`FIRST_LOOK` folds, and at
+the end (every fold done, or the time spent). Each look uses a ``1 - 0.05 / LOOKS`` interval, so that stopping
+at a decided look keeps the verdict's error at 5% (Bonferroni over the looks; docs/evaluation.md, "Folds until
+decided")."""
+
+FIRST_LOOK = 4
+"""Folds after which the evaluation first decides whether to stop. Folds interleave (every 14th photo from
+offsets 0, 7, 3, 10): each samples the whole capture, so their means agree closely and four already give an
+interval of a few tenths of a dB on a real walk (docs/evaluation.md)."""
+
+
+def fold_order(every: int) -> list[int]:
+    """The offsets ``0 .. every - 1`` in the order folds are trained: each next one the farthest, around the
+    circle of offsets, from those taken (ties: the lowest), e.g. 0, 7, 3, 10, 1, 5, 8, 12, ... for 14."""
+    every = int(every)
+    if every < 1:
+        return []
+    order = [0]
+    while len(order) < every:
+        left = [o for o in range(every) if o not in order]
+        dist = [min(min(abs(o - t), every - abs(o - t)) for t in order) for o in left]
+        order.append(left[int(np.argmax(dist))])
+    return order
+
+
+def planned_folds(cfg: EvalConfig, n_registered: int) -> int:
+    """How many folds the evaluation may train: ``cfg.folds`` when given, else ``holdout_every`` (every photo
+    held out once); never more folds than offsets that hold out a photo."""
+    m = min(cfg.holdout_every, max(n_registered, 0))
+    return min(cfg.folds, m) if cfg.folds else m
+
+
+def looks(n_folds: int, adaptive: bool) -> list[int]:
+    """After how many finished folds the evaluation decides whether to stop: with ``adaptive`` (``--folds
+    0``) after :data:`FIRST_LOOK` and after all of them (a time-out before then is the last look);
+    otherwise only at the end."""
+    if not adaptive or n_folds <= FIRST_LOOK:
+        return [n_folds]
+    return [FIRST_LOOK, n_folds]
+
+
+def look_level(adaptive: bool) -> float:
+    """The confidence level of each look's interval: 95% for one look, ``1 - 0.05 / LOOKS`` when the
+    evaluation may stop at an earlier look."""
+    return 1 - 0.05 / LOOKS if adaptive else 0.95
+
+
+@dataclass
+class Fold:
+    """One hold-out fold: its split, its estimate of the selection and its units."""
+
+    offset: int
+    holdout: list[int]
+    """Held-out camera indices (every ``holdout_every``-th from ``offset``)."""
+    pool: list[int]
+    """The other camera indices, which the subsets are chosen from."""
+    budget: int
+    """The exported share of ``pool``."""
+    method: str
+    """What the selection ran (auto resolved)."""
+    chosen: list[int]
+    """The fold's selection (camera indices)."""
+    units: list[Unit] = field(default_factory=list)
+
+    def record(self, exported: list[int]) -> dict:
+        """The fold as ``summary.json`` records it."""
+        return {"offset": self.offset, "holdout": self.holdout, "n_pool": len(self.pool), "budget": self.budget,
+                "method": self.method, "chosen": self.chosen,
+                "shared_with_export": len(set(self.chosen) & set(exported)),
+                "units": {u.key: u.method for u in self.units}}
+
+
+def eval_budget(n_exported: int, n_all: int, n_pool: int) -> int:
+    """A fold's budget: the exported fraction ``n_exported / n_all`` of the ``n_pool`` photos left after the
+    hold-out, rounded, at least 2 and fewer than ``n_pool``."""
+    k = int(round(n_exported * n_pool / max(n_all, 1)))
+    return int(min(max(k, 2), max(n_pool - 1, 2)))
+
+
+def in_capture_order(cams, nodes=None) -> bool:
+    """The photos form a path in name order (a video, numbered frames): every n-th frame is then a rival."""
+    from curate.select.medoids import embed, path_steps, view_depths
+    return path_steps(*embed(cams, view_depths(cams, nodes))) is not None
+
+
+def plan_fold(cfg: EvalConfig, select_cfg, cams, grid, n_exported: int, offset: int, ordered: bool,
+              with_all: bool = True) -> Fold:
+    """Fold ``offset`` of ``cams`` (every registered camera): its split, its selection (``select_cfg`` on
+    ``grid``) and its units, in the order they are trained: the selection, the rivals (every n-th frame only
+    when ``ordered``), all photos (only ``with_all``: the ceiling is measured on the first :data:`ALL_FOLDS`
+    folds, the comparisons on every fold)."""
+    from curate.core.stats import holdout_split
+    from curate.select.baselines import farthest_view, random_subset, stride_subset
+    from curate.select.select import select
+    from curate.select.visibility import build_pair_index
+    pool, hold = (v.tolist() for v in holdout_split(len(cams), cfg.holdout_every, offset))
+    if not hold:
+        raise ValueError(f"fold {offset}: no photo to hold out from {len(cams)} registered photos")
+    if len(pool) < 3:
+        raise ValueError(f"only {len(pool)} registered photos left after holding out every {cfg.holdout_every}th: "
+                         "too few to evaluate (use --no-evaluate)")
+    k = eval_budget(n_exported, len(cams), len(pool))
+    pc = cams[pool]
+    index = build_pair_index(pc, grid.nodes(), select_cfg.energy.bins, device=select_cfg.device)
+    sel = select(pc, grid, k, select_cfg, index=index)
+    chosen = [pool[i] for i in sel.chosen]
+    tag = f"f{offset:02d}"
+    units = []
+    for m in cfg.methods:
+        if m == "selection":
+            units.append(Unit(f"{tag}_selection", "selection", None, chosen, offset))
+        elif m == "random":
+            units += [Unit(f"{tag}_random_s{s}", "random", FOLD_SEED * offset + s,
+                           [pool[i] for i in random_subset(len(pool), k, FOLD_SEED * offset + s)], offset)
+                      for s in range(cfg.random_seeds)]
+        elif m == "fvs":
+            units.append(Unit(f"{tag}_fvs", "fvs", None, [pool[i] for i in farthest_view(pc, k)], offset))
+        elif m == "stride" and ordered:
+            units.append(Unit(f"{tag}_stride", "stride", None, [pool[i] for i in stride_subset(len(pool), k)], offset))
+        elif m == "all" and with_all:
+            units.append(Unit(f"{tag}_all", "all", None, list(pool), offset))
+    return Fold(offset, hold, pool, k, sel.method, chosen, units)
+
+
+# ------------------------------------------------------------------ what the folds say together
+def per_view(results: dict, folds: list[Fold], method: str) -> dict[int, dict]:
+    """{held-out camera index: its scores} of ``method`` over ``folds`` (``results``: unit key -> metrics):
+    ``psnr``, ``ssim`` (random: the mean over the fold's draws), ``name``, ``fold``, ``unit`` (the unit whose
+    render it is). A fold without that method gives nothing."""
+    out: dict[int, dict] = {}
+    for f in folds:
+        us = [u for u in f.units if u.method == method and u.key in results]
+        if not us:
+            continue
+        pvs = [results[u.key]["per_view"] for u in us]
+        for j, cam in enumerate(f.holdout):
+            out[cam] = {"name": pvs[0][j]["name"], "psnr": float(np.mean([p[j]["psnr"] for p in pvs])),
+                        "ssim": float(np.mean([p[j]["ssim"] for p in pvs])), "fold": f.offset, "unit": us[0].key}
+    return out
+
+
+def summarize(results: dict, folds: list[Fold], level: float, margin: float) -> tuple[dict, dict, float | None]:
+    """(methods, paired, gap_closed) over the finished ``folds``.
+
+    ``methods[m]``: held-out ``psnr`` / ``ssim`` (means over every held-out photo of the folds that trained
+    it: ``n_views``; all photos train in the first :data:`ALL_FOLDS` only), ``per_view`` (:func:`per_view`, in
+    camera order), ``n_train`` (the subsets' mean size), ``key`` (fold 0's unit, whose renders the report
+    shows), ``units``; random also ``psnr_std`` over its draws' means. ``paired["selection-<rival>"]``:
+    :func:`curate.core.stats.folds_paired` of the per-view differences at ``level``, with ``decision``
+    (:func:`curate.core.stats.decision` at ``margin``). ``gap_closed``: (selection - random) / (all - random)
+    over the same photos, None when all photos do not beat random subsets.
+    """
+    from curate.core.stats import decision, folds_paired
+    methods: dict[str, dict] = {}
+    for m in ("selection", *RIVALS, "all"):
+        pv = per_view(results, folds, m)
+        if not pv:
+            continue
+        us = [results[u.key] for f in folds for u in f.units if u.method == m and u.key in results]
+        first = next(u.key for f in folds for u in f.units if u.method == m and u.key in results)
+        rows = [pv[c] for c in sorted(pv)]
+        methods[m] = {"psnr": float(np.mean([r["psnr"] for r in rows])),
+                      "ssim": float(np.mean([r["ssim"] for r in rows])), "per_view": rows,
+                      "n_train": float(np.mean([u["n_train"] for u in us])), "key": first,
+                      "units": len(us), "n_views": len(rows)}
+        if m == "random":
+            methods[m]["psnr_std"] = float(np.std([u["psnr"] for u in us], ddof=1)) if len(us) > 1 else 0.0
+    paired = {}
+    sel = per_view(results, folds, "selection")
+    for r in RIVALS:
+        other = per_view(results, folds, r)
+        if not sel or not other:
+            continue
+        diffs = [np.array([sel[c]["psnr"] - other[c]["psnr"] for c in f.holdout if c in sel and c in other])
+                 for f in folds]
+        p = folds_paired(diffs, level)
+        paired[f"selection-{r}"] = {**p, "decision": decision(p, margin), "margin": margin}
+    gap = None
+    if all(m in methods for m in ("selection", "random", "all")):
+        rnd, al = per_view(results, folds, "random"), per_view(results, folds, "all")
+        common = sorted(set(sel) & set(rnd) & set(al))                 # the same photos for all three
+        s, r_, a = (float(np.mean([d[c]["psnr"] for c in common])) for d in (sel, rnd, al))
+        if a - r_ > 1e-6:
+            gap = (s - r_) / (a - r_)
+    return methods, paired, gap
+
+
+def decided(paired: dict) -> bool:
+    """Every rival compared is decided: ahead, behind or level (none undecided)."""
+    return bool(paired) and all(p.get("decision") in ("ahead", "behind", "level") for p in paired.values())
+
+
+def curve_budgets(k: int, n_pool: int) -> list[int]:
+    """The budgets a learning-curve fold trains around ``k`` (the law's advice at the fold's size): ``k`` and
+    the check's about half and twice it (:func:`curate.evaluate.check.check_budgets`), within [3, n_pool - 2]."""
+    from curate.evaluate.check import check_budgets
+    return sorted(set(check_budgets(k, n_pool)) | ({k} if 3 <= k <= n_pool - 2 else set()))
+
+
+def curve_fold(cfg: EvalConfig, select_cfg, cams, grid, k_law: int, offset: int) -> Fold:
+    """Fold ``offset``'s learning curve (:mod:`curate.evaluate.budget`): the selection's method at
+    :func:`curve_budgets` of the law's ``k_law`` scaled to the fold's pool (units ``f<offset>_curve_b<k>``,
+    method 'check') and all photos left (``f<offset>_all``: the same unit as the evaluation's, reused by it)."""
+    from curate.core.stats import holdout_split
+    from curate.select.select import select
+    from curate.select.visibility import build_pair_index
+    pool, hold = (v.tolist() for v in holdout_split(len(cams), cfg.holdout_every, offset))
+    k = eval_budget(k_law, len(cams), len(pool))
+    pc = cams[pool]
+    index = build_pair_index(pc, grid.nodes(), select_cfg.energy.bins, device=select_cfg.device)
+    tag = f"f{offset:02d}"
+    units, method = [], ""
+    for b in curve_budgets(k, len(pool)):
+        sel = select(pc, grid, b, select_cfg, index=index)
+        method = sel.method
+        units.append(Unit(f"{tag}_curve_b{b}", "check", None, [pool[i] for i in sel.chosen], offset))
+    units.append(Unit(f"{tag}_all", "all", None, list(pool), offset))
+    return Fold(offset, hold, pool, k, method, [], units)
+
+
+def curve_points(results: dict, folds: list[Fold]) -> list[dict]:
+    """The learning curve's measured points: per budget (the i-th of each fold's :func:`curve_budgets`; ``k``
+    their mean, of the folds' pools), the loss against all photos left, ``all - subset`` per held-out photo
+    pooled over the folds (:func:`curate.core.stats.folds_paired`): ``k``, ``loss`` (dB), ``lo``, ``hi``, ``n``."""
+    from curate.core.stats import folds_paired
+    by_rank: dict[int, list] = {}
+    for f in folds:
+        al = next((u for u in f.units if u.method == "all" and u.key in results), None)
+        if al is None:
+            continue
+        a = np.array([v["psnr"] for v in results[al.key]["per_view"]])
+        for i, u in enumerate(u for u in f.units if u.method == "check"):
+            if u.key in results:
+                d = a - np.array([v["psnr"] for v in results[u.key]["per_view"]])
+                by_rank.setdefault(i, []).append((len(u.subset), d))
+    out = []
+    for i in sorted(by_rank):
+        p = folds_paired([d for _, d in by_rank[i]])
+        out.append({"k": int(round(np.mean([k for k, _ in by_rank[i]]))), "loss": p["mean"], "lo": p["lo"],
+                    "hi": p["hi"], "n": p["n"]})
+    return out

@@ -1,0 +1,230 @@
+"""Train the folds' units as the folds are added, and stop when the folds have decided or the time is spent.
+
+:func:`run_folds` keeps every worker busy: a fold's units go to the workers as they free up, and a new fold
+is started as soon as the previous one has no unit left to hand out, while it is expected to finish within
+the time given (the first :data:`MIN_FOLDS` always run). When the finished folds reach a planned look
+(:func:`curate.evaluate.folds.looks`), ``stop_at`` decides whether to stop; the units still training then
+finish (they are kept for a later evaluation) and nothing more is started.
+
+A unit whose stage key equals another's (the same subset: "auto" chose exactly the FVS subset) trains once
+and is copied. A unit finished by an earlier evaluation is reused. Ctrl-C stops the workers at once: the
+units finished so far stay, and a re-run resumes from them.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+MIN_FOLDS = 2
+"""Folds that always run (an interval over folds needs two)."""
+
+
+class _Inline:
+    """An executor that runs each call at once in this process (one worker)."""
+
+    def submit(self, fn, /, *args) -> Future:
+        f: Future = Future()
+        f.set_result(fn(*args))
+        return f
+
+
+def _kill(ex) -> None:
+    """Stop a local process pool now: its running trainings are killed, not waited for; then the pool is shut
+    down (its queues released: no "leaked semaphore" warning at exit)."""
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    for p in procs:
+        try:
+            p.kill()
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+    for p in procs:
+        p.join(5)
+    try:
+        ex.shutdown(wait=True, cancel_futures=True)
+    except Exception:  # noqa: BLE001
+        pass
+
+
+def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at: list[int],
+              stop_at: Callable[[list, dict], bool], cams, paths, box, unit_key: Callable, adaptive: bool,
+              executor=None, progress: bool = True, train: Callable | None = None) -> tuple[list, dict, str]:
+    """Train folds ``make_fold(offset)`` for the offsets of ``order`` until one of: the finished folds decide
+    at a look (``stop_at(folds, results)`` at each count of ``look_at``), every fold is done, or (``adaptive``) the next
+    fold is not expected to end within ``cfg.minutes``.
+
+    ``unit_key(unit, fold)``: a unit's stage key. ``cams``: every registered camera at evaluation size,
+    ``paths`` their images, ``box`` the field's scene box. ``executor``: a ``concurrent.futures.Executor``
+    (e.g. Ray's) for the trainings; None: local processes (:func:`curate.evaluate.units.auto_workers`).
+    ``train``: what trains a unit, given :func:`curate.evaluate.units.train_unit`'s arguments and the log level
+    as one tuple (default :func:`curate.evaluate.units._unit_entry`; a test passes its own).
+    Returns (the finished folds in order, {unit key: metrics}, why it stopped: 'decided', 'all folds' or
+    'time'). When it stopped decided, the folds are those of the deciding look.
+    """
+    from curate.core.runfolder import held_token
+    from curate.core.stage import is_fresh
+    from curate.evaluate.units import (PROGRESS_FILE, _copy_unit, _unit_entry, auto_workers, read_metrics,
+                                       save_ground_truth)
+    from tqdm import tqdm
+    ev_dir = Path(run_dir) / "evaluate"
+    train = train or _unit_entry
+    t0 = time.monotonic()
+    budget_s = 60.0 * cfg.minutes
+    token = held_token(run_dir)
+    level = logging.getLogger("curate").getEffectiveLevel()
+    started: list = []          # folds begun, in order
+    finished: list = []         # folds whose every unit is done, in order
+    results: dict[str, dict] = {}
+    queue: deque = deque()      # units to hand out
+    inflight: dict[Future, object] = {}
+    by_key: dict[str, str] = {}  # stage key -> the unit that trains it
+    dups: list = []             # (unit, the unit whose result it copies)
+    durations: list[float] = []  # seconds of each unit trained now
+    began: dict[str, float] = {}
+    trained_now: list = []       # units handed to a worker now (the bar's total)
+    owned: list = []             # the local pool this call started
+    decided_now = False
+    n_decided = 0                # the finished folds when they decided
+
+    if executor is not None:
+        workers, ex = (cfg.workers or 8), executor
+    else:
+        workers, ex = 1, None
+
+    def start_fold() -> None:
+        nonlocal workers, ex
+        f = make_fold(order[len(started)])
+        started.append(f)
+        save_ground_truth(run_dir, cams, paths, f.holdout)
+        for u in f.units:
+            k = unit_key(u, f)
+            if is_fresh(ev_dir / u.key, k):
+                results[u.key] = read_metrics(ev_dir / u.key)
+                by_key.setdefault(k, u.key)
+            elif k in by_key:
+                dups.append((u, by_key[k]))
+            else:
+                by_key[k] = u.key
+                queue.append((u, f, k))
+        if ex is None and queue:           # the first training to do: a local pool sized for it
+            u0 = queue[0][0]
+            pix = int(np.sum(cams.width[u0.subset] * cams.height[u0.subset]))
+            workers = auto_workers(cfg, 2 * len(f.units), pix)
+            if workers <= 1:
+                ex = _Inline()
+            else:
+                import multiprocessing as mp
+                import os
+                from concurrent.futures import ProcessPoolExecutor
+                from curate.evaluate.units import worker_start
+                ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=worker_start,
+                                         initargs=(os.getpid(),))
+                owned.append(ex)
+
+    def may_start() -> bool:
+        if decided_now or len(started) >= len(order):
+            return False
+        if len(started) < MIN_FOLDS or not adaptive:
+            return True
+        if not durations:
+            return True
+        per = float(np.median(durations)) / max(workers, 1)
+        left = len(queue) + len(inflight) + len(started[-1].units)
+        return time.monotonic() - t0 + left * per <= budget_s
+
+    def resolve() -> None:
+        """Copy the duplicates whose source is done; move finished folds to ``finished``; look."""
+        nonlocal decided_now, n_decided
+        for u, src in list(dups):
+            if src in results:
+                results[u.key] = _copy_unit(ev_dir, src, u, results[src])
+                dups.remove((u, src))
+        while len(finished) < len(started) and all(u.key in results for u in started[len(finished)].units):
+            finished.append(started[len(finished)])
+            if len(finished) in look_at and not decided_now and stop_at(finished, results):
+                decided_now, n_decided = True, len(finished)
+                queue.clear()
+
+    def iters_done() -> int:
+        n = 0
+        for u, _, _ in trained_now:
+            if u.key in results:
+                n += cfg.iters
+                continue
+            try:
+                n += min(int((ev_dir / u.key / PROGRESS_FILE).read_text()), cfg.iters)
+            except (OSError, ValueError):
+                pass
+        return n
+
+    bar = tqdm(total=0, desc="evaluate", unit="it", disable=not progress, smoothing=0.05)
+    stop_bar = threading.Event()
+
+    def show() -> None:
+        bar.total = len(trained_now) * cfg.iters + len(queue) * cfg.iters
+        bar.n = iters_done()
+        done = sum(u.key in results for u, _, _ in trained_now)
+        bar.set_description_str(f"evaluate: fold {min(len(finished) + 1, len(order))} of up to {len(order)}")
+        bar.set_postfix_str(f"{done} of {len(trained_now) + len(queue)} trainings", refresh=False)
+        bar.refresh()
+
+    def poll() -> None:
+        while not stop_bar.wait(1.0):
+            show()
+    poller = threading.Thread(target=poll, daemon=True)
+    poller.start()
+    try:
+        while True:
+            while len(inflight) < workers:
+                if not queue:
+                    if may_start():
+                        start_fold()
+                        resolve()
+                        continue
+                    break
+                u, f, k = queue.popleft()
+                trained_now.append((u, f, k))
+                began[u.key] = time.monotonic()
+                fut = ex.submit(train, (str(run_dir), u, cfg, cams, list(paths), list(f.holdout), box, k, None,
+                                              token, level))
+                inflight[fut] = u
+                if fut.done():          # inline: ran already
+                    break
+            if not inflight:
+                resolve()
+                if not queue and not may_start():
+                    break
+                continue
+            done, _ = wait(list(inflight), timeout=1.0, return_when=FIRST_COMPLETED)
+            for fut in done:
+                u = inflight.pop(fut)
+                results[u.key] = fut.result()
+                durations.append(time.monotonic() - began[u.key])
+            resolve()
+    except BaseException:
+        for e in owned:
+            _kill(e)
+        if executor is not None:
+            for fut in inflight:
+                fut.cancel()
+        raise
+    finally:
+        stop_bar.set()
+        poller.join()
+        show()
+        bar.close()
+    for e in owned:
+        e.shutdown(wait=True)
+    resolve()
+    if decided_now:   # the verdict is the look's: a fold the trainings still running completed is kept for later
+        return finished[:n_decided], results, "decided"
+    return finished, results, "all folds" if len(finished) == len(order) else "time"

@@ -1,0 +1,132 @@
+"""Does a cheaper evaluation field give the same verdict? (issue 48, part 2)
+
+For each run folder (SfM, occupancy and selection done) and each training setting, the product's evaluation
+(:mod:`curate.evaluate.stage`) trains the first ``--folds`` hold-out folds with that setting, in a sibling
+run folder ``<out>/<capture>@<setting>`` that shares the run's SfM, occupancy and selection (hard links) and
+has its own ``evaluate/``. Then, per capture and rival, the per-view differences (selection - rival) of each
+setting against the reference setting (the first): their correlation, the mean difference and its interval
+under each, whether the decisions agree, and each setting's CPU seconds per training.
+
+Usage:
+  python -m research.eval_agreement RUN... --out /tmp/agree --settings 240x800,160x400,160x250 --folds 2
+Prints one table per capture and one JSON line last.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+SHARED = ("sfm", "occupancy", "select", "run.json", ".curate-run.json")
+
+
+def sibling(run: Path, dest: Path) -> Path:
+    """``dest``: a run folder sharing ``run``'s SfM, occupancy and selection (hard links; copies across devices)."""
+    if (dest / "select" / "stage.json").is_file():
+        return dest
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in SHARED:
+        src = run / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, copy_function=_link, dirs_exist_ok=True, symlinks=True)
+        elif src.is_file():
+            _link(src, dest / name)
+    return dest
+
+
+def _link(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def setting(text: str) -> tuple[int, int]:
+    """'160x400' -> (max_side 160, iters 400)."""
+    a, b = text.lower().split("x")
+    return int(a), int(b)
+
+
+def evaluate(run: Path, side: int, iters: int, folds: int) -> dict:
+    """The product's evaluation of ``run`` at (side, iters) over its first ``folds`` folds -> summary.json."""
+    from curate.cli import saved_config
+    from curate.core import runfolder
+    from curate.evaluate import stage
+    cfg, _ = saved_config(run)
+    cfg = replace(cfg, evaluate=replace(cfg.evaluate, max_side=side, iters=iters, folds=folds,
+                                        methods=("selection", "random", "fvs", "stride", "all"), random_seeds=1))
+    with runfolder.claimed(run, writes=("evaluate",)):
+        res = stage.run(cfg, run)
+    print(res.line(), flush=True)
+    return json.loads((run / "evaluate" / "summary.json").read_text())
+
+
+def unit_seconds(run: Path) -> float:
+    """Median CPU-bound seconds of one training (its stage record's wall seconds, one single-threaded training)."""
+    secs = [json.loads(p.read_text()).get("seconds", 0) for p in (run / "evaluate").glob("f*/stage.json")]
+    return float(np.median(secs)) if secs else float("nan")
+
+
+def diffs(summary: dict, rival: str) -> dict[str, float]:
+    """{held-out photo: selection - rival, dB}."""
+    m = summary["methods"]
+    if rival not in m or "selection" not in m:
+        return {}
+    other = {r["name"]: r["psnr"] for r in m[rival]["per_view"]}
+    return {r["name"]: r["psnr"] - other[r["name"]] for r in m["selection"]["per_view"] if r["name"] in other}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", help="run folders (SfM, occupancy and selection done)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--settings", default="240x800,160x400,160x250", help="SIDExITERS, comma list; the first is "
+                    "the reference")
+    ap.add_argument("--folds", type=int, default=2)
+    a = ap.parse_args(argv)
+    sets = [setting(s) for s in a.settings.split(",")]
+    out = Path(a.out)
+    rows = []
+    for run in map(Path, a.runs):
+        name = run.name
+        summ, secs = {}, {}
+        for side, iters in sets:
+            tag = f"{side}x{iters}"
+            sib = sibling(run, out / f"{name}@{tag}")
+            summ[tag] = evaluate(sib, side, iters, a.folds)
+            secs[tag] = unit_seconds(sib)
+        ref = f"{sets[0][0]}x{sets[0][1]}"
+        print(f"\n{name}: {summ[ref]['protocol']['n_folds']} folds, "
+              f"{len(summ[ref]['protocol']['holdout'])} held-out photos")
+        print(f"{'rival':8s} {'setting':9s} {'mean':>7s} {'interval':>16s} {'decision':>9s} {'r':>6s} "
+              f"{'s/train':>8s}")
+        for rival in ("random", "fvs", "stride"):
+            d_ref = diffs(summ[ref], rival)
+            if not d_ref:
+                continue
+            for tag in summ:
+                d = diffs(summ[tag], rival)
+                common = sorted(set(d) & set(d_ref))
+                r = float(np.corrcoef([d_ref[k] for k in common], [d[k] for k in common])[0, 1]) \
+                    if len(common) > 2 else float("nan")
+                p = summ[tag]["paired"].get(f"selection-{rival}") or {}
+                print(f"{rival:8s} {tag:9s} {p.get('mean', float('nan')):+7.2f} "
+                      f"{p.get('lo', float('nan')):+7.2f}..{p.get('hi', float('nan')):+6.2f} "
+                      f"{str(p.get('decision')):>9s} {r:6.2f} {secs[tag]:8.1f}")
+                rows.append({"capture": name, "rival": rival, "setting": tag, "mean": p.get("mean"),
+                             "lo": p.get("lo"), "hi": p.get("hi"), "sd": p.get("sd"), "n": p.get("n"),
+                             "decision": p.get("decision"), "r_vs_ref": r, "seconds_per_training": secs[tag],
+                             "psnr": {m: v["psnr"] for m, v in summ[tag]["methods"].items()}})
+    print(json.dumps({"settings": a.settings, "folds": a.folds, "rows": rows}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""SIGTERM and SIGHUP, what schedulers send, stop curate as Ctrl-C does (issue 49): one line, no native stack
+dump, the run folder's lock released, the workers gone, exit status 143, and a re-run that resumes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from curate.core import runfolder as rf
+from curate.core import signals
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "data_samples" / "room_walk"
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+
+
+def test_the_words_and_exit_statuses_of_each_signal():
+    assert issubclass(signals.Terminated, KeyboardInterrupt)
+    assert signals.said(KeyboardInterrupt()) == ("interrupted", 130)
+    assert signals.said(signals.Terminated(signal.SIGTERM)) == ("terminated", 143)
+    assert signals.said(signals.Terminated(signal.SIGHUP))[1] == 129
+
+
+@pytest.mark.parametrize("sig, word, code", [(signal.SIGTERM, "terminated", 143),
+                                           (signal.SIGHUP, "terminated (hang-up)", 129)])
+def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, code):
+    """pycolmap's import installs glog's failure handler (a native stack dump on SIGTERM): after curate's
+    loader, the signal ends the process with curate's one line."""
+    prog = ("import os, signal, sys, time\n"
+            "from curate.core import signals\n"
+            "from curate.sfm.native import load\n"
+            "signals.install('curate test')\n"
+            "load()\n"
+            "try:\n"
+            "    print('ready', flush=True)\n"
+            "    time.sleep(60)\n"
+            "except KeyboardInterrupt as e:\n"
+            "    signals.unwound(); w, c = signals.said(e); print(f'curate test: {w}', file=sys.stderr); sys.exit(c)\n")
+    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    assert p.stdout.readline().strip() == "ready"
+    p.send_signal(sig)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == code and err.strip() == f"curate test: {word}", err
+
+
+def test_a_signal_during_native_work_ends_the_process_after_the_grace(tmp_path):
+    """The main thread stuck in a call that does not return (as COLMAP's mapping): the watcher ends the
+    process within the grace, with the line, and the run folder's lock released."""
+    run = tmp_path / "run"
+    prog = ("import signal, threading\n"
+            "from curate.core import runfolder, signals\n"
+            "signals.install('curate test')\n"
+            f"with runfolder.claimed({str(run)!r}):\n"
+            "    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})\n"   # as in a native call that does
+            "    print('ready', flush=True)\n"                                   # not return: Python's handler
+            "    threading.Event().wait()\n")                                    # never gets to run
+    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    assert p.stdout.readline().strip() == "ready"
+    t0 = time.time()
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 143 and err.strip() == "curate test: terminated"
+    assert time.time() - t0 < signals.GRACE_S + 10
+    with rf.claimed(run):          # free again, and no "taking over" of a stale holder is needed
+        pass
+    assert rf.read_lock(run) == {}
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d.name))
+            except (OSError, ValueError, IndexError):
+                pass
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        st = (Path("/proc") / str(pid) / "stat").read_text()
+    except OSError:
+        return False
+    return st.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("when", ["sfm", "evaluate"])
+def test_sigterm_during_a_run_stops_it_cleanly_and_the_rerun_resumes(tmp_path, when):
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "curate", "run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"),
+           "--out", str(run), "--budget", "8", "--iters", "60", "--eval-size", "32", "--res", "12", "--folds", "2",
+           "--workers", "2"]
+    p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    ready = (lambda: (run / "sfm" / "database.db").is_file()) if when == "sfm" else \
+        (lambda: any((run / "evaluate").glob("f00_*/.progress")))
+    while not ready():
+        assert p.poll() is None, p.communicate()
+        assert time.time() - t0 < 600
+        time.sleep(0.1)
+    workers = _children(p.pid)
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "curate run: terminated"
+    assert "Aborted" not in err and "stack trace" not in err and "Traceback" not in err
+    deadline = time.time() + 10
+    while any(_alive(w) for w in workers) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not [w for w in workers if _alive(w)]
+    with rf.claimed(run):
+        pass
+    res = subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr
+    rep = json.loads((run / "report.json").read_text())
+    assert rep["evaluation"]["status"] == "current" and len(rep["selection"]["chosen"]) == 8
