@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import errno
 import json
 import logging
 import re
@@ -363,6 +364,11 @@ def cmd_select(args) -> int:
         except CliError as e:
             raise CliError(f"{args.input} is neither a run folder (no run.json) nor a pose file "
                            f"(transforms.json, a COLMAP model, cameras.json): {e}")
+        if (inp / "sfm" / "stage.json").is_file():   # a folder of `curate sfm`: poses, no run yet
+            raise CliError(f"{args.input} holds the cameras of `curate sfm`, not a run of `curate run`: "
+                           f"`curate select {args.input} --out DIR` chooses from those cameras into DIR, or "
+                           f"`curate run PHOTOS --out {args.input}` goes on from them to a selection, its export and "
+                           "report")
         raise CliError(f"--out is required for a pose file: where to write the subset of {args.input}")
     return _select_posed(args)
 
@@ -791,8 +797,23 @@ def _crash_log(exc: BaseException) -> Path:
     return p
 
 
+def _negative_values(argv: list[str]) -> list[str]:
+    """``--budget -5%`` as ``--budget=-5%``: argparse takes a value that starts with '-' for a flag unless it is
+    a plain number, and says only "expected one argument"; joined, the value reaches the option's own check,
+    which says what is wrong with it."""
+    import re
+    out: list[str] = []
+    for tok in argv:
+        if out and re.match(r"^-[\d.]", tok) and out[-1].startswith("--") and "=" not in out[-1] \
+                and out[-1] != "--":
+            out[-1] = f"{out[-1]}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _negative_values(list(sys.argv[1:] if argv is None else argv))
     try:
         args = build_parser(_command_of(argv)).parse_args(argv)
     except SystemExit as e:  # --help, --version (0) or a one-line usage error (2)
@@ -811,8 +832,20 @@ def main(argv: list[str] | None = None) -> int:
         word, code = signals.said(e)
         print(f"curate {args.command}: {word}", file=sys.stderr)
         return code
+    except OSError as e:
+        if e.errno != errno.ENOSPC:
+            return _internal_error(args.command, e)
+        print(f"curate {args.command}: error: the disk is full: no space left writing {e.filename or 'a file'}; "
+              "free some space, then run the same command again (what finished is kept, nothing half-written is "
+              "taken for finished)", file=sys.stderr)
+        return 2
     except Exception as e:  # noqa: BLE001 - an internal error: one line, the trace in a file
-        log = _crash_log(e)
-        print(f"curate {args.command}: internal error: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''} "
-              f"(full trace in {log})", file=sys.stderr)
-        return 1
+        return _internal_error(args.command, e)
+
+
+def _internal_error(command: str, e: BaseException) -> int:
+    """An error curate did not expect: one line, the trace in a file; exit status 1."""
+    log = _crash_log(e)
+    print(f"curate {command}: internal error: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''} "
+          f"(full trace in {log})", file=sys.stderr)
+    return 1

@@ -55,6 +55,45 @@ RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "bud
 """Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
 
 
+def check_same_capture(run_dir: Path, photos, poses) -> None:
+    """ValueError when ``run_dir`` holds a run of another capture (its ``run.json`` names other photos or
+    poses): a typo in ``--out`` must not replace that run without a word; ``--force`` does, on purpose. The
+    same photos moved to another folder (the same file names), or the same pose file's content elsewhere, are
+    the same capture: the run resumes."""
+    import json
+    run_dir = Path(run_dir)
+    try:
+        rec = json.loads((run_dir / "run.json").read_text())
+    except (OSError, ValueError):
+        return
+
+    def same_path(a, b) -> bool:
+        return (a is None) == (b is None) and (a is None or Path(a).resolve() == Path(b).resolve())
+
+    def moved_photos(a, b) -> bool:        # the run's photos, by their names, in another folder
+        try:
+            had = {Path(r["original"]).name for r in json.loads((run_dir / "sfm" / "images.json").read_text())["photos"]
+                   if r.get("original") and Path(r["original"]).parent == Path(a).resolve()}
+            from curate.sfm.ingest import find_images
+            imgs, other = find_images(b)
+            return bool(had) and had == {p.name for p in imgs + other}
+        except (OSError, ValueError, KeyError, TypeError):
+            return False
+
+    def same_poses(a, b) -> bool:
+        try:
+            return Path(a).is_file() and Path(b).is_file() and Path(a).read_bytes() == Path(b).read_bytes()
+        except OSError:
+            return False
+    ok_photos = same_path(rec.get("photos"), photos) or (photos and rec.get("photos") and
+                                                         moved_photos(rec["photos"], photos))
+    ok_poses = same_path(rec.get("poses"), poses) or (poses and rec.get("poses") and same_poses(rec["poses"], poses))
+    if not (ok_photos and ok_poses):
+        held = " and ".join(f"{k} {rec[k]}" for k in ("photos", "poses") if rec.get(k)) or "another capture"
+        raise ValueError(f"{run_dir} holds a run of another capture ({held}): give another --out, or --force to "
+                         "replace that run")
+
+
 def split_parts(run_dir: Path) -> list[dict]:
     """The models of a capture that split (``RUN/sfm`` stats ``parts``: the largest first, then
     ``sparse/1``, ...) with at least :data:`MIN_PART` photos; [] when it did not split."""
@@ -158,6 +197,8 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     if photos is not None and run_dir.resolve().is_relative_to(Path(photos).resolve()):
         raise ValueError(f"the run folder {run_dir} is inside the photo folder {photos}: curate never writes there")
     run_dir.mkdir(parents=True, exist_ok=True)
+    if not force:
+        check_same_capture(run_dir, photos, poses)
     save_run_config(cfg, run_dir, photos, poses)
     results: list[StageResult] = []
     _start("sfm")

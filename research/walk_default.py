@@ -3,9 +3,12 @@
 For a run folder (SfM, occupancy done), every hold-out fold of the product's evaluation (each holds out every
 ``--holdout-every``-th photo from its own offset; all of them: every photo held out once) trains the
 product's evaluation field (:class:`curate.evaluate.config.EvalConfig` defaults, or ``--iters``/``--eval-size``)
-on the subset each method chooses at ``--share`` of the photos left: the candidates (``--methods``: any
-selection method of :data:`curate.select.methods.REGISTRY`, and the variants of :data:`VARIANTS`), random
-subsets and all photos. Units ``RUN/evaluate/w<share>_f<offset>_<method>`` (a re-run reuses them). Then, per
+on the subset each method chooses at the exported share of the photos left (as the product's evaluation
+does; ``--share`` another): the candidates (``--methods``: any selection method of
+:data:`curate.select.methods.REGISTRY`, and the variants of :data:`VARIANTS`), random subsets and all photos.
+The units the product's evaluation trains too (the run's own method, random, fvs, stride, all) keep its
+names (``f<offset>_selection``, ...), so that each is trained once for both; the others are
+``f<offset>_w_<method>``. Then, per
 pair (the first method against each other), the per-photo differences pooled over the folds with the
 product's interval (:func:`curate.core.stats.folds_paired`, 95%, one look), the gap closed, and where along
 the walk the first method loses: the first and last 5% of the frames (the walk's ends) against the rest.
@@ -63,7 +66,7 @@ def choose(method: str, cams, grid, budget: int, scfg, seed: int) -> list[int]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run")
-    ap.add_argument("--share", type=float, default=0.15)
+    ap.add_argument("--share", type=float, default=0.0, help="0: the run's exported share")
     ap.add_argument("--methods", default="path,fvs,stride,medoids,random")
     ap.add_argument("--holdout-every", type=int, default=14)
     ap.add_argument("--folds", type=int, default=0, help="0: every fold")
@@ -74,7 +77,9 @@ def main(argv=None) -> int:
     from curate.core import runfolder
     from curate.core.stage import current_key, stage_key
     from curate.core.stats import folds_paired, holdout_split
-    from curate.evaluate.folds import FOLD_SEED, Fold, fold_order
+    from curate.evaluate.folds import FOLD_SEED, Fold, eval_budget, fold_order
+    from curate.select.select import resolve_method
+    from curate.select.stage import read_selection
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import Unit, eval_cameras
     from curate.field.train import default_box
@@ -90,13 +95,18 @@ def main(argv=None) -> int:
     grid = load_node_grid(run)
     methods = a.methods.split(",")
     order = fold_order(a.holdout_every)[:a.folds or a.holdout_every]
-    tag = f"w{int(round(100 * a.share))}"
+    n_exported = int(round(a.share * n)) if a.share else len(read_selection(run)["chosen"])
+    own = resolve_method(cams, cfg.select.method)[0]       # the run's method: its units are the product's
+    shared = {own: "selection", "random": "random_s0", "fvs": "fvs", "stride": "stride"}
     sfm_key = current_key(run, "sfm") or ""
+
+    def name(o: int, m: str) -> str:
+        return f"f{o:02d}_{shared[m]}" if m in shared and not a.share else f"f{o:02d}_w{n_exported}_{m}"
 
     def make_fold(o: int) -> Fold:
         pool, hold = (v.tolist() for v in holdout_split(n, a.holdout_every, o))
-        k = max(2, int(round(a.share * len(pool))))
-        units = [Unit(f"{tag}_f{o:02d}_{m}", m, FOLD_SEED * o if m == "random" else None,
+        k = eval_budget(n_exported, n, len(pool))
+        units = [Unit(name(o, m), m, FOLD_SEED * o if m == "random" else None,
                       [pool[i] for i in choose(m, cams[pool], grid, k, cfg.select, FOLD_SEED * o)], o) for m in methods]
         units.append(Unit(f"f{o:02d}_all", "all", None, list(pool), o))      # the evaluation's own 'all' unit
         return Fold(o, hold, pool, k, methods[0], units[0].subset, units)
@@ -115,7 +125,7 @@ def main(argv=None) -> int:
     first = methods[0]
     ends = set(range(0, max(1, n // 20))) | set(range(n - max(1, n // 20), n))
     rows = []
-    print(f"\n{run.name}: {n} photos, {len(folds)} folds, share {a.share:g}, budget ~{folds[0].budget}, "
+    print(f"\n{run.name}: {n} photos, {len(folds)} folds, {n_exported} exported, fold budget ~{folds[0].budget}, "
           f"{ev.max_side} px x {ev.iters} it")
     print("  " + "  ".join(f"{m} {np.mean(list(per[m].values())):.2f}" for m in per))
     for m in methods[1:] + ["all"]:
@@ -133,7 +143,7 @@ def main(argv=None) -> int:
         for m in methods:
             if m != "random" and al - r > 1e-6:
                 rows.append({"pair": f"gap_closed_{m}", "mean": float((np.mean(list(per[m].values())) - r) / (al - r))})
-    print(json.dumps({"run": str(run), "share": a.share, "budget": folds[0].budget, "n": n, "folds": len(folds),
+    print(json.dumps({"run": str(run), "exported": n_exported, "budget": folds[0].budget, "n": n, "folds": len(folds),
                       "iters": ev.iters, "max_side": ev.max_side,
                       "psnr": {m: float(np.mean(list(per[m].values()))) for m in per}, "rows": rows}))
     return 0

@@ -118,6 +118,7 @@ POSES = {
     "focal_text": (_fl("wide"), "frame 3"),
     "no_intrinsics": (_del("fl_x"), "fl_x"),
     "duplicate_files": (_dup, "more than one frame"),
+    "nested_deep": (lambda m: "[" * 100000 + "]" * 100000, "nested too deeply"),
 }
 COMMANDS = {
     "score": lambda p, out: ["score", str(p), "--res", "8"],
@@ -165,6 +166,9 @@ OPTIONS = [
     (["--bins", "ax3"], "--bins"), (["--res", "0"], "res"), (["--device", "gpu9"], "--device"),
     (["--device", "cuda"], "--device"), (["--method", "best"], "--method"), (["--export-mode", "move"], "--export-mode"),
     (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "--max-size"),
+    (["--budget", "-5%"], "--budget"), (["--sift-peak-threshold", "-1"], "--sift-peak-threshold"),
+    (["--sift-peak-threshold", "2"], "--sift-peak-threshold"), (["--eval-minutes", "-1"], "--eval-minutes"),
+    (["--folds", "-2"], "--folds"), (["--equivalence-db", "0"], "--equivalence-db"),
 ]
 
 
@@ -311,3 +315,46 @@ def test_an_unsupported_camera_model_is_one_warning_per_run(good, tmp_path, capl
 def test_the_suite_covers_a_hundred_cases():
     n = len(POSES) * len(COMMANDS) + len(OPTIONS) + 16 + 2
     assert n >= 100
+
+
+def test_a_disk_too_full_for_colmaps_database_is_a_one_line_error_before_it(tmp_path, capsys, monkeypatch):
+    """Issue 49: COLMAP's SQLite aborts the whole process on a full disk (exit 134, a native trace): curate
+    checks the free space its database needs before extracting features, and says so in one line."""
+    import shutil
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk" / "images"
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for p in sorted(sample.iterdir())[:6]:
+        shutil.copy(p, photos / p.name)
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10 << 20))
+    before = tree_hash(photos)
+    assert cli.main(["sfm", str(photos), "--out", str(tmp_path / "run")]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("curate sfm: error: not enough free space") and "MB are free" in last
+    assert not (tmp_path / "run" / "sfm" / "stage.json").exists() and not (tmp_path / "run" / "sfm" / "database.db").exists()
+    assert tree_hash(photos) == before
+
+
+def test_a_full_disk_while_writing_is_a_one_line_error_naming_the_file(tmp_path, capsys, monkeypatch):
+    """Issue 49: ENOSPC ended in "internal error: OSError: [Errno 28]"; it is one line naming the file being
+    written, exit 2, and the file is not left half-written."""
+    import errno
+    from curate.core import stage
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    run = tmp_path / "run"
+    assert cli.main(["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--out", str(run),
+                     "--budget", "8", "--no-evaluate", "--res", "8", "--triangulate", "off"]) == 0
+    real = stage.Path.write_text
+
+    def full(self, text, *a, **k):
+        if self.name.startswith("report.json"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, text, *a, **k)
+    monkeypatch.setattr(stage.Path, "write_text", full)
+    before = (run / "report.json").read_text()
+    capsys.readouterr()
+    assert cli.main(["report", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the disk is full" in err[0] and str(run / "report.json") in err[0]
+    assert (run / "report.json").read_text() == before and not list(run.glob("report.json.tmp*"))

@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -251,3 +252,16 @@ def test_export_says_linked_or_copied(tmp_path, capsys):
     assert cli.main(["export", str(out), "--mode", "copy"]) == 0
     line = capsys.readouterr().out
     assert "3 images (copied)" in line and "copys" not in line
+
+
+def test_select_on_a_folder_of_curate_sfm_says_what_to_run(tmp_path):
+    """Issue 49: `curate select RUN` on a folder made by `curate sfm` said only "--out is required for a pose
+    file"; it now says what the folder holds and the two commands that go on from it."""
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    run_dir = tmp_path / "r"
+    run("sfm", "--poses", str(sample / "transforms.json"), str(sample / "images"), "--out", str(run_dir),
+        "--triangulate", "off")
+    p = run("select", str(run_dir), "--budget", "10", check=False)
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
+    assert "cameras of `curate sfm`" in p.stderr and f"curate select {run_dir} --out DIR" in p.stderr
+    assert f"curate run PHOTOS --out {run_dir}" in p.stderr

@@ -176,3 +176,27 @@ def test_later_stages_do_not_import_pycolmap():
     r = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+def test_broken_links_in_the_photo_folder_are_listed_with_their_reason(tmp_path):
+    """Issue 49: a dangling link and a link loop among the photos are skipped and listed (the README promises
+    every skipped file with its reason), never dropped without a word; the photos around them are kept."""
+    import os
+    from PIL import Image
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        Image.fromarray(rng.integers(0, 255, (24, 32, 3), np.uint8)).save(folder / f"img_{i}.png")
+    os.symlink(tmp_path / "gone.jpg", folder / "dangling.jpg")
+    os.symlink(folder / "loop_b.jpg", folder / "loop_a.jpg")
+    os.symlink(folder / "loop_a.jpg", folder / "loop_b.jpg")
+    os.symlink(tmp_path / "gone.txt", folder / "notes.txt")
+    recs = {r.rel: r for r in ingest(folder, tmp_path / "work", progress=False)}
+    assert sorted(recs) == ["dangling.jpg", "img_0.png", "img_1.png", "img_2.png", "loop_a.jpg", "loop_b.jpg",
+                            "notes.txt"]
+    assert [recs[f"img_{i}.png"].status for i in range(3)] == ["kept"] * 3
+    assert recs["dangling.jpg"].status == "skipped" and "target is gone" in recs["dangling.jpg"].reason
+    assert "gone.jpg" in recs["dangling.jpg"].reason
+    assert all("link loop" in recs[n].reason and recs[n].status == "skipped" for n in ("loop_a.jpg", "loop_b.jpg"))
+    assert recs["notes.txt"].status == "skipped" and "target is gone" in recs["notes.txt"].reason

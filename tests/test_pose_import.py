@@ -277,3 +277,62 @@ def test_fox_poses_get_points_that_fit_them(tmp_path):
     assert tri["status"] == "done" and tri["n_points"] >= 2000, tri
     assert tri["mean_track_length"] >= 3 and tri["mean_reprojection_error_px"] < 1.5, tri
     assert tri["n_images_with_points"] >= 0.95 * tri["n_images"]
+
+
+@pytest.mark.parametrize("factor, said", [(0.5, "intrinsics scaled by 1/2"), (2.0, "intrinsics scaled by 2")])
+@pytest.mark.parametrize("source", ["transforms.json", "sparse/0"])
+def test_poses_for_another_size_of_the_photos_export_the_photos_cameras(tmp_path, capsys, factor, said, source):
+    """Issue 49: poses written for the full-size images with the photos downscaled (nerfstudio's images_2,
+    images_4), or the reverse: the run says so in one line, and the export's transforms.json and sparse/0
+    describe the photos they name, their size and their intrinsics scaled; another aspect is an error."""
+    from PIL import Image
+    root = tmp_path / "cap"
+    _, cams = capture(root)
+    w, h = int(round(64 * factor)), int(round(48 * factor))
+    for p in (root / "images").iterdir():                  # the photos at another size, same aspect
+        Image.open(p).resize((w, h)).save(p)
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(root / source), "--out", str(run), *FAST]) == 0
+    out = capsys.readouterr().out
+    assert f"poses are for 64x48, photos are {w}x{h}: {said}" in out
+    tj = json.loads((run / "export" / "transforms.json").read_text())
+    for fr in tj["frames"]:
+        W, H = fr.get("w", tj.get("w")), fr.get("h", tj.get("h"))
+        fx = fr.get("fl_x", tj.get("fl_x"))
+        assert (W, H) == (w, h) and fx == pytest.approx(55.0 * factor)
+        with Image.open(run / "export" / fr["file_path"]) as im:
+            assert im.size == (W, H)                        # the cameras match the images they name
+    rec = pycolmap.Reconstruction(str(run / "export" / "sparse" / "0"))
+    for cam in rec.cameras.values():
+        assert (cam.width, cam.height) == (w, h) and cam.focal_length_x == pytest.approx(55.0 * factor)
+    bad = root / "images" / "img_03.png"                    # another aspect: refused, naming the file
+    Image.open(bad).resize((w, w)).save(bad)
+    assert main(["run", str(root / "images"), "--poses", str(root / source), "--out", str(tmp_path / "r2"),
+                 *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "img_03.png" in err and f"{w}x{w}" in err and "another aspect ratio" in err
+
+
+def test_a_transforms_json_without_image_sizes_reads_them_from_the_photos_found_in_the_folder(tmp_path, capsys):
+    """Issue 49: w and h left out of a transforms.json whose file paths do not lead to the photos (they were
+    moved): the photo found by name in the photo folder gives the size; with no photo to read, a one-line
+    error says what to add."""
+    root = tmp_path / "cap"
+    _, cams = capture(root)
+    meta = json.loads((root / "transforms.json").read_text())
+    for k in ("w", "h"):
+        meta.pop(k, None)
+        for fr in meta["frames"]:
+            fr.pop(k, None)
+    for fr in meta["frames"]:
+        fr["file_path"] = "elsewhere/" + Path(fr["file_path"]).name
+    poses = tmp_path / "poses" / "transforms.json"
+    poses.parent.mkdir()
+    poses.write_text(json.dumps(meta))
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(poses), "--out", str(run), *FAST]) == 0
+    res = load_sfm(run)
+    assert len(res.cameras) == 12 and set(res.cameras.width) == {64} and set(res.cameras.height) == {48}
+    assert main(["run", "--poses", str(poses), "--out", str(tmp_path / "r2"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "transforms.json" in err and 'add "w" and "h"' in err

@@ -568,3 +568,36 @@ def test_a_run_folder_of_curate_0_1_is_refused_with_a_clear_message(tmp_path):
         with pytest.raises(runfolder.RunFolderError, match="curate 0.1.*new folder"):
             runfolder.claim(old, adopt=adopt)
     assert sorted(p.name for p in old.rglob("*")) == before
+
+
+def test_a_run_folder_of_another_capture_is_not_replaced_without_force(tmp_path, capsys):
+    """Issue 49: `--out` given a folder that holds a run of another capture (a typo) redid it for the new input
+    and the old run was gone without a word. It is refused, naming what the folder holds; the same capture
+    moved elsewhere (the same photo names, the same pose file) resumes; --force replaces the run."""
+    import shutil
+    from curate.cli import main
+    from test_export import ring, write_photos
+    from curate.core.transforms_json import write_transforms
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    fast = ["--budget", "4", "--no-evaluate", "--res", "8", "--triangulate", "off"]
+    run = tmp_path / "run"
+    assert main(["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--out", str(run),
+                 *fast]) == 0
+    other = tmp_path / "other"
+    cams = ring(12)
+    write_photos(other, cams)
+    write_transforms(other / "transforms.json", cams)
+    stamp = (run / "report.json").read_bytes()
+    capsys.readouterr()
+    assert main(["run", str(other), "--poses", str(other / "transforms.json"), "--out", str(run), *fast]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "holds a run of another capture" in err and str(sample / "images") in err and "--force" in err
+    assert (run / "report.json").read_bytes() == stamp
+    moved = tmp_path / "moved"
+    shutil.copytree(sample, moved)
+    assert main(["run", str(moved / "images"), "--poses", str(moved / "transforms.json"), "--out", str(run),
+                 *fast]) == 0                                      # the same capture, moved: not refused
+    assert json.loads((run / "run.json").read_text())["photos"] == str(moved / "images")
+    assert main(["run", str(other), "--poses", str(other / "transforms.json"), "--out", str(run), *fast,
+                 "--force"]) == 0
+    assert json.loads((run / "run.json").read_text())["photos"] == str(other)

@@ -368,3 +368,12 @@ def test_a_capture_from_one_spot_does_not_forbid_going_nearer_than_it_stood(room
     assert e1.view_margin <= MAX_VIEW_MARGIN_SHARE * e1.look_depth + 1e-12
     feas = Feasibility(occ, g.box_min, g.box_max, fs1.free, e1)
     assert len(feas.draw(np.random.default_rng(0), 50)) == 50
+
+
+def test_add_beyond_what_a_reshoot_can_use_is_refused_naming_the_flag_and_its_bound():
+    """Issue 49: `curate suggest RUN --add 100000` ran without limit; the option is refused (the CLI turns the
+    ValueError into its one-line error), with the bound and why."""
+    from curate.suggest.config import MAX_ADD, SuggestConfig
+    with pytest.raises(ValueError, match=f"--add must be an integer from 1 to {MAX_ADD}, got 100000"):
+        SuggestConfig(add=100000)
+    assert SuggestConfig(add=MAX_ADD).add == MAX_ADD

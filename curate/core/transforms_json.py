@@ -42,8 +42,11 @@ def _image_size(path: Path | None) -> tuple[int, int] | None:
         return im.size
 
 
-def read_transforms(path: str | Path) -> tuple[Cameras, list[str]]:
+def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
     """Read a transforms.json.
+
+    ``photos``: a folder where a frame without ``w``/``h`` finds its image when it is not at its ``file_path``
+    beside the file (by that path in the folder, else by its file name), to read its size from.
 
     Returns:
         cameras: OpenCV c2w cameras, ``names`` = each frame's ``file_path`` as written.
@@ -55,6 +58,8 @@ def read_transforms(path: str | Path) -> tuple[Cameras, list[str]]:
         meta = json.loads(path.read_text())
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:
+        raise ValueError(f"{path}: not a transforms.json: its JSON is nested too deeply to read") from None
     if not isinstance(meta, dict):
         raise ValueError(f"{path}: not a transforms.json (a JSON object with 'frames')")
     frames = meta.get("frames")
@@ -72,9 +77,13 @@ def read_transforms(path: str | Path) -> tuple[Cameras, list[str]]:
             img = _resolve_image(root, fp) if fp else None
             w, h = get("w"), get("h")
             if w is None or h is None:
+                if img is None and photos is not None and fp:     # the photo folder the user gave
+                    img = _resolve_image(Path(photos), fp) or _resolve_image(Path(photos), Path(fp).name)
                 size = _image_size(img)
                 if size is None:
-                    raise ValueError(f"{path}: frame {i} ({fp!r}) has no w/h and its image was not found")
+                    raise ValueError(f"{path}: frame {i} ({fp!r}) has no w and h, and its image was not found to "
+                                     "read them from: add \"w\" and \"h\" (the image size in pixels) to the file, "
+                                     "or give the photo folder")
                 w, h = size
             w, h = float(w), float(h)
             if get("fl_x") is not None:

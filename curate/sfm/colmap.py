@@ -73,7 +73,7 @@ from curate.core.cameras import Cameras, rotation_angle_deg
 from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.native import load as load_pycolmap
 from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap, sfm_dir as _sfm_dir
-from curate.sfm.prep import (choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
+from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
                              takes_not_joined, takes_of, too_few_message, write_outputs)
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 
@@ -850,6 +850,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
         raise RuntimeError(too_few_message(photos, records, videos, out / "images.json"))
     single = choose_camera_mode(cfg, kept)
     matcher = choose_matcher(cfg, kept)
+    check_free_space(out, len(names), matcher, cfg)     # COLMAP aborts the process on a full disk
     db, images = out / "database.db", out / "images"
     stats: dict = {"n_input_files": len(records), "n_kept": len(names), "camera_mode": "single" if single else
                    "per_image", "matcher": matcher, **({"videos": videos} if videos else {})}
@@ -992,6 +993,26 @@ def check_photos(cams: Cameras, originals: list[str], source: Path) -> tuple[lis
     return records, keep
 
 
+def photo_sizes_said(cams: Cameras, records: list[dict]) -> dict | None:
+    """When photos have another size than the one their poses describe (same aspect: poses written for the
+    full-size images, photos downscaled, as nerfstudio's ``images_2``, ``images_4``): ``n`` such photos, the
+    commonest pair of sizes and its factor, and one line saying so (the export's cameras are scaled to the
+    photos: :func:`curate.sfm.io.original_cameras`); None when every photo has its pose's size."""
+    from collections import Counter
+    pairs = Counter((int(cams.width[i]), int(cams.height[i]), int(r["orig_width"]), int(r["orig_height"]))
+                    for i, r in enumerate(records) if r.get("orig_width")
+                    and (int(r["orig_width"]), int(r["orig_height"])) != (int(cams.width[i]), int(cams.height[i])))
+    if not pairs:
+        return None
+    (cw, ch, w, h), _ = pairs.most_common(1)[0]
+    f = w / cw
+    factor = f"1/{1 / f:.3g}" if f < 1 else f"{f:.3g}"
+    n = sum(pairs.values())
+    return {"n": n, "poses": f"{cw}x{ch}", "photos": f"{w}x{h}", "factor": f,
+            "said": f"poses are for {cw}x{ch}, photos are {w}x{h}: intrinsics scaled by {factor}"
+                    + (f" ({n} of {len(cams)} photos)" if n < len(cams) else "")}
+
+
 def _check_photo_folder(photos: Path, source: Path) -> None:
     """The photo folder given with poses must be a folder: a video's frames (or one photo) have no names
     the poses could refer to."""
@@ -1093,11 +1114,14 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
     if photos is not None:
         _check_photo_folder(photos, source)
         refuse_inside(out, photos)
-    poses = read_poses(source)
+    poses = read_poses(source, photos)
     idx, originals, left, match = _pose_photos(cfg, poses, source, photos)
     cams = poses.cameras[idx]
     records, keep = check_photos(cams, originals, source)
     cams, originals = cams[keep], [originals[i] for i in keep]
+    rescaled = photo_sizes_said(cams, [records[i] for i in keep])
+    if rescaled:
+        logger.warning("sfm import: %s", rescaled["said"])
     has_points = poses.points is not None and len(poses.points) > 0
     readable = sum(Path(o).is_absolute() for o in originals)
     triangulate = cfg.triangulate == "auto" and not has_points and readable >= 2
@@ -1110,6 +1134,8 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
     stats: dict = {"n_poses": len(poses.cameras)}
     if match is not None:
         stats["pose_match"] = match
+    if rescaled:
+        stats["rescaled"] = rescaled
     if has_points:
         if len(cams) < len(poses.cameras):  # the model of the photos kept, with the points they see
             write_subset_model(poses.reconstruction, list(cams.names), sparse, min_track=2)

@@ -155,6 +155,9 @@ class SfmConfig:
                 raise ValueError(f"sfm: {k.replace('_', ' ')} must be one of {ok}, got {getattr(self, k)!r}")
         if self.max_image_size < 64:
             raise ValueError(f"--max-size must be >= 64 (pixels), got {self.max_image_size}")
+        if not (isinstance(self.sift_peak_threshold, (int, float)) and 0 < self.sift_peak_threshold < 1):
+            raise ValueError(f"--sift-peak-threshold must be a number in (0, 1) (COLMAP's default 0.0067; lower "
+                             f"finds more features), got {self.sift_peak_threshold!r}")
         if not self.max_part_disagreement_deg > 0:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1) or not (0 <= self.min_global_gain <= 1):

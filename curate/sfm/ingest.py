@@ -30,6 +30,7 @@ only ever read.
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -78,7 +79,8 @@ def find_images(folder: str | Path, recursive: bool = False) -> tuple[list[Path]
     """Files of ``folder`` (sorted by relative path), split into (image-like, other).
 
     Hidden files (name starting with ``.``) are ignored; directories are entered only
-    when ``recursive``.
+    when ``recursive``. A link that leads to no file (its target gone, or a loop) is kept, so that it is
+    skipped and listed with its reason like any unreadable file, never dropped without a word.
     """
     folder = Path(folder)
     if folder.is_file():   # one video (or photo) given instead of a folder
@@ -86,7 +88,7 @@ def find_images(folder: str | Path, recursive: bool = False) -> tuple[list[Path]
     if not folder.is_dir():
         raise FileNotFoundError(f"photo folder {folder} does not exist")
     it = folder.rglob("*") if recursive else folder.iterdir()
-    files = sorted((p for p in it if p.is_file() and not any(
+    files = sorted((p for p in it if (p.is_file() or p.is_symlink() and not p.is_dir()) and not any(
         part.startswith(".") for part in p.relative_to(folder).parts)),
         key=lambda p: p.relative_to(folder).as_posix())
     imgs = [p for p in files if p.suffix.lower() in IMAGE_EXTS]
@@ -156,6 +158,20 @@ def decode_upright(im, size: tuple[int, int] | None = None) -> np.ndarray:
     return rgb
 
 
+def broken_said(path: Path) -> str:
+    """Why ``path`` is not a file, for the list of skipped files: missing, a link whose target is gone, a link
+    loop."""
+    import errno
+    if not path.is_symlink():
+        return "missing file"
+    try:
+        path.stat()
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            return "missing file (a link that leads back to itself: a link loop)"
+    return f"missing file (a link whose target is gone: {os.readlink(path)})"
+
+
 def probe_image(path: str | Path) -> tuple[int, int]:
     """(width, height) of a photo as curate sees it (upright), after checking that it decodes
     whole (at a reduced scale for a JPEG: fast). ValueError with the reason otherwise: missing
@@ -163,7 +179,7 @@ def probe_image(path: str | Path) -> tuple[int, int]:
     from PIL import Image
     path = Path(path)
     if not path.is_file():
-        raise ValueError("missing file" + (" (a link whose target is gone)" if path.is_symlink() else ""))
+        raise ValueError(broken_said(path))
     if path.suffix.lower() in RAW_EXTS:
         rgb, _ = read_image(path)
         return int(rgb.shape[1]), int(rgb.shape[0])
@@ -359,6 +375,8 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
     folder = source_root(path)
     out_dir.mkdir(parents=True, exist_ok=True)
     imgs, other = find_images(path, recursive)
+    broken = [p for p in imgs + other if not p.is_file()]          # links to nothing: listed, never dropped
+    imgs, other = [p for p in imgs if p.is_file()], [p for p in other if p.is_file()]
     videos = [p for p in other if p.suffix.lower() in VIDEO_EXTS]
     other = [p for p in other if p.suffix.lower() not in VIDEO_EXTS]
     video = video or VideoConfig()
@@ -368,6 +386,8 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
     tags, prefixes = unique_names([rel_of[p] for p in imgs], [rel_of[p] for p in videos])
     records = [PhotoRecord(original=str(p.resolve()), rel=p.relative_to(folder).as_posix(), status="skipped",
                            reason=f"unsupported extension {p.suffix!r}") for p in other]
+    records += [PhotoRecord(original=str(p.absolute()), rel=p.relative_to(folder).as_posix(), status="skipped",
+                            reason=broken_said(p)) for p in broken]
     for v in videos:
         rel = rel_of[v]
         try:

@@ -123,16 +123,20 @@ def original_cameras(cams: Cameras, records: dict) -> tuple[Cameras, list[str]]:
     """The same cameras for the ORIGINAL photos (full resolution, upright): cameras + absolute paths.
 
     Intrinsics are scaled per axis by the ratio of original to working size recorded
-    by ingest; for an import stage (no working copies) they are returned unchanged.
+    by ingest; for an import stage (no working copies), by the ratio of the photo's own size (recorded by
+    :func:`curate.sfm.colmap.check_photos`) to the size the poses describe: poses written for 1080x1920 and
+    photos at 180x320 (nerfstudio's ``images_4``) export cameras of the 180x320 photos.
     """
     by_name = {r["working"]: r for r in records.get("photos", []) if r.get("working")}
     imported = {r["rel"]: r for r in records.get("photos", []) if not r.get("working") and r.get("rel")}
     fx, fy, cx, cy, w, h, paths = [], [], [], [], [], [], []
     for i, n in enumerate(cams.names):
         r = by_name.get(n)
-        if r is None and n in imported:  # an import: same intrinsics, the original's absolute path
-            r = {"scale_x": 1.0, "scale_y": 1.0, "orig_width": cams.width[i], "orig_height": cams.height[i],
-                 "original": imported[n]["original"]}
+        if r is None and n in imported:  # an import: the pose's intrinsics, scaled to its photo's own size
+            rec = imported[n]
+            ow, oh = rec.get("orig_width") or cams.width[i], rec.get("orig_height") or cams.height[i]
+            r = {"scale_x": cams.width[i] / ow, "scale_y": cams.height[i] / oh, "orig_width": ow, "orig_height": oh,
+                 "original": rec["original"]}
         sx = 1.0 / r["scale_x"] if r else 1.0
         sy = 1.0 / r["scale_y"] if r else 1.0
         fx.append(cams.fx[i] * sx)

@@ -85,6 +85,8 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
         raise ValueError(f"{source}: not a readable file ({e})") from None
     except json.JSONDecodeError as e:
         raise ValueError(f"{source}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:
+        raise ValueError(f"{source}: not a pose file: its JSON is nested too deeply to read") from None
     try:
         if isinstance(data, dict) and "convention" in data:
             cams = Cameras.from_dict(data)
@@ -94,7 +96,7 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
             base = Path(photos) if photos is not None else (default_photos(source) or source.parent)
             return Poses(cams, [str((base / n).resolve()) if n else n for n in cams.names])
         from curate.core.transforms_json import read_transforms
-        cams, files = read_transforms(source)
+        cams, files = read_transforms(source, photos)
         return Poses(cams, files)
     except (KeyError, TypeError, IndexError) as e:
         raise ValueError(f"{source}: not a transforms.json or cameras.json ({type(e).__name__}: {e})") from None

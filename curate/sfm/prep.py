@@ -259,3 +259,31 @@ def write_outputs(out: Path, cams: Cameras, xyz, rgb, err, records: list, file_p
     return {"n_registered": summary["registered"], "registered_fraction": summary["registered"] / n_kept,
             "n_points": int(0 if xyz is None else len(xyz)),
             "unregistered": [r["rel"] for r in recs if r["status"] == "kept" and not r["registered"]]}
+
+
+def database_bytes(n_images: int, matcher: str, cfg: SfmConfig) -> int:
+    """About how many bytes COLMAP's database of ``n_images`` photos takes, at most: every photo's features
+    (keypoints and 128-byte descriptors) and the matches of the pairs ``matcher`` matches (8 bytes a match, two
+    tables), with room to spare."""
+    per_image = cfg.max_num_features * (128 + 24)
+    if matcher == "exhaustive":
+        pairs = n_images * (n_images - 1) // 2
+    else:
+        pairs = n_images * (cfg.sequential_overlap + 10)
+    return int(1.5 * (n_images * per_image + pairs * 4096 * 16)) + (64 << 20)
+
+
+def check_free_space(folder: Path, n_images: int, matcher: str, cfg: SfmConfig) -> None:
+    """``RuntimeError`` (one line, naming the folder) when its disk has less free space than COLMAP's database
+    will need (:func:`database_bytes`): COLMAP's SQLite cannot say "disk full" but aborts the whole process."""
+    import shutil
+    need = database_bytes(n_images, matcher, cfg)
+    free = shutil.disk_usage(folder).free
+    if free < need:
+        raise RuntimeError(f"not enough free space on the disk of {folder}: SfM of {n_images} photos needs about "
+                           f"{_size(need)} for COLMAP's database, {_size(free)} are free; free some space (or give "
+                           "--out on another disk), then run the same command again")
+
+
+def _size(n: int) -> str:
+    return f"{n / 2**30:.1f} GB" if n >= 2**30 else f"{n / 2**20:.0f} MB"

@@ -221,6 +221,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
             summary += f", {tri['n_points']} points triangulated in {tri['seconds']:.0f}s"
         elif st.get("n_points"):
             summary += f", {st['n_points']} points"
+        if st.get("rescaled"):      # poses written for another size of the same photos: said, and scaled
+            summary += f"; {st['rescaled']['said']}"
         imp = import_warning(run_dir)
         if imp is not None:
             log.warning("sfm: %s", imp)

@@ -13,6 +13,10 @@ NODE_MODES = ("surface", "surface+frontier")
 """``SuggestConfig.nodes`` choices."""
 
 
+MAX_ADD = 200
+"""The most poses ``--add`` may ask for (each one scores ``--candidates`` poses: about a second each)."""
+
+
 @dataclass(frozen=True)
 class SuggestConfig:
     """How ``curate suggest`` proposes new camera poses for a run folder."""
@@ -61,8 +65,10 @@ class SuggestConfig:
     """Seed of the candidate draws (and of the field's training)."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.add, int) or isinstance(self.add, bool) or self.add < 1:
-            raise ValueError(f"--add must be an integer >= 1, got {self.add!r}")
+        if not isinstance(self.add, int) or isinstance(self.add, bool) or not 1 <= self.add <= MAX_ADD:
+            raise ValueError(f"--add must be an integer from 1 to {MAX_ADD}, got {self.add!r} (each pose is placed "
+                             f"by scoring --candidates poses: more than {MAX_ADD} is a new capture, not a re-shoot; "
+                             "shoot the first ones and run curate again)")
         if not isinstance(self.n_candidates, int) or self.n_candidates < 1:
             raise ValueError(f"--candidates must be an integer >= 1, got {self.n_candidates!r}")
         if self.nodes not in NODE_MODES:
