@@ -200,7 +200,9 @@ ENERGY = [Opt("--gamma", "select.energy.gamma", parse=float),
               help="direction bins uniform in cos(theta) instead of theta (the paper's)"),
           Opt("--device", "select.device", parse=str, metavar="DEVICE")]
 GRID = [Opt("--res", "occupancy.res", parse=int),
-        Opt("--box", "box", parse=_box, metavar="X0,Y0,Z0,X1,Y1,Z1")]
+        Opt("--box", "box", parse=_box, metavar="X0,Y0,Z0,X1,Y1,Z1"),
+        Opt("--refine-iters", "refine.iters", parse=int),
+        Opt("--refine-size", "refine.max_side", parse=int, metavar="PX")]
 TRAIN = [Opt("--holdout-every", "evaluate.holdout_every", parse=int),
          Opt("--iters", "evaluate.iters", parse=int),
          Opt("--eval-size", "evaluate.max_side", parse=int)]

@@ -88,6 +88,8 @@ def check_same_capture(run_dir: Path, photos, poses) -> None:
     ok_photos = same_path(rec.get("photos"), photos) or (photos and rec.get("photos") and
                                                          moved_photos(rec["photos"], photos))
     ok_poses = same_path(rec.get("poses"), poses) or (poses and rec.get("poses") and same_poses(rec["poses"], poses))
+    # the same poses with the photos named once and found beside the poses the other time: the same capture
+    ok_photos = ok_photos or bool(ok_poses and poses and (photos is None or rec.get("photos") is None))
     if not (ok_photos and ok_poses):
         held = " and ".join(f"{k} {rec[k]}" for k in ("photos", "poses") if rec.get(k)) or "another capture"
         raise ValueError(f"{run_dir} holds a run of another capture ({held}): give another --out, or --force to "

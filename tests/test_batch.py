@@ -16,7 +16,8 @@ from curate.batch.runner import find_poses, plan, read_list
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8", "--folds", "2"]
+FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8", "--folds", "2", "--refine-iters", "40",
+        "--refine-size", "32"]
 
 
 def make_pool(dst: Path, frames: range) -> Path:

@@ -20,7 +20,7 @@ from curate.core.stage import config_dict, config_from_dict
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
 FAST = ["--iters", "50", "--eval-size", "48", "--random-seeds", "2", "--workers", "1", "--res", "16",
-        "--budget", "12", "--triangulate", "off", "--folds", "2"]
+        "--budget", "12", "--triangulate", "off", "--folds", "2", "--refine-iters", "60", "--refine-size", "48"]
 
 
 def _cmd(out: Path, *extra: str) -> list[str]:
@@ -67,13 +67,15 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     rep = json.loads((run / "report.json").read_text())
     assert set(rep["methods"]) == {"selection", "random", "fvs", "stride", "all"}
     assert rep["methods"]["random"]["units"] == 2 * 2          # two draws in each of the two folds
-    n_hold = len(range(0, 160, 14))
+    n_hold0 = len(range(0, 160, 14))                                # fold 0 holds out every 14th from 0,
+    n_hold = n_hold0 + len(range(7, 160, 14))                       # fold 1 every 14th from 7
     for m in rep["methods"].values():
-        assert len(m["per_view"]) == n_hold
+        assert len(m["per_view"]) == n_hold                         # every held-out view of both folds
         assert all(np.isfinite(v["psnr"]) for v in m["per_view"])
-    assert rep["estimate"]["n_holdout"] == n_hold and rep["estimate"]["n_pool"] == 160 - n_hold
+        assert {v["fold"] for v in m["per_view"]} == {0, 7}
+    assert rep["estimate"]["n_holdout"] == n_hold and rep["estimate"]["n_pool"] == 160 - n_hold0
     assert len(rep["selection"]["chosen"]) == 12 and rep["n_candidates"] == 160   # chosen among every photo
-    assert rep["estimate"]["budget"] == round(12 * (160 - n_hold) / 160)
+    assert rep["estimate"]["budget"] == round(12 * (160 - n_hold0) / 160)
     assert {"lo", "hi", "mean"} <= set(rep["paired"]["selection-random"])
     assert (run / "report.html").is_file()
     # export: the chosen photos, linked to the originals

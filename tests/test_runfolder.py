@@ -25,7 +25,7 @@ from curate.core import runfolder as rf
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
 QUICK = ["--budget", "4", "--iters", "20", "--eval-size", "32", "--res", "8", "--random-seeds", "1", "--workers", "1",
-         "--folds", "2"]
+         "--folds", "2", "--refine-iters", "20", "--refine-size", "32"]
 
 
 def _env() -> dict:
@@ -579,7 +579,7 @@ def test_a_run_folder_of_another_capture_is_not_replaced_without_force(tmp_path,
     from test_export import ring, write_photos
     from curate.core.transforms_json import write_transforms
     sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
-    fast = ["--budget", "4", "--no-evaluate", "--res", "8", "--triangulate", "off"]
+    fast = ["--budget", "4", "--no-evaluate", "--res", "8", "--triangulate", "off", "--refine-iters", "20"]
     run = tmp_path / "run"
     assert main(["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--out", str(run),
                  *fast]) == 0
@@ -598,6 +598,10 @@ def test_a_run_folder_of_another_capture_is_not_replaced_without_force(tmp_path,
     assert main(["run", str(moved / "images"), "--poses", str(moved / "transforms.json"), "--out", str(run),
                  *fast]) == 0                                      # the same capture, moved: not refused
     assert json.loads((run / "run.json").read_text())["photos"] == str(moved / "images")
+    # the same poses with the photos found beside them (no photo folder named) is the same capture too;
+    # another pose file without photos is not
+    assert main(["run", "--poses", str(moved / "transforms.json"), "--out", str(run), *fast]) == 0
+    assert main(["run", "--poses", str(other / "transforms.json"), "--out", str(run), *fast]) == 2
     assert main(["run", str(other), "--poses", str(other / "transforms.json"), "--out", str(run), *fast,
                  "--force"]) == 0
     assert json.loads((run / "run.json").read_text())["photos"] == str(other)
