@@ -27,8 +27,10 @@ __all__ = ["RunConfig", "run", "save_run_config"]
 def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> None:
     """``RUN/run.json``: the resolved options (the base of every stage re-run), the inputs and the versions."""
     from curate.core.stage import config_dict, versions, write_json_atomic
-    write_json_atomic(Path(run_dir) / "run.json", {"config": config_dict(cfg), "photos": str(photos) if photos else None,
-                                                   "poses": str(poses) if poses else None, "versions": versions()})
+    def absolute(p):   # as given, made absolute: a stage re-run from another directory finds the same files
+        return str(Path(p).absolute()) if p else None
+    write_json_atomic(Path(run_dir) / "run.json", {"config": config_dict(cfg), "photos": absolute(photos),
+                                                   "poses": absolute(poses), "versions": versions()})
 
 
 STARTS = {"sfm": "photos to cameras", "occupancy": "where the scene is",
@@ -59,7 +61,8 @@ def check_same_capture(run_dir: Path, photos, poses) -> None:
     """ValueError when ``run_dir`` holds a run of another capture (its ``run.json`` names other photos or
     poses): a typo in ``--out`` must not replace that run without a word; ``--force`` does, on purpose. The
     same photos moved to another folder (the same file names), or the same pose file's content elsewhere, are
-    the same capture: the run resumes."""
+    the same capture: not refused (the stages that read the moved files are redone). ``run.json`` records the
+    inputs as absolute paths (:func:`save_run_config`), so a run resumed from another directory is the same."""
     import json
     run_dir = Path(run_dir)
     try:

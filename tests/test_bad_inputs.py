@@ -358,3 +358,15 @@ def test_a_full_disk_while_writing_is_a_one_line_error_naming_the_file(tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "the disk is full" in err[0] and str(run / "report.json") in err[0]
     assert (run / "report.json").read_text() == before and not list(run.glob("report.json.tmp*"))
+
+
+def test_the_databases_space_is_estimated_at_its_real_size_not_far_beyond():
+    """The free-space check must not refuse a run on a roomy disk: the estimate is above the real databases of
+    ../shared's sets and within a few times them (the drone flight, 75 photos matched exhaustively: 96 MB;
+    the office walk, 373 sequentially: 77 MB)."""
+    from curate.sfm.colmap import SfmConfig
+    from curate.sfm.prep import database_bytes
+    cfg = SfmConfig()
+    assert 96e6 < database_bytes(75, "exhaustive", cfg) < 5 * 96e6      # photos with features near the cap
+    assert 77e6 < database_bytes(373, "sequential", cfg) < 2**30        # small frames: fewer features than the cap
+    assert database_bytes(1000, "exhaustive", cfg) < 10 * 2**30          # was 49 GB

@@ -15,7 +15,7 @@ from curate.core.transforms_json import read_transforms, write_transforms
 from test_ingest import sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.export.subset import ExportConfig, export_names, export_subset  # noqa: E402
+from curate.export.subset import ExportConfig, check_unchanged, export_names, export_subset  # noqa: E402
 from curate.sfm.colmap import SfmConfig, import_poses, read_cameras  # noqa: E402
 
 
@@ -220,6 +220,29 @@ def test_a_file_the_user_changed_in_the_export_is_never_removed(import_run, firs
     with pytest.raises(ValueError, match="transforms.json was changed"):
         export_subset(run, list(cams.names[:2]), out, mode="copy")
     assert tj.is_file() and (out / "images" / Path(cams.names[0]).name).is_file()
+
+
+def test_copies_are_checked_against_what_was_written_and_a_users_text_model_stays(import_run, tmp_path):
+    """A copied export whose originals moved (the photo folder moved; the run resumes there) is not taken for
+    an edit: each copy is checked against its own checksum. A text model the user converted into the export's
+    sparse/0 (`colmap model_converter --output_type TXT`) is not curate's and stays through a new export."""
+    import json
+    import shutil
+    cams, src, run = import_run
+    out = export_subset(run, list(cams.names[:4]), tmp_path / "exp", mode="copy")
+    rec = json.loads((out / "export.json").read_text())
+    assert all(f"images/{Path(n).name}" in rec["files"] for n in cams.names[:4])
+    moved = tmp_path / "moved_photos"
+    shutil.move(str(src), str(moved))                                  # the originals are elsewhere now
+    check_unchanged(out)                                               # no edit: nothing said
+    (out / "sparse" / "0" / "points3D.txt").write_text("# the user's\n")
+    shutil.move(str(moved), str(src))
+    export_subset(run, list(cams.names[1:5]), out, mode="copy")
+    assert (out / "sparse" / "0" / "points3D.txt").read_text() == "# the user's\n"
+    img = out / "images" / Path(cams.names[2]).name
+    img.write_bytes(b"edited by the user")
+    with pytest.raises(ValueError, match=f"{img.name} was changed since curate exported it"):
+        check_unchanged(out)
 
 
 @pytest.mark.slow

@@ -98,6 +98,27 @@ def test_a_small_capture_plans_no_fold_that_holds_out_nothing():
     assert planned_folds(EvalConfig(folds=20), 300) == 14
     assert looks(14, adaptive=False) == [14] and look_level(False) == 0.95
     assert looks(2, adaptive=True) == [2] and looks(5, adaptive=True) == [4, 5]
+    assert look_level(True, 14) == 1 - 0.05 / LOOKS and look_level(True, 3) == 0.95   # one look: 95%
+    for n in range(1, 15):   # fewer photos than --holdout-every: only offsets that hold out a photo, in order
+        o = fold_order(14, n)
+        assert sorted(o) == list(range(n)) and o == [x for x in fold_order(14) if x < n]
+        assert len(o) == planned_folds(EvalConfig(), n)
+
+
+def test_one_held_out_view_gives_no_infinite_figure():
+    """One fold of one held-out view: its interval is infinite; summary.json gets None, never Infinity."""
+    import json
+    from curate.evaluate.folds import summarize
+    from curate.evaluate.units import Unit
+    units = [Unit(f"f00_{m}", m, None, [1, 2], 0) for m in ("selection", "random", "all")]
+    fold = Fold(0, [0], [1, 2], 2, "path", [1, 2], units)
+    res = {f"f00_{m}": {"n_train": 2, "psnr": v, "per_view": [{"name": "a.jpg", "psnr": v, "ssim": 0.5}]}
+           for m, v in (("selection", 21.0), ("random", 20.0), ("all", 22.0))}
+    methods, paired, gap = summarize(res, [fold], 0.95, 0.3)
+    p = paired["selection-random"]
+    assert p["mean"] == 1.0 and p["lo"] is None and p["hi"] is None and p["decision"] == "undecided"
+    json.dumps(paired, allow_nan=False)
+    assert gap == 0.5
 
 
 @pytest.mark.parametrize("bad", [{"folds": -1}, {"minutes": 0}, {"minutes": float("nan")}, {"margin_db": -0.1},

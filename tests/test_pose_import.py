@@ -336,3 +336,18 @@ def test_a_transforms_json_without_image_sizes_reads_them_from_the_photos_found_
     assert main(["run", "--poses", str(poses), "--out", str(tmp_path / "r2"), *FAST]) == 2
     err = one_line_error(capsys)
     assert "transforms.json" in err and 'add "w" and "h"' in err
+
+
+def test_a_link_loop_in_the_photo_folder_does_not_stop_a_pose_import(tmp_path):
+    """A link loop among the photos (read by no pose) raised Python's 'Symlink loop' while the poses' photos
+    were looked up: the import goes on, and the loop is listed among the skipped files."""
+    import os
+    cap, _ = capture(tmp_path / "cap")
+    os.symlink(cap / "images" / "loop_b.jpg", cap / "images" / "loop_a.jpg")
+    os.symlink(cap / "images" / "loop_a.jpg", cap / "images" / "loop_b.jpg")
+    (cap / "images" / "gone.jpg").symlink_to(tmp_path / "nowhere.jpg")
+    m = match_photos([f"images/img_{i:02d}.png" for i in range(12)], [""] * 12, cap / "images")
+    assert all(f is not None for f in m.files)
+    run = tmp_path / "run"
+    assert main(["run", str(cap / "images"), "--poses", str(cap / "transforms.json"), "--out", str(run), *FAST]) == 0
+    assert len(load_sfm(run).cameras) == 12

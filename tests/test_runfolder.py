@@ -605,3 +605,21 @@ def test_a_run_folder_of_another_capture_is_not_replaced_without_force(tmp_path,
     assert main(["run", str(other), "--poses", str(other / "transforms.json"), "--out", str(run), *fast,
                  "--force"]) == 0
     assert json.loads((run / "run.json").read_text())["photos"] == str(other)
+
+
+def test_run_json_records_absolute_inputs_so_another_directory_is_the_same_capture(tmp_path, monkeypatch):
+    """Relative inputs were recorded as typed: the same capture run again from another directory was refused as
+    another one (and a stage re-run looked for the photos in the wrong place)."""
+    from curate.cli import main
+    from test_export import ring, write_photos
+    from curate.core.transforms_json import write_transforms
+    cap = tmp_path / "cap"
+    write_photos(cap, ring(12))
+    write_transforms(cap / "transforms.json", ring(12))
+    fast = ["--budget", "4", "--no-evaluate", "--res", "8", "--triangulate", "off", "--method", "medoids"]
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "cap", "--poses", "cap/transforms.json", "--out", "run", *fast]) == 0
+    rec = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert rec["photos"] == str(cap) and rec["poses"] == str(cap / "transforms.json")
+    monkeypatch.chdir(cap)
+    assert main(["run", ".", "--poses", "transforms.json", "--out", str(tmp_path / "run"), *fast]) == 0

@@ -54,17 +54,51 @@ def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, cod
     assert p.returncode == code and err.strip() == f"curate test: {word}", err
 
 
+def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
+    """`nohup curate run ...`: SIGHUP is ignored when curate starts, and closing the terminal must not stop the
+    run, before or after pycolmap's import replaced the handlers; SIGTERM still stops it."""
+    prog = ("import signal, sys, time\n"
+            "signal.signal(signal.SIGHUP, signal.SIG_IGN)\n"            # what nohup does before exec
+            "from curate.core import signals\n"
+            "from curate.sfm.native import load\n"
+            "signals.install('curate test')\n"
+            "load()\n"
+            "try:\n"
+            "    print('ready', flush=True)\n"
+            "    sys.stdin.readline()\n"
+            "    print('still running', flush=True)\n"
+            "    time.sleep(60)\n"
+            "except KeyboardInterrupt as e:\n"
+            "    signals.unwound(); w, c = signals.said(e); print(f'curate test: {w}', file=sys.stderr); sys.exit(c)\n")
+    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "ready"
+    p.send_signal(signal.SIGHUP)
+    time.sleep(0.5)
+    p.stdin.write("\n")
+    p.stdin.flush()
+    assert p.stdout.readline().strip() == "still running"
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 143 and err.strip() == "curate test: terminated", err
+
+
 def test_a_signal_during_native_work_ends_the_process_after_the_grace(tmp_path):
     """The main thread stuck in a call that does not return (as COLMAP's mapping): the watcher ends the
     process within the grace, with the line, and the run folder's lock released."""
     run = tmp_path / "run"
-    prog = ("import signal, threading\n"
+    prog = ("import os, signal, sys\n"
             "from curate.core import runfolder, signals\n"
             "signals.install('curate test')\n"
-            f"with runfolder.claimed({str(run)!r}):\n"
-            "    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})\n"   # as in a native call that does
-            "    print('ready', flush=True)\n"                                   # not return: Python's handler
-            "    threading.Event().wait()\n")                                    # never gets to run
+            "r, w = os.pipe()\n"
+            "try:\n"
+            f"    with runfolder.claimed({str(run)!r}):\n"
+            "        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})\n"   # as in a native call that does
+            "        print('ready', flush=True)\n"                                   # not return: Python's handler
+            "        os.read(r, 1)\n"                                                # never gets to run
+            "except KeyboardInterrupt as e:\n"      # the signal caught the main thread before it blocked: the same
+            "    signals.unwound(); c = signals.said(e)\n"
+            "    print(f'curate test: {c[0]}', file=sys.stderr); sys.exit(c[1])\n")
     p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True)
     assert p.stdout.readline().strip() == "ready"

@@ -26,10 +26,13 @@ import threading
 GRACE_S = 3.0
 """Seconds the main thread has to unwind after a signal before the watcher ends the process."""
 
-EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 129}
+_HUP = getattr(signal, "SIGHUP", None)     # not on Windows
+
+EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143, **({_HUP: 129} if _HUP is not None else {})}
 """Exit status by signal (128 + its number, as a shell reports a process it killed)."""
 
-WORD = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated (hang-up)"}
+WORD = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated",
+        **({_HUP: "terminated (hang-up)"} if _HUP is not None else {})}
 """What the last line says, by signal."""
 
 
@@ -41,7 +44,7 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
-_state: dict = {"command": "curate", "pipe": None, "done": threading.Event(), "installed": False}
+_state: dict = {"command": "curate", "pipe": None, "done": threading.Event(), "installed": False, "ignored": None}
 
 
 def _raise(signum, frame) -> None:
@@ -53,13 +56,16 @@ def _raise(signum, frame) -> None:
 def install(command: str | None = None) -> None:
     """Handle SIGINT, SIGTERM and SIGHUP as described above (the main thread only; elsewhere nothing).
     ``command``: what the last line names ("curate run"). Calling it again re-installs the handlers (after an
-    import that replaced them) and keeps the watcher."""
+    import that replaced them) and keeps the watcher. A signal ignored when curate started stays ignored
+    (``nohup curate run ...``: closing the terminal does not stop the run; SIGINT of a background job)."""
     if threading.current_thread() is not threading.main_thread():
         return
     if command:
         _state["command"] = command
+    if _state["ignored"] is None:
+        _state["ignored"] = {s for s in EXIT if signal.getsignal(s) is signal.SIG_IGN}
     for s in EXIT:
-        signal.signal(s, _raise)
+        signal.signal(s, signal.SIG_IGN if s in _state["ignored"] else _raise)
     if _state["pipe"] is None:
         r, w = os.pipe()
         os.set_blocking(w, False)

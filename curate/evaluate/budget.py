@@ -48,15 +48,17 @@ def key_for(cfg: "RunConfig", run_dir: Path) -> str:
 
 def measured_budget(cfg: "RunConfig", run_dir: Path) -> dict | None:
     """``RUN/budget/budget.json`` when it was measured for these options on this scene (its key is
-    :func:`key_for`'s), else None: the select stage then uses the law."""
+    :func:`key_for`'s) and the curve gave a budget, else None: the select stage then uses the law."""
     from curate.core.stage import read_stage
     rec = read_stage(Path(run_dir) / "budget")
     if not rec or rec.get("key") != key_for(cfg, run_dir):
         return None
     try:
-        return json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
+        out = json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
     except (OSError, ValueError):
         return None
+    chk = out.get("check") or {}
+    return out if chk.get("budget") is not None or chk.get("high") is not None else None   # no curve: the law
 
 
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
@@ -87,7 +89,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     nodes = grid.nodes()
     index = build_pair_index(cams, nodes, cfg.select.energy.bins, device=cfg.select.device)
     law = choose_for_pool(cams, nodes, index, cfg.budget_tolerance)
-    order = fold_order(ev.holdout_every)[:min(FOLDS, ev.holdout_every, len(cams))]
+    order = fold_order(ev.holdout_every, len(cams))[:FOLDS]
     sfm_key = current_key(run_dir, "sfm") or ""
 
     def keyed(u, f):   # as the evaluation keys its units: a shared one ('all') is trained once

@@ -39,9 +39,10 @@ offsets 0, 7, 3, 10): each samples the whole capture, so their means agree close
 interval of a few tenths of a dB on a real walk (docs/evaluation.md)."""
 
 
-def fold_order(every: int) -> list[int]:
+def fold_order(every: int, n: int | None = None) -> list[int]:
     """The offsets ``0 .. every - 1`` in the order folds are trained: each next one the farthest, around the
-    circle of offsets, from those taken (ties: the lowest), e.g. 0, 7, 3, 10, 1, 5, 8, 12, ... for 14."""
+    circle of offsets, from those taken (ties: the lowest), e.g. 0, 7, 3, 10, 1, 5, 8, 12, ... for 14. With
+    ``n`` (the photos), only the offsets that hold out a photo (``< n``), in the same order."""
     every = int(every)
     if every < 1:
         return []
@@ -50,7 +51,7 @@ def fold_order(every: int) -> list[int]:
         left = [o for o in range(every) if o not in order]
         dist = [min(min(abs(o - t), every - abs(o - t)) for t in order) for o in left]
         order.append(left[int(np.argmax(dist))])
-    return order
+    return order if n is None else [o for o in order if o < n]
 
 
 def planned_folds(cfg: EvalConfig, n_registered: int) -> int:
@@ -69,10 +70,12 @@ def looks(n_folds: int, adaptive: bool) -> list[int]:
     return [FIRST_LOOK, n_folds]
 
 
-def look_level(adaptive: bool) -> float:
-    """The confidence level of each look's interval: 95% for one look, ``1 - 0.05 / LOOKS`` when the
-    evaluation may stop at an earlier look."""
-    return 1 - 0.05 / LOOKS if adaptive else 0.95
+def look_level(adaptive: bool, n_folds: int | None = None) -> float:
+    """The confidence level of each look's interval: ``1 - 0.05 / LOOKS`` when the evaluation may stop at an
+    earlier look (``adaptive`` with more than :data:`FIRST_LOOK` folds planned; ``n_folds`` None: assume so),
+    else 95% (one look)."""
+    many = adaptive and (n_folds is None or len(looks(n_folds, True)) > 1)
+    return 1 - 0.05 / LOOKS if many else 0.95
 
 
 @dataclass
@@ -204,7 +207,9 @@ def summarize(results: dict, folds: list[Fold], level: float, margin: float) -> 
         diffs = [np.array([sel[c]["psnr"] - other[c]["psnr"] for c in f.holdout if c in sel and c in other])
                  for f in folds]
         p = folds_paired(diffs, level)
-        paired[f"selection-{r}"] = {**p, "decision": decision(p, margin), "margin": margin}
+        if not p["n"]:
+            continue
+        paired[f"selection-{r}"] = {**_finite_or_none(p), "decision": decision(p, margin), "margin": margin}
     gap = None
     if all(m in methods for m in ("selection", "random", "all")):
         rnd, al = per_view(results, folds, "random"), per_view(results, folds, "all")
@@ -213,6 +218,12 @@ def summarize(results: dict, folds: list[Fold], level: float, margin: float) -> 
         if a - r_ > 1e-6:
             gap = (s - r_) / (a - r_)
     return methods, paired, gap
+
+
+def _finite_or_none(p: dict) -> dict:
+    """``p`` with its non-finite figures (the infinite interval of one held-out view) as None: no NaN or
+    Infinity reaches summary.json."""
+    return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in p.items()}
 
 
 def decided(paired: dict) -> bool:
@@ -265,7 +276,9 @@ def curve_points(results: dict, folds: list[Fold]) -> list[dict]:
                 by_rank.setdefault(i, []).append((len(u.subset), d))
     out = []
     for i in sorted(by_rank):
-        p = folds_paired([d for _, d in by_rank[i]])
+        p = _finite_or_none(folds_paired([d for _, d in by_rank[i]]))
+        if p["mean"] is None:
+            continue
         out.append({"k": int(round(np.mean([k for k, _ in by_rank[i]]))), "loss": p["mean"], "lo": p["lo"],
                     "hi": p["hi"], "n": p["n"]})
     return out

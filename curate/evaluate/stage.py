@@ -95,11 +95,11 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     n = len(cams)
     grid = load_node_grid(run_dir)
     ordered = "stride" in ev.methods and in_capture_order(cams, grid.nodes())
-    order = fold_order(ev.holdout_every)[:planned_folds(ev, n)]
+    order = fold_order(ev.holdout_every, n)[:planned_folds(ev, n)]
     if not order:
         raise ValueError(f"no photo to hold out from {n} registered photos: register more photos")
     adaptive = ev.folds == 0
-    look_at, level = looks(len(order), adaptive), look_level(adaptive)
+    look_at, level = looks(len(order), adaptive), look_level(adaptive, len(order))
     sfm_key = current_key(run_dir, "sfm") or ""
 
     def make_fold(offset: int):
@@ -114,7 +114,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     paths = image_paths(run_dir, list(cams.names), sfm.records)
     folds, res, stopped = run_folds(run_dir, ev, make_fold, order, look_at, stop_at, eval_cameras(cams, ev.max_side),
                                     paths, default_box(cams), keyed, adaptive, executor=executor)
-    if stopped == "all folds":
+    if stopped == "all folds" or (stopped == "decided" and not adaptive):   # --folds N: all N ran, as asked
         stopped = "every photo" if len(order) == min(ev.holdout_every, n) else "folds asked"
     methods, paired, gap = summarize(res, folds, level, ev.margin_db)
     seconds = time.perf_counter() - t0

@@ -88,7 +88,9 @@ def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
 
 
 _WRITES = ("images", "sparse", "transforms.json", "images.txt", "export.json")
-_MODEL_FILES = tuple(f"{n}.{e}" for n in ("cameras", "images", "points3D", "rigs", "frames") for e in ("bin", "txt"))
+_MODEL_FILES = tuple(f"{n}.bin" for n in ("cameras", "images", "points3D", "rigs", "frames"))
+"""What an export before ``files`` was recorded (curate 0.2) may have written in ``sparse/0`` (binary only: a
+``.txt`` model there is the user's, from ``colmap model_converter``)."""
 
 
 def _sha256(p: Path) -> str:
@@ -103,7 +105,8 @@ def _sha256(p: Path) -> str:
 def check_unchanged(out: str | Path) -> None:
     """``ValueError`` naming the first file of the export in ``out`` that was changed since curate wrote it
     (:func:`_changed`): clearing the export would delete a user's edit. Nothing without a readable
-    ``export.json`` (:func:`_clear` refuses such a folder on its own)."""
+    ``export.json``: there is no record to check against (the run folder's export stage then clears
+    ``RUN/export``, an export cut short; :func:`_clear` refuses a folder given as ``--out``)."""
     out = Path(out)
     try:
         changed = _changed(out, json.loads((out / "export.json").read_text()))
@@ -120,19 +123,21 @@ def _changed_said(path: str, out: Path) -> str:
 
 def _changed(out: Path, prev: dict) -> str | None:
     """The first file an earlier export wrote (per its ``export.json`` ``prev``) that is no longer what it wrote:
-    an image that is not the link to its original any more, nor a copy equal to it (an image editor's save
-    replaces a link by a file), or a file whose checksum changed (``files``, recorded since curate 0.3)."""
+    an image that is not the link to its original any more (an image editor's save replaces a link by a file),
+    or a file whose checksum changed (``files``, recorded since curate 0.3, copied images included; a copy of
+    an earlier export is compared with its original)."""
     import filecmp
+    digests = prev.get("files") or {}
     for it in prev.get("images", []):
         p = out / "images" / it["name"]
         if p.is_symlink():
             if os.readlink(p) != it["original"]:
                 return str(p)
-        elif p.is_file():
+        elif p.is_file() and f"images/{it['name']}" not in digests:   # a copy of 0.2: against its original
             orig = Path(it["original"])
             if not (orig.is_file() and filecmp.cmp(p, orig, shallow=False)):
                 return str(p)
-    for rel, digest in (prev.get("files") or {}).items():
+    for rel, digest in digests.items():             # since 0.3: each file written, copies included
         p = out / rel
         if p.is_file() and not p.is_symlink() and _sha256(p) != digest:
             return str(p)
@@ -169,8 +174,10 @@ def _clear(out: Path) -> None:
         p = out / "images" / n
         if p.is_symlink() or p.is_file():
             p.unlink()
-    for n in _MODEL_FILES:
-        (out / "sparse" / "0" / n).unlink(missing_ok=True)
+    written = prev.get("files")
+    model = [f for f in written if f.startswith("sparse/0/")] if written else [f"sparse/0/{n}" for n in _MODEL_FILES]
+    for f in model:
+        (out / f).unlink(missing_ok=True)
     for d in (out / "images", out / "sparse" / "0", out / "sparse"):
         if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
             d.rmdir()
@@ -256,10 +263,13 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     (out / "images.txt").write_text("".join(r + "\n" for r in rels))
     files = ["transforms.json", "images.txt"] + sorted(f"sparse/0/{p.name}" for p in (out / "sparse" / "0").iterdir()
                                                        if p.is_file())
+    if cfg.mode == "copy":   # a copy is checked against what was written, wherever its original is now
+        files += [f"images/{n}" for n in names]
     manifest = {"config": asdict(cfg), "run_dir": str(run_dir), "n_images": len(chosen), "model": model,
                 "images": [{"camera": c, "name": n, "original": o, "rel": r}
                            for c, n, o, r in zip(chosen, names, originals, rels)],
                 "files": {f: _sha256(out / f) for f in files}}
-    (out / "export.json").write_text(json.dumps(manifest, indent=1))
+    from curate.core.stage import write_json_atomic
+    write_json_atomic(out / "export.json", manifest)      # never half written: it is the record of what to check
     logger.info("export: %d images (%s), %d sparse points -> %s", len(chosen), cfg.mode, model["n_points3D"], out)
     return out

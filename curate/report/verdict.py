@@ -161,7 +161,7 @@ def how_many_said(auto: dict | None, k: int, legacy_check: dict | None = None) -
     tol = f"{auto['tolerance_db']:g} dB"
     err = LAW_ERROR.get(auto.get("kind"), "")
     chk = auto.get("measured")
-    if chk:
+    if chk and (chk.get("budget") is not None or chk.get("high") is not None):
         got = (f"about {chk['budget']} ({chk['low']} to {chk['high']}) photos come within {tol} of all of them"
                if chk.get("budget") is not None else f"{chk.get('high')} or fewer photos come within {tol} of all of them")
         return (f"How many: measured on this capture, {got}; {k} were exported. From the poses alone, the law "

@@ -216,6 +216,8 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
     from curate.sfm.video import VIDEO_EXTS
     folder = Path(folder).resolve()
     imgs, other = find_images(folder, recursive)
+    imgs = [p for p in imgs if p.is_file()]   # a link to nothing (gone, a loop) is no pose's photo: ingest lists it
+    other = [p for p in other if p.is_file()]
     photos = [p.resolve() for p in imgs] + [p.resolve() for p in other if p.suffix.lower() in VIDEO_EXTS]
     by_name: dict[str, list[Path]] = {}
     for p in imgs:
