@@ -83,6 +83,27 @@ def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
     assert p.returncode == 143 and err.strip() == "curate test: terminated", err
 
 
+def test_a_forked_workers_signal_does_not_end_the_parent():
+    """A worker forked from curate's process (multiprocessing's default on Linux) inherited the pipe of curate's
+    watcher: a SIGTERM the worker got (a pool's terminate) reached the parent's watcher, which ended the parent
+    after the grace (the CI run that stopped at 143 half-way through the tests)."""
+    prog = ("import multiprocessing as mp, os, signal, sys, time\n"
+            "from curate.core import signals\n"
+            "signals.install('curate test')\n"
+            "def child():\n"
+            "    try:\n"
+            "        os.kill(os.getpid(), signal.SIGTERM)\n"
+            "        time.sleep(5)\n"
+            "    except KeyboardInterrupt:\n"
+            "        pass\n"
+            "p = mp.get_context('fork').Process(target=child)\n"
+            "p.start(); p.join()\n"
+            "time.sleep(signals.GRACE_S + 1.5)\n"
+            "print('alive', flush=True)\n")
+    res = subprocess.run([sys.executable, "-c", prog], env=_env(), capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and res.stdout.strip() == "alive", (res.returncode, res.stderr)
+
+
 def test_a_signal_during_native_work_ends_the_process_after_the_grace(tmp_path):
     """The main thread stuck in a call that does not return (as COLMAP's mapping): the watcher ends the
     process within the grace, with the line, and the run folder's lock released."""

@@ -75,6 +75,29 @@ def install(command: str | None = None) -> None:
     _state["installed"] = True
 
 
+def _after_fork_in_child() -> None:
+    """A forked child (a multiprocessing worker) must not write its signals into the parent's pipe: the
+    parent's watcher would take a worker's SIGTERM for its own and end the parent. The child starts without
+    curate's watcher; :func:`install` there makes its own."""
+    pipe = _state["pipe"]
+    if pipe is None:
+        return
+    try:
+        signal.set_wakeup_fd(-1)
+    except (ValueError, OSError):
+        pass
+    for fd in pipe:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _state.update(pipe=None, done=threading.Event(), installed=False)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
 def installed() -> bool:
     return _state["installed"]
 
