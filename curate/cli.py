@@ -803,7 +803,6 @@ def _negative_values(argv: list[str]) -> list[str]:
     """``--budget -5%`` as ``--budget=-5%``: argparse takes a value that starts with '-' for a flag unless it is
     a plain number, and says only "expected one argument"; joined, the value reaches the option's own check,
     which says what is wrong with it."""
-    import re
     out: list[str] = []
     for tok in argv:
         if out and re.match(r"^-[\d.]", tok) and out[-1].startswith("--") and "=" not in out[-1] \

@@ -31,23 +31,28 @@ def test_the_words_and_exit_statuses_of_each_signal():
     assert signals.said(signals.Terminated(signal.SIGHUP))[1] == 129
 
 
-@pytest.mark.parametrize("sig, word, code", [(signal.SIGTERM, "terminated", 143),
-                                           (signal.SIGHUP, "terminated (hang-up)", 129)])
-def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, code):
-    """pycolmap's import installs glog's failure handler (a native stack dump on SIGTERM): after curate's
-    loader, the signal ends the process with curate's one line."""
-    prog = ("import os, signal, sys, time\n"
-            "from curate.core import signals\n"
+def _after_pycolmap(body: list[str], first: str = "") -> str:
+    """A program that installs curate's handlers, imports pycolmap through curate's loader, prints 'ready', runs
+    ``body`` (lines) and ends as curate's commands do on a signal: the one line and the signal's exit status."""
+    return ("import signal, sys, time\n" + (first + "\n" if first else "")
+            + "from curate.core import signals\n"
             "from curate.sfm.native import load\n"
             "signals.install('curate test')\n"
             "load()\n"
             "try:\n"
             "    print('ready', flush=True)\n"
-            "    time.sleep(60)\n"
-            "except KeyboardInterrupt as e:\n"
+            + "".join(f"    {line}\n" for line in body)
+            + "except KeyboardInterrupt as e:\n"
             "    signals.unwound(); w, c = signals.said(e); print(f'curate test: {w}', file=sys.stderr); sys.exit(c)\n")
-    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+
+
+@pytest.mark.parametrize("sig, word, code", [(signal.SIGTERM, "terminated", 143),
+                                           (signal.SIGHUP, "terminated (hang-up)", 129)])
+def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, code):
+    """pycolmap's import installs glog's failure handler (a native stack dump on SIGTERM): after curate's
+    loader, the signal ends the process with curate's one line."""
+    p = subprocess.Popen([sys.executable, "-c", _after_pycolmap(["time.sleep(60)"])], env=_env(),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "ready"
     p.send_signal(sig)
     out, err = p.communicate(timeout=30)
@@ -57,19 +62,8 @@ def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, cod
 def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
     """`nohup curate run ...`: SIGHUP is ignored when curate starts, and closing the terminal must not stop the
     run, before or after pycolmap's import replaced the handlers; SIGTERM still stops it."""
-    prog = ("import signal, sys, time\n"
-            "signal.signal(signal.SIGHUP, signal.SIG_IGN)\n"            # what nohup does before exec
-            "from curate.core import signals\n"
-            "from curate.sfm.native import load\n"
-            "signals.install('curate test')\n"
-            "load()\n"
-            "try:\n"
-            "    print('ready', flush=True)\n"
-            "    sys.stdin.readline()\n"
-            "    print('still running', flush=True)\n"
-            "    time.sleep(60)\n"
-            "except KeyboardInterrupt as e:\n"
-            "    signals.unwound(); w, c = signals.said(e); print(f'curate test: {w}', file=sys.stderr); sys.exit(c)\n")
+    prog = _after_pycolmap(["sys.stdin.readline()", "print('still running', flush=True)", "time.sleep(60)"],
+                           first="signal.signal(signal.SIGHUP, signal.SIG_IGN)")   # what nohup does before exec
     p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "ready"
