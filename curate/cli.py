@@ -213,7 +213,22 @@ EVAL = [Opt("--eval-minutes", "evaluate.minutes", parse=float, metavar="MIN"),
         Opt("--workers", "evaluate.workers", parse=int)]
 NO_EVAL = [Opt("--no-evaluate", "run_evaluation", const=False,
                help="skip the trainings: selection, report and export only")]
-EXPORT = [Opt("--export-mode", "export_mode", choices=("link", "copy"))]
+def _factors(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(w) for w in _words(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--downscale wants factors such as 2,4,8, got {text!r}") from None
+
+
+def _export_opts(mode_flag: str) -> list[Opt]:
+    from curate.export.config import MODES, UNDISTORT
+    return [Opt(mode_flag, "export.mode", choices=MODES),
+            Opt("--undistort", "export.undistort", choices=UNDISTORT),
+            Opt("--keep-distorted", "export.keep_distorted"),
+            Opt("--downscale", "export.downscale", parse=_factors, metavar="2,4,8")]
+
+
+EXPORT = _export_opts("--export-mode")
 SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--recursive", "sfm.recursive"),
        Opt("--matcher", "sfm.matcher", choices=MATCHERS),
@@ -259,7 +274,7 @@ SUGGEST = [Opt("--add", "add", parse=int, metavar="K"),
 COMMAND_OPTS: dict[str, list[Opt]] = {
     "run": RUN, "batch": RUN, "sfm": SFM, "score": ENERGY + GRID,
     "select": BUDGET + METHOD + ENERGY + GRID,
-    "occupancy": GRID, "evaluate": TRAIN + EVAL, "export": [Opt("--mode", "export_mode", choices=("link", "copy"))],
+    "occupancy": GRID, "evaluate": TRAIN + EVAL, "export": _export_opts("--mode"),
     "report": [], "simulate": SIMULATE, "suggest": SUGGEST,
 }
 
@@ -612,6 +627,11 @@ def print_verdict(rep: dict, run_dir: Path) -> None:
         print(v["how_many"])
     secs = rep.get("wall_seconds")
     print(f"report: {run_dir / 'report.html'}" + (f" ({secs:.0f} s)" if secs is not None else ""))
+    if (run_dir / "export" / "transforms.json").is_file():
+        from curate.export.trainable import train_commands
+        cmds = dict((t, c) for t, c in train_commands(run_dir / "export"))
+        print(f"train on it: {cmds['nerfstudio, Gaussian splatting']}   (3DGS: "
+              f"{cmds['3D Gaussian splatting (reference code)']}; more in the report)")
 
 
 def cmd_batch(args) -> int:

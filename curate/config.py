@@ -12,13 +12,10 @@ from dataclasses import dataclass, field
 
 from curate.core.budget import parse_budget
 from curate.evaluate.config import EvalConfig
+from curate.export.config import ExportConfig
 from curate.occupancy.masks import OccupancyConfig, RefineConfig
 from curate.select.select import SelectConfig
 from curate.sfm.config import SfmConfig
-
-EXPORT_MODES = ("link", "copy")
-"""``RunConfig.export_mode`` choices."""
-
 
 @dataclass
 class RunConfig:
@@ -55,8 +52,8 @@ class RunConfig:
     """Evaluation protocol (hold-out split, trainings)."""
     run_evaluation: bool = True
     """Train and score the subsets (off: selection, report and export only)."""
-    export_mode: str = "link"
-    """Export links to the original photos (link) or copies of them (copy)."""
+    export: ExportConfig = field(default_factory=ExportConfig)
+    """How the chosen subset is exported (``RUN/export``)."""
 
     def __post_init__(self) -> None:
         b = parse_budget(str(self.budget))  # ValueError on a malformed budget
@@ -64,8 +61,6 @@ class RunConfig:
             raise ValueError(f"budget {self.budget}: choose at least 2 images")
         if not (math.isfinite(self.budget_tolerance) and self.budget_tolerance > 0):
             raise ValueError(f"--budget-tolerance must be > 0 dB, got {self.budget_tolerance}")
-        if self.export_mode not in EXPORT_MODES:
-            raise ValueError(f"export mode must be one of {EXPORT_MODES}, got {self.export_mode!r}")
         if self.surface_band < 0:
             raise ValueError(f"surface band must be >= 0, got {self.surface_band}")
         if self.box is not None:
@@ -87,14 +82,16 @@ def upgrade_config(d: dict, version: str | None) -> dict:
     """A ``run.json`` config ``d`` written by curate ``version``: before 0.3, an option still at that version's
     default (:data:`OLD_DEFAULTS`) takes today's, so a stage command on an older run evaluates as a new run
     would; an option the user had changed is kept."""
+    import copy
+    d = copy.deepcopy(d)
+    if "export_mode" in d:      # before 0.4: the export's mode alone, now one of ExportConfig's fields
+        d.setdefault("export", {})["mode"] = d.pop("export_mode")
     try:
         major, minor = (int(x) for x in str(version).split(".")[:2])
     except ValueError:
         return d
     if (major, minor) >= (0, 3):
         return d
-    import copy
-    d = copy.deepcopy(d)
     for (section, name), old in OLD_DEFAULTS.items():
         sub = d.get(section)
         if isinstance(sub, dict) and sub.get(name) == old:

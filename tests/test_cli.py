@@ -248,10 +248,12 @@ def test_export_says_linked_or_copied(tmp_path, capsys):
     args = ["run", "--poses", str(tj), "--out", str(out), "--budget", "3", "--no-evaluate", "--res", "8",
             "--method", "stride"]   # no pool field to train
     assert cli.main(args) == 0, capsys.readouterr().err
-    assert "export     3 images (linked)" in capsys.readouterr().out
+    assert "export     3 images (hard-linked)" in capsys.readouterr().out
     assert cli.main(["export", str(out), "--mode", "copy"]) == 0
     line = capsys.readouterr().out
     assert "3 images (copied)" in line and "copys" not in line
+    assert cli.main(["export", str(out), "--mode", "link"]) == 0
+    assert "3 images (linked)" in capsys.readouterr().out
 
 
 def test_select_on_a_folder_of_curate_sfm_says_what_to_run(tmp_path):

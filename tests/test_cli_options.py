@@ -40,6 +40,8 @@ def _other_value(opt: Opt, current):
         return "ours,fvs", ("ours", "fvs")
     if opt.flag == "--device":
         return "cpu", "cpu"
+    if opt.flag == "--downscale":
+        return "2,4", (2, 4)
     if isinstance(current, bool):
         return ("--no-" if current else "--"), (not current)
     if isinstance(current, float):

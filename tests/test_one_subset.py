@@ -262,3 +262,8 @@ def test_the_same_command_gives_the_same_export_byte_for_byte(tmp_path):
     assert set(a) == set(b) and all(a[k] == b[k] for k in a), [k for k in a if a[k] != b.get(k)]
     pts = [np.load(r / "sfm" / "points.npy") for r in runs]
     assert pts[0].shape == pts[1].shape and np.array_equal(pts[0], pts[1])
+    # and the same suggestions of where to shoot next
+    for r in runs:
+        assert main(["suggest", str(r), "--add", "3", "--candidates", "200", "--field", "none"]) == 0
+    sug = [json.loads((r / "suggest" / "suggestions.json").read_text())["suggestions"] for r in runs]
+    assert [s["c2w"] for s in sug[0]] == [s["c2w"] for s in sug[1]] and len(sug[0]) == 3

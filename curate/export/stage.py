@@ -13,7 +13,7 @@ if TYPE_CHECKING:
     from curate.config import RunConfig
 
 
-EXPORTED = {"link": "linked", "copy": "copied"}
+EXPORTED = {"hardlink": "hard-linked", "link": "linked", "copy": "copied"}
 """How the stage line says each export mode ("10 images (copied)")."""
 
 
@@ -26,25 +26,29 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "export"
-    key = stage_key({"mode": cfg.export_mode}, [key_of(run_dir / "select")])
+    key = stage_key({"export": cfg.export}, [key_of(run_dir / "select")])
     if force or not is_fresh(d, key):
         check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
     if begin_stage(d, key, force):  # unchanged: its warning still holds
         return StageResult("export", d, False, time.perf_counter() - t0,
                            warning=(read_stage(d) or {}).get("export_warning"))
     sel = read_selection(run_dir)
-    export_subset(run_dir, sel["chosen_names"], d, mode=cfg.export_mode)
+    export_subset(run_dir, sel["chosen_names"], d, config=cfg.export)
     model = json.loads((d / "export.json").read_text())["model"]
     sfm = read_stage(run_dir / "sfm") or {}
-    warn = "; ".join(w for w in (points_warning(model, sfm), connectivity_warning(model)) if w) or None
+    # what stops a trainer is a warning (atop the report); separate groups of images only matter to a tool that
+    # registers the subset again, so it is said beside the training commands, not in the warning box
+    warn = points_warning(model, sfm)
+    groups = connectivity_warning(model)
     from curate.sfm.stage import import_warning
     # the record's warning (shown atop the report) also says when the photos and the poses did not match
     shown = "; ".join(w for w in (import_warning(run_dir), warn) if w) or None
-    finish_stage(d, key, {"mode": cfg.export_mode}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",
-                                                                 "list": "images.txt", "images": "images/"},
-                 model=model, warning=shown, export_warning=warn)
+    finish_stage(d, key, {"export": cfg.export}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",
+                                                               "list": "images.txt", "images": "images/"},
+                 model=model, warning=shown, export_warning=warn, connectivity=groups)
     return StageResult("export", d, True, time.perf_counter() - t0,
-                       f"{len(sel['chosen_names'])} images ({EXPORTED[cfg.export_mode]}), {model['n_points3D']} points -> {d}",
+                       f"{len(sel['chosen_names'])} images ({'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "
+                       f"{model['n_points3D']} points -> {d}",
                        warning=warn)
 
 

@@ -1,28 +1,35 @@
-"""Export the chosen subset of a run as a ready-to-train dataset.
+"""Export the chosen subset of a run as a dataset the trainers read as it is.
 
-``export_subset(run_dir, chosen_names, out_dir)`` writes, into ``out_dir`` (normally
+``export_subset(run_dir, chosen_names, out_dir, config=ExportConfig())`` writes, into ``out_dir`` (normally
 ``RUN/export``):
 
-* ``images/``: the chosen ORIGINAL photos (never the working copies), as symbolic links
-  to the originals (``mode="link"``, absolute targets) or copies (``mode="copy"``). A file
-  is named after the original (its base name; the path relative to the photo folder with
-  ``/`` turned into ``__`` when two originals share a base name). RAW originals are linked
-  or copied as they are (``.dng``, ``.cr2``...): most NeRF tools cannot read them; convert
-  them first. Originals carrying a non-trivial EXIF orientation are linked as they are too:
-  the cameras describe the UPRIGHT image (as curate decoded it), so a tool must apply the
-  EXIF orientation (nerfstudio and PIL's ``exif_transpose`` do); a warning is logged.
-* ``sparse/0/``: a COLMAP binary model of only the chosen images, in COLMAP's world frame
-  (that of ``RUN/sfm/sparse/0``), image names = the names in ``images/`` and cameras
-  rescaled to the originals' resolution, so ``out_dir`` is a complete COLMAP dataset
-  (Gaussian splatting's ``-s out_dir``, ``ns-process-data``). 3D points are kept when at
-  least ``min_track`` (default 2) chosen images observe them, with only those observations.
-* ``transforms.json``: the same cameras (nerfstudio / instant-ngp, OpenGL convention, same
-  world frame, full-resolution intrinsics), ``file_path`` = ``images/<name>``.
-* ``images.txt``: the chosen photos, one per line, in the order chosen, as paths relative
-  to the photo folder (for an import: the image names of the imported model/transforms).
-* ``export.json``: what was written (mode, per image: camera name, export name, original).
+* ``images/``: the chosen photos. Without lens distortion (or ``undistort='off'``): the ORIGINAL photos (never
+  the working copies) as hard links (``mode='hardlink'``, the default; copies where the file system allows no
+  hard link), copies (``'copy'``) or symbolic links (``'link'``, absolute targets). With distortion (a phone
+  video's SIMPLE_RADIAL) and ``undistort='auto'``: the originals undistorted by COLMAP's undistorter
+  (:func:`curate.sfm.undistort.undistort_model`), new files, with PINHOLE cameras (3D Gaussian splatting's loader
+  reads no other); ``keep_distorted`` keeps the originals and their model in ``distorted/``. A file is named after
+  the original (its base name; the path relative to the photo folder with ``/`` turned into ``__`` when two
+  originals share a base name). RAW originals are exported as they are (convert them for NeRF tools; no
+  undistortion). Originals carrying an EXIF orientation are exported as they are when not undistorted (the
+  cameras describe the upright image: a tool must apply the orientation, as nerfstudio and PIL's
+  ``exif_transpose`` do; a warning is logged), and upright when undistorted.
+* ``sparse/0/``: a COLMAP binary model of only the chosen images, in COLMAP's world frame (that of
+  ``RUN/sfm/sparse/0``), image names = the names in ``images/``, cameras at the exported images' resolution:
+  ``out_dir`` is a complete COLMAP dataset (3DGS's ``-s out_dir``, gsplat's ``--data_dir``). 3D points are kept
+  when at least ``min_track`` (default 2) chosen images observe them, with only those observations.
+* ``sparse_pc.ply``: those points (:func:`curate.export.trainable.write_ply`), named by ``transforms.json``'s
+  ``ply_file_path`` (nerfstudio's splatfacto starts from it).
+* ``transforms.json``: the same cameras (nerfstudio / instant-ngp, OpenGL convention, same world frame),
+  ``file_path`` = ``images/<name>``.
+* ``images_2/``, ``images_4/``, ``images_8/``: with ``downscale``, the images shrunk by each factor.
+* ``images.txt``: the chosen photos, one per line, in the order chosen, as paths relative to the photo folder
+  (for an import: the image names of the imported model/transforms).
+* ``export.json``: what was written (config, per image: camera name, export name, original; the checksum of
+  every file written except symbolic links).
 
-The photo folder is never written: an ``out_dir`` inside it is refused.
+The photo folder is never written: an ``out_dir`` inside it is refused. A re-export removes only what the
+previous one wrote, and nothing when one of those files was changed since (a user's edit is theirs).
 """
 
 from __future__ import annotations
@@ -31,32 +38,16 @@ import json
 import logging
 import os
 import shutil
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
+from curate.export.config import ExportConfig
+from curate.export.trainable import PLY_NAME
 from curate.sfm.io import load_sfm, original_cameras, sfm_dir
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["ExportConfig", "export_subset", "export_names"]
-
-MODES = ("link", "copy")
-
-
-@dataclass(frozen=True)
-class ExportConfig:
-    """How the chosen subset is written."""
-
-    mode: str = "link"
-    """``link``: symbolic links to the original photos; ``copy``: copies of them."""
-    min_track: int = 2
-    """A sparse point is kept in ``sparse/0`` when at least this many chosen images observe it."""
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ValueError(f"export mode must be one of {MODES}, got {self.mode!r}")
-        if self.min_track < 1:
-            raise ValueError("min_track must be >= 1")
 
 
 def export_names(originals: list[str], rels: list[str]) -> list[str]:
@@ -87,7 +78,11 @@ def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
     return sorted(roots)
 
 
-_WRITES = ("images", "sparse", "transforms.json", "images.txt", "export.json")
+_WRITES = ("images", "sparse", "transforms.json", "images.txt", "export.json", PLY_NAME, "distorted", "images_2",
+           "images_4", "images_8")
+_DIRS = ("images", "images_2", "images_4", "images_8", "sparse/0", "sparse", "distorted/images", "distorted/sparse/0",
+         "distorted/sparse", "distorted")
+"""Folders an export may have made, deepest first: removed by a re-export when left empty."""
 _MODEL_FILES = tuple(f"{n}.bin" for n in ("cameras", "images", "points3D", "rigs", "frames"))
 """What an export before ``files`` was recorded (curate 0.2) may have written in ``sparse/0`` (binary only: a
 ``.txt`` model there is the user's, from ``colmap model_converter``)."""
@@ -137,6 +132,13 @@ def _changed(out: Path, prev: dict) -> str | None:
             orig = Path(it["original"])
             if not (orig.is_file() and filecmp.cmp(p, orig, shallow=False)):
                 return str(p)
+    for it in prev.get("images", []):               # the originals kept beside an undistorted export, as links
+        p = out / "distorted" / "images" / it["name"]
+        if it["name"] in prev.get("distorted", []) and p.is_symlink() and os.readlink(p) != it["original"]:
+            return str(p)
+        if it["name"] in prev.get("distorted", []) and not p.is_symlink() and p.is_file() \
+                and f"distorted/images/{it['name']}" not in digests:
+            return str(p)
     for rel, digest in digests.items():             # since 0.3: each file written, copies included
         p = out / rel
         if p.is_file() and not p.is_symlink() and _sha256(p) != digest:
@@ -174,19 +176,40 @@ def _clear(out: Path) -> None:
         p = out / "images" / n
         if p.is_symlink() or p.is_file():
             p.unlink()
+    for n in prev.get("distorted", []):          # the originals kept beside an undistorted export
+        p = out / "distorted" / "images" / n
+        if p.is_symlink() or p.is_file():
+            p.unlink()
     written = prev.get("files")
-    model = [f for f in written if f.startswith("sparse/0/")] if written else [f"sparse/0/{n}" for n in _MODEL_FILES]
-    for f in model:
-        (out / f).unlink(missing_ok=True)
-    for d in (out / "images", out / "sparse" / "0", out / "sparse"):
+    listed = list(written) if written else [f"sparse/0/{n}" for n in _MODEL_FILES]
+    for f in listed:
+        if ".." not in Path(f).parts and not Path(f).is_absolute():      # a record names files inside the export
+            (out / f).unlink(missing_ok=True)
+    for rel in _DIRS:
+        d = out / rel
         if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
             d.rmdir()
     for name in ("transforms.json", "images.txt", "export.json"):
         (out / name).unlink(missing_ok=True)
 
 
+def _place(src: str, dst: Path, mode: str) -> None:
+    """Put the original ``src`` at ``dst``: a hard link (a copy where the file system refuses one), a copy, or a
+    symbolic link."""
+    if mode == "link":
+        os.symlink(src, dst)
+        return
+    if mode == "hardlink":
+        try:
+            os.link(src, dst)
+            return
+        except OSError:          # another file system, or one without hard links: a copy
+            pass
+    shutil.copy2(src, dst)
+
+
 def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | Path | None = None,
-                  mode: str = "link", config: ExportConfig | None = None) -> Path:
+                  mode: str = "hardlink", config: ExportConfig | None = None) -> Path:
     """Write the chosen cameras of the run's SfM stage as a dataset in ``out_dir``; returns ``out_dir``.
 
     Args:
@@ -194,8 +217,8 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
         chosen_names: [K] camera names of ``RUN/sfm/cameras.json`` (= ``chosen_names`` of
             ``selection.json``), in the order chosen. Unknown or repeated names: ``ValueError``.
         out_dir: destination (default ``RUN/export``); what an earlier export wrote there is replaced.
-        mode: ``link`` (symbolic links to the originals, default) or ``copy``.
-        config: overrides ``mode`` when given (``min_track`` lives there).
+        mode: ``hardlink`` (default), ``copy`` or ``link``, when ``config`` is not given.
+        config: the export's options (:class:`curate.export.config.ExportConfig`).
 
     Layout of ``out_dir``: see the module docstring.
     """
@@ -239,37 +262,98 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     if clash:
         raise ValueError(f"{img_dir / clash[0]} exists and was not written by a curate export: choose an empty folder")
     for src, name in zip(originals, names):
-        dst = img_dir / name
-        if cfg.mode == "link":
-            os.symlink(src, dst)
-        else:
-            shutil.copy2(src, dst)
-    rotated = [n for n in chosen if int(recs.get(n, {}).get("orientation", 1) or 1) != 1]
-    if rotated:
-        logger.warning("export: %d original(s) carry an EXIF rotation (%s...): the cameras describe the upright "
-                       "image, read them with the EXIF orientation applied", len(rotated), rotated[0])
+        _place(src, img_dir / name, cfg.mode)
+    rotated = {n for n in chosen if int(recs.get(n, {}).get("orientation", 1) or 1) != 1}
     raw = [n for n, r in zip(names, chosen) if recs.get(r, {}).get("format") == "raw"]
-    if raw:
-        logger.warning("export: %d RAW original(s) (%s...) linked as they are: convert them for NeRF tools",
-                       len(raw), raw[0])
 
     from curate.sfm.colmap import write_subset_model  # pycolmap lives there
     sizes = {n: (int(sub.width[k]), int(sub.height[k])) for k, n in enumerate(chosen)}
     model = write_subset_model(sfm_dir(run_dir) / "sparse" / "0", chosen, out / "sparse" / "0",
                                rename=dict(zip(chosen, names)), sizes=sizes, min_track=cfg.min_track)
+    undistorted = False
+    if cfg.undistort == "auto":
+        sub, undistorted = _undistort(out, sub, names, [n in rotated for n in chosen], originals, raw, cfg)
+    if rotated and not undistorted:
+        logger.warning("export: %d original(s) carry an EXIF rotation (%s...): the cameras describe the upright "
+                       "image, read them with the EXIF orientation applied", len(rotated), sorted(rotated)[0])
+    if raw:
+        logger.warning("export: %d RAW original(s) (%s...) exported as they are: convert them for NeRF tools",
+                       len(raw), raw[0])
 
     from curate.core.transforms_json import write_transforms
-    write_transforms(out / "transforms.json", sub, [f"images/{n}" for n in names])
+    from curate.export.trainable import downscale_images, write_ply
+    from curate.sfm.undistort import model_points
+    xyz, rgb = model_points(out / "sparse" / "0")
+    extra = {}
+    if len(xyz):
+        write_ply(out / PLY_NAME, xyz, rgb)
+        extra["ply_file_path"] = PLY_NAME
+    write_transforms(out / "transforms.json", sub, [f"images/{n}" for n in names], extra=extra)
     (out / "images.txt").write_text("".join(r + "\n" for r in rels))
-    files = ["transforms.json", "images.txt"] + sorted(f"sparse/0/{p.name}" for p in (out / "sparse" / "0").iterdir()
-                                                       if p.is_file())
-    if cfg.mode == "copy":   # a copy is checked against what was written, wherever its original is now
+    files = ["transforms.json", "images.txt"] + ([PLY_NAME] if len(xyz) else [])
+    files += sorted(f"sparse/0/{p.name}" for p in (out / "sparse" / "0").iterdir() if p.is_file())
+    for f in cfg.downscale:
+        files += [f"images_{f}/{n}" for n in downscale_images(img_dir, names, f, out / f"images_{f}")]
+    if cfg.mode != "link" or undistorted:   # a file is checked against what was written, wherever its original is
         files += [f"images/{n}" for n in names]
+    if undistorted and cfg.keep_distorted:
+        files += sorted(f"distorted/sparse/0/{p.name}" for p in (out / "distorted" / "sparse" / "0").iterdir())
+        if cfg.mode != "link":
+            files += [f"distorted/images/{n}" for n in names]
+    model.update({"undistorted": undistorted, "camera_model": "PINHOLE" if undistorted else
+                  ("OPENCV" if (sub.dist != 0).any() else "PINHOLE")})
     manifest = {"config": asdict(cfg), "run_dir": str(run_dir), "n_images": len(chosen), "model": model,
                 "images": [{"camera": c, "name": n, "original": o, "rel": r}
                            for c, n, o, r in zip(chosen, names, originals, rels)],
+                "distorted": names if undistorted and cfg.keep_distorted else [],
                 "files": {f: _sha256(out / f) for f in files}}
     from curate.core.stage import write_json_atomic
     write_json_atomic(out / "export.json", manifest)      # never half written: it is the record of what to check
-    logger.info("export: %d images (%s), %d sparse points -> %s", len(chosen), cfg.mode, model["n_points3D"], out)
+    logger.info("export: %d images (%s%s), %d sparse points -> %s", len(chosen), cfg.mode,
+                ", undistorted" if undistorted else "", model["n_points3D"], out)
     return out
+
+
+def _undistort(out: Path, sub, names: list[str], rotated: list[bool], originals: list[str], raw: list[str],
+               cfg: ExportConfig):
+    """Undistort the export in ``out`` in place when a camera of its model has distortion: (cameras of the
+    undistorted images, True), else (``sub``, False). The placed originals are removed (or moved to
+    ``distorted/images`` with ``keep_distorted``), and the undistorted images and model take their place."""
+    from curate.sfm.undistort import distorted_cameras, undistort_model
+    if not distorted_cameras(out / "sparse" / "0"):
+        return sub, False
+    if raw:
+        logger.warning("export: RAW originals are not undistorted: their distorted cameras are exported as they are")
+        return sub, False
+    tmp = out / ".undistort"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    src = tmp / "src"
+    src.mkdir(parents=True)
+    for name, rot, orig in zip(names, rotated, originals):
+        if rot:            # COLMAP reads the pixels as stored: an EXIF rotation is applied first
+            from PIL import Image
+            from curate.sfm.ingest import read_image
+            Image.fromarray(read_image(orig)[0]).save(src / name, quality=95)
+        else:
+            os.symlink(out / "images" / name, src / name)
+    intr = undistort_model(out / "sparse" / "0", src, tmp / "out", log=tmp / "undistort.log")
+    if cfg.keep_distorted:
+        (out / "distorted" / "sparse").mkdir(parents=True, exist_ok=True)
+        os.replace(out / "images", out / "distorted" / "images")
+        os.replace(out / "sparse" / "0", out / "distorted" / "sparse" / "0")
+    else:
+        for n in names:
+            (out / "images" / n).unlink()
+        for p in (out / "sparse" / "0").iterdir():
+            p.unlink()
+        (out / "images").rmdir()
+        (out / "sparse" / "0").rmdir()
+    os.replace(tmp / "out" / "images", out / "images")
+    os.replace(tmp / "out" / "sparse", out / "sparse" / "0")
+    shutil.rmtree(tmp)
+    from curate.core.cameras import Cameras
+    k = [intr[n] for n in names]
+    cams = Cameras(sub.c2w, [v[0] for v in k], [v[1] for v in k], [v[2] for v in k], [v[3] for v in k],
+                   [v[4] for v in k], [v[5] for v in k], names=sub.names)
+    return cams, True

@@ -219,6 +219,9 @@ def _first_screen(run: _Run) -> str:
     if sug:
         out.append(f'<p>Going back to film more? <a href="suggest/suggest.html">Where to shoot next</a>: '
                    f'{esc(sug.get("placed", "?"))} suggested camera poses, with how to reach each from your capture.</p>')
+    elif (why := (read_json(run.dir / "suggest" / "unanswered.json") or {}).get("reason")):
+        out.append(f'<p class="small">Going back to film more? <code>curate suggest</code> found nowhere to propose '
+                   f"for this capture: {esc(why)}.</p>")
     else:
         out.append(f'<p class="small">Going back to film more? <code>curate suggest {esc(run.dir)} --add 8</code> '
                    "proposes where to stand and look, from this capture.</p>")
@@ -584,6 +587,34 @@ def _timings(run: _Run) -> str:
                "(stages it found unchanged were not redone)." if wall is not None else "") + "</p>")
 
 
+def _train(run: _Run) -> str:
+    """The command lines that train on the export, and what it holds."""
+    from curate.export.trainable import train_commands
+    exp = read_json(run.dir / "export" / "export.json")
+    if not exp:
+        return note("Not exported yet: curate export RUN writes the export.")
+    model = exp.get("model") or {}
+    cfg = exp.get("config") or {}
+    held = [f"{esc(exp.get('n_images', '?'))} images"
+            + (" undistorted, with PINHOLE cameras" if model.get("undistorted") else
+               f" with {esc(model.get('camera_model', 'their'))} cameras"),
+            f"{esc(model.get('n_points3D', 0))} SfM points (<code>sparse/0</code>, <code>sparse_pc.ply</code>)",
+            {"hardlink": "hard links or copies of the photos: the folder travels alone (tar, rsync)",
+             "copy": "copies of the photos: the folder travels alone (tar, rsync)",
+             "link": "symbolic links to your photos: valid only beside them (<code>--export-mode hardlink</code> "
+                     "for a folder that travels)"}.get(cfg.get("mode"), "")]
+    if cfg.get("downscale"):
+        held.append("downscaled copies in " + ", ".join(f"<code>images_{esc(f)}</code>" for f in cfg["downscale"]))
+    rows = "".join(f'<tr><td class="l">{esc(t)}</td><td class="l"><code>{esc(c)}</code></td></tr>'
+                   for t, c in train_commands(run.dir / "export"))
+    groups = (read_json(run.dir / "export" / "stage.json") or {}).get("connectivity")
+    return (f"<p>The export holds {'; '.join(held)}.</p>"
+            + f'<table><tr><th class="l">trainer</th><th class="l">command</th></tr>{rows}</table>'
+            '<p class="small">nerfstudio reads <code>transforms.json</code> (and starts splatting from its '
+            "<code>ply_file_path</code>); 3DGS and gsplat read <code>sparse/0</code> with <code>images/</code>.</p>"
+            + (f'<p class="small">For a tool that registers the subset again: {esc(groups)}.</p>' if groups else ""))
+
+
 def _details(title: str, body: str, open_: bool = False) -> str:
     return f"<details{' open' if open_ else ''}><summary><h2>{esc(title)}</h2></summary>\n{body}\n</details>"
 
@@ -591,6 +622,7 @@ def _details(title: str, body: str, open_: bool = False) -> str:
 SECTIONS: list[tuple[str, Callable[[_Run], str], str]] = [
     ("How the selection compares (held-out photos)", _method_table, "evaluated"),
     ("Held-out photos side by side", _renders, "evaluated"),
+    ("Train on the export", _train, "always"),
     ("How many photos?", _budget_auto, "always"),
     ("Where the cameras are", _camera_layout, "always"),
     ("The capture", _capture, "always"),

@@ -4,10 +4,12 @@ The capture's *envelope* (:func:`capture_envelope`) is read from its cameras: th
 (:func:`up_vector`), the range of their heights along it and of their pitches (percentiles), their intrinsics,
 and how close they went to things (the distance from each centre to the nearest occupied node, and the nearest
 surface each one saw; at most :data:`MAX_CLEARANCE_SHARE` and :data:`MAX_VIEW_MARGIN_SHARE` of the typical
-viewing distance, at least one voxel). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an observed-free, unoccupied
-voxel (:mod:`curate.suggest.freespace`), at a height and pitch within the envelope, no nearer to an occupied
-node than the envelope's clearance, and nothing occupied lies in its view nearer than the envelope's view
-margin. Candidates (:meth:`Feasibility.draw`) are drawn in the feasible voxels (each equally likely, the position
+viewing distance, at least one voxel). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an
+observed-free, unoccupied voxel (:mod:`curate.suggest.freespace`), at a height and pitch within the envelope, no
+nearer to an occupied node than the envelope's clearance, no nearer than the clearance either (in its horizontal
+plane) to space the capture has not seen to be empty (a plain wall gives no points, so only the rays that stop beside
+it say where it is: what lies beyond what the capture saw is taken as a wall), and nothing occupied lies in its view nearer than the
+envelope's view margin. Candidates (:meth:`Feasibility.draw`) are drawn in the feasible voxels (each equally likely, the position
 uniform across the voxel and the height uniform in the envelope's range), with a uniform yaw, a pitch uniform in
 the envelope's range and no roll (the image's x axis level).
 """
@@ -26,6 +28,8 @@ MAX_CLEARANCE_SHARE = 0.25
 """The clearance never exceeds this share of the capture's typical viewing distance (``Envelope.look_depth``)."""
 MAX_VIEW_MARGIN_SHARE = 0.5
 """The view margin never exceeds this share of the capture's typical viewing distance."""
+SEEN_DIRECTIONS = 16
+"""Directions of the ring a suggestion must see empty around it (:meth:`Feasibility.seen_around`)."""
 
 
 def up_vector(cams: Cameras) -> np.ndarray:
@@ -144,6 +148,14 @@ class Feasibility:
         self.vox = voxel_size(self.lo, self.hi, self.R)
         self.env = env
         self.allowed = np.asarray(free, bool) & ~self.occ                 # [R, R, R]
+        # the ring a suggestion must see empty around it, in its horizontal plane (walls stand upright; the capture's
+        # heights bound it up and down): the clearance, and half a voxel (the surface that stopped the carving lies
+        # somewhere in the last free voxel), and half that, in SEEN_DIRECTIONS directions
+        e1, e2 = horizontal_basis(env.up)
+        a = np.linspace(0, 2 * np.pi, SEEN_DIRECTIONS, endpoint=False)
+        ring = np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2
+        r = env.clearance + 0.5 * float(self.vox.max())
+        self._ring = np.concatenate([ring * r, ring * (r / 2)])          # [2 D, 3]
         pts = occupied_points(self.occ, self.lo, self.hi)
         self._tree = cKDTree(pts) if len(pts) else None
         self._oracle = GridOracle(self.lo, self.hi, self.occ, margin=env.view_margin)
@@ -154,6 +166,7 @@ class Feasibility:
         h = nodes @ env.up
         ok = (h >= env.heights[0] - half) & (h <= env.heights[1] + half)
         ok &= self.clearance(nodes) >= env.clearance - half
+        ok[ok] = self.seen_around(nodes[ok])
         self.cells = flat[ok]
 
     def node_xyz(self, flat: np.ndarray) -> np.ndarray:
@@ -166,9 +179,16 @@ class Feasibility:
         p = np.asarray(points, float).reshape(-1, 3)
         return self._tree.query(p)[0] if self._tree is not None else np.full(len(p), np.inf)
 
+    def seen_around(self, points: np.ndarray) -> np.ndarray:
+        """[n] bool: the ring around each point [n, 3] in its horizontal plane (the clearance and half a voxel out,
+        and half that) lies in observed-free, unoccupied voxels."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        flat = voxel_index(p[:, None, :] + self._ring[None], self.lo, self.hi, self.R)      # [n, 2 D]
+        return np.all((flat >= 0) & self.allowed.ravel()[np.maximum(flat, 0)], axis=1)
+
     def checks(self, cams: Cameras) -> dict[str, np.ndarray]:
         """Each feasibility test, [N] bool per name: 'free' (centre in an observed-free, unoccupied voxel),
-        'height', 'pitch', 'clearance' and 'view'."""
+        'height', 'pitch', 'clearance' (from occupied nodes), 'seen' (:meth:`seen_around`) and 'view'."""
         env = self.env
         c = cams.centres
         flat = voxel_index(c, self.lo, self.hi, self.R)
@@ -180,8 +200,9 @@ class Feasibility:
                "height": (h >= env.heights[0] - eps) & (h <= env.heights[1] + eps),
                "pitch": (p >= env.pitches[0] - eps) & (p <= env.pitches[1] + eps),
                "clearance": self.clearance(c) >= env.clearance,
+               "seen": self.seen_around(c),
                "view": np.zeros(len(cams), bool)}
-        pre = out["free"] & out["height"] & out["pitch"] & out["clearance"]
+        pre = out["free"] & out["height"] & out["pitch"] & out["clearance"] & out["seen"]
         if pre.any():
             out["view"][pre] = self._oracle.min_depth(cams[np.flatnonzero(pre)]) >= env.view_margin
         return out

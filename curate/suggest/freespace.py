@@ -9,9 +9,11 @@ Each camera casts a ``probe`` grid of rays (pixel centres of a ``W x H`` image w
 view), sampled every ``step`` along the ray. A ray's *hit* is its first sample in an occupied voxel, at least
 ``near`` from the camera (occupied voxels nearer than that are taken as noise of the occupancy: a camera
 stood there). Every voxel a ray's samples traverse before its hit is *observed free*. A ray that hits nothing
-is evidence of free space only as far as the camera's surfaces usually are: it carves up to the median depth of
-the same camera's hits (nothing when none of its rays hits), not through a wall the occupancy missed (a
-textureless wall has no SfM points).
+is evidence of free space only as far as the surfaces next to it in the same image: it carves up to the
+nearest hit among its neighbours (the rays within ``fill`` probe cells, their z-depth taken along its own
+direction), and nothing when none of them hits. A plain wall has no SfM points, so its rays hit nothing: they
+carve up to the things seen beside it, never through it (the median depth of the camera's hits, the rule
+before, carved through a wall the camera stood near while looking along it).
 """
 
 from __future__ import annotations
@@ -73,13 +75,24 @@ def probe_directions(cams: Cameras, probe: tuple[int, int]) -> tuple[np.ndarray,
     return np.einsum("npj,nij->npi", dc, cams.rotations), dc[..., 2]
 
 
+def fill_depth(zdepth: np.ndarray, fill: int) -> np.ndarray:
+    """[H, W] the nearest z-depth within ``fill`` cells of each cell of ``zdepth`` [H, W] (inf = no hit); a cell's
+    own hit is kept."""
+    from scipy.ndimage import minimum_filter
+    if fill <= 0:
+        return zdepth
+    return np.where(np.isfinite(zdepth), zdepth, minimum_filter(zdepth, size=2 * int(fill) + 1, mode="nearest"))
+
+
 def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tuple[int, int] = (32, 24),
-                    step: float | None = None, near: float | None = None, chunk: int = 1 << 21) -> FreeSpace:
+                    step: float | None = None, near: float | None = None, fill: int = 0,
+                    chunk: int = 1 << 21) -> FreeSpace:
     """Observed free space of ``cams`` in the occupancy ``occ`` [R, R, R] over the box (module docstring).
 
     Args:
         step: sample spacing along the rays (default: half the smallest voxel side).
         near: hits nearer than this are ignored (default: the largest voxel side).
+        fill: a ray that hits nothing carves up to the nearest hit within this many probe cells (0: nothing).
         chunk: samples evaluated at once (bounds memory: ~40 bytes each).
     """
     occ = np.asarray(occ, bool)
@@ -92,7 +105,8 @@ def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tup
     near = float(vox.max()) if near is None else float(near)
     if not step > 0:
         raise ValueError(f"step must be > 0, got {step}")
-    N, P = len(cams), int(probe[0]) * int(probe[1])
+    W, H = int(probe[0]), int(probe[1])
+    N, P = len(cams), W * H
     free = np.zeros(R ** 3, bool)
     hit = np.full((N, P), np.inf)
     med = np.full(N, np.nan)
@@ -120,9 +134,11 @@ def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tup
         h = hit[k][np.isfinite(hit[k])]
         if h.size:
             med[k] = float(np.median(h))
-        miss_lim = int(np.searchsorted(ts, med[k])) if h.size else 0             # samples before the median depth
-        for first, flat in zip(lim_parts, flat_parts):
-            lim = np.where(first < S, first, miss_lim)
+        # a miss carves up to the nearest hit beside it: its neighbours' z-depth along its own direction
+        z = fill_depth((hit[k] * axis_cos[k]).reshape(H, W), fill).ravel()
+        miss_lim = np.where(np.isfinite(z), np.searchsorted(ts, z / np.maximum(axis_cos[k], 1e-9)), 0)   # [P]
+        for s, (first, flat) in zip(range(0, P, per), zip(lim_parts, flat_parts)):
+            lim = np.where(first < S, first, miss_lim[s:s + per])
             carve = (np.arange(S)[None, :] < lim[:, None]) & (flat >= 0)
             free[flat[carve]] = True
     free &= ~occ_flat

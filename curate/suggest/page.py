@@ -165,12 +165,22 @@ def _how(rec: dict) -> str:
              + (f" ({rec['n_frontier']} of them unobserved voxels at the edge of the seen free space)"
                 if rec.get("n_frontier") else " (the occupied surface band)")
              + f"; occupancy from {rec['occupancy']}"),
-            ("where", f"in the {rec['free_voxels']} voxels the capture's rays crossed as free space; "
-                      f"{rec['feasible_voxels']} of them at the capture's heights and clear of occupied nodes"),
-            ("heights", f"{env['heights'][0]:.2f} to {env['heights'][1]:.2f} {u} along the capture's up (its "
-                        f"{hp[0]:g}th to {hp[1]:g}th percentile)"),
-            ("pitches", f"{p[0]:+.0f}° to {p[1]:+.0f}° (the capture's {pp[0]:g}th to {pp[1]:g}th percentile), no roll"),
-            ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes (the capture's {cp:g}th "
+            *((("where", f"an object capture: on its view sphere, {o['radii'][0]:.2f} to {o['radii'][1]:.2f} {u} "
+                          f"from the object's centre, at elevations {o['elevation_deg'][0]:+.0f}° to "
+                          f"{o['elevation_deg'][1]:+.0f}° (the capture filmed {o['captured_elevation_deg'][0]:+.0f}° to "
+                          f"{o['captured_elevation_deg'][1]:+.0f}°), looking at the centre, no roll; "
+                          f"{100 * rec.get('feasible_share', 0):.0f}% of the sphere feasible"),)
+              if (o := rec.get("orbit")) else
+              (("where", f"in the {rec['free_voxels']} voxels the capture's rays crossed as free space before the "
+                         f"surfaces they hit; {rec.get('feasible_voxels', 0)} of them at the capture's heights and "
+                         "clear of occupied nodes and of space it did not see"),
+               ("heights", f"{env['heights'][0]:.2f} to {env['heights'][1]:.2f} {u} along the capture's up (its "
+                           f"{hp[0]:g}th to {hp[1]:g}th percentile)"),
+               ("pitches", f"{p[0]:+.0f}° to {p[1]:+.0f}° (the capture's {pp[0]:g}th to {pp[1]:g}th percentile), "
+                           "no roll"))),
+            ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes"
+                          + ("" if rec.get("orbit") else " and from space the capture did not see to be empty")
+                          + f" (the capture's {cp:g}th "
                           f"percentile, at least one voxel, at most a quarter of its typical viewing distance); nothing "
                           f"occupied nearer than {env['view_margin']:.2f} {u} in view (the {vp:g}th percentile of the "
                           "nearest surfaces it saw, at least one voxel, at most half the typical viewing distance)"),

@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 
 STAGE = "suggest"
 FIELD_STAGE = "suggest_field"
+UNANSWERED = "unanswered.json"
+"""Written in ``RUN/suggest`` when the capture leaves nothing to suggest: ``reason`` (what it lacks) and ``key``."""
 RUN_FIELDS = ("occupancy/field.pt", "evaluate/all/field.pt")
 """Fields a run may hold, in the order they are preferred for previews."""
 
@@ -210,21 +212,41 @@ def field_occupancy_grid(field_path: Path, inp: RunInputs) -> RunInputs:
 # ------------------------------------------------------------------ the stage
 def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
     """(placement, feasibility, free space, node mask used, frontier mask) for a capture and its occupancy
-    (``inp.occ``, ``inp.nodes_mask``): the stage's computation without its files (the validation harness's too)."""
+    (``inp.occ``, ``inp.nodes_mask``): the stage's computation without its files (the validation harness's too).
+
+    A walk-through gets poses where the capture saw empty space (:class:`curate.suggest.candidates.Feasibility`);
+    an object capture (:func:`curate.select.select.capture_kind`) gets poses on its own view sphere
+    (:class:`curate.suggest.orbit.OrbitFeasibility`). ValueError saying what the capture lacks when nothing is
+    feasible."""
     occ, nodes_mask = inp.occ, inp.nodes_mask
+    from curate.select.select import capture_kind
     from curate.suggest.candidates import Feasibility, capture_envelope
     from curate.suggest.freespace import cast_free_space
+    from curate.suggest.orbit import OrbitFeasibility, capture_orbit
     from curate.suggest.place import place_cameras
-    fs = cast_free_space(inp.cams, occ, inp.box_min, inp.box_max, probe=tuple(cfg.probe))
-    if not fs.free.any():
-        raise ValueError("no ray of the capture crosses free space before an occupied node: its occupancy "
-                         "leaves nowhere to stand")
+    fs = cast_free_space(inp.cams, occ, inp.box_min, inp.box_max, probe=tuple(cfg.probe), fill=cfg.probe_fill)
     env = capture_envelope(inp.cams, fs, occ, inp.box_min, inp.box_max, cfg.clearance_percentile,
                            cfg.view_percentile, cfg.height_percentiles, cfg.pitch_percentiles)
-    feas = Feasibility(occ, inp.box_min, inp.box_max, fs.free, env)
-    if len(feas.cells) == 0:
-        raise ValueError("no feasible place for a camera: no observed-free voxel at the capture's heights keeps "
-                         f"the capture's clearance ({env.clearance:.3g}) from occupied nodes")
+    kind = capture_kind(inp.cams)[0]
+    orbit = capture_orbit(inp.cams, env.up) if kind == "object" else None
+    if orbit is not None:
+        feas = OrbitFeasibility(occ, inp.box_min, inp.box_max, env, orbit)
+        if len(feas.cells) == 0:
+            raise ValueError("no feasible place for a camera around the object: every view of it at the capture's "
+                             f"distances ({orbit.radii[0]:.3g}-{orbit.radii[1]:.3g}) comes nearer than the capture's "
+                             f"clearance ({env.clearance:.3g}) to something occupied")
+    else:
+        if not fs.free.any():
+            raise ValueError("the capture saw no empty space to stand in: none of its rays reaches a surface it "
+                             "has points on (plain walls and floors give SfM no points); film the room with its "
+                             "furniture and textured surfaces in view, then run curate again")
+        feas = Feasibility(occ, inp.box_min, inp.box_max, fs.free, env)
+        if len(feas.cells) == 0:
+            raise ValueError("no feasible place for a camera: no space the capture saw to be empty keeps the "
+                             f"capture's own clearance ({env.clearance:.3g}) from surfaces and from what it did not "
+                             "see, at the heights it was filmed at (a capture from one spot, or of plain walls, "
+                             "sees too little of the room around it; walk through the room once, then run curate "
+                             "again)")
     front = frontier(fs.free, occ) if cfg.nodes == "surface+frontier" else np.zeros_like(occ)
     used = nodes_mask | front
     from curate.core.grid import NodeGrid
@@ -263,11 +285,18 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
         inp = field_occupancy_grid(field, inp)
         occ_source = f"the density of {field.relative_to(run_dir).as_posix()}"
     t1 = time.perf_counter()
-    pl, feas, fs, used, front = suggest(cfg, inp, progress)
+    try:
+        pl, feas, fs, used, front = suggest(cfg, inp, progress)
+        if len(pl.cams) == 0:
+            raise ValueError("no feasible candidate could be drawn: nothing to suggest")
+    except ValueError as e:     # the report says why instead of recommending the command
+        write_json_atomic(d / UNANSWERED, {"reason": str(e), "key": key})
+        if (run_dir / "report.json").is_file():
+            from curate.report.run_report import write_html
+            write_html(run_dir)
+        raise
     place_s = time.perf_counter() - t1
     sugg = pl.cams
-    if len(sugg) == 0:
-        raise ValueError("no feasible candidate could be drawn: nothing to suggest")
     names = outputs.suggestion_names(len(sugg))
     sugg = Cameras(sugg.c2w, sugg.fx, sugg.fy, sugg.cx, sugg.cy, sugg.width, sugg.height, names=tuple(names))
     env = feas.env
@@ -290,7 +319,9 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
            "occupancy": occ_source, "nodes": cfg.nodes, "n_nodes": int(len(flat)),
            "n_frontier": int(front.sum()), "n_capture": len(inp.cams), "chosen": inp.chosen,
            "field": str(field.relative_to(run_dir)) if field is not None else None,
-           "envelope": env.to_dict(), "feasible_voxels": int(len(feas.cells)),
+           "envelope": env.to_dict(), "kind": "object" if hasattr(feas, "orbit") else "walk",
+           **({"orbit": feas.orbit.to_dict(), "feasible_share": len(feas.cells) / feas.probe}
+              if hasattr(feas, "orbit") else {"feasible_voxels": int(len(feas.cells))}),
            "free_voxels": int(fs.free.sum()), "energy_before": pl.energy_before, "energy": pl.energy,
            "timing": {**timing, "place_seconds": place_s}, "n_candidates": pl.n_candidates,
            "suggestions": [{"index": s + 1, "name": names[s], "c2w": sugg.c2w[s].tolist(),
