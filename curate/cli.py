@@ -22,6 +22,8 @@ from curate import __version__
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
 from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
+from curate.export.config import MODES, UNDISTORT
+from curate.suggest.choices import FIELD_MODES, NODE_MODES
 
 
 class CliError(Exception):
@@ -221,7 +223,6 @@ def _factors(text: str) -> tuple[int, ...]:
 
 
 def _export_opts(mode_flag: str) -> list[Opt]:
-    from curate.export.config import MODES, UNDISTORT
     return [Opt(mode_flag, "export.mode", choices=MODES),
             Opt("--undistort", "export.undistort", choices=UNDISTORT),
             Opt("--keep-distorted", "export.keep_distorted"),
@@ -262,8 +263,8 @@ SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen"))
 
 SUGGEST = [Opt("--add", "add", parse=int, metavar="K"),
            Opt("--candidates", "n_candidates", parse=int),
-           Opt("--nodes", "nodes", choices=("surface", "surface+frontier")),
-           Opt("--field", "field", choices=("auto", "train", "none")),
+           Opt("--nodes", "nodes", choices=NODE_MODES),
+           Opt("--field", "field", choices=FIELD_MODES),
            Opt("--field-iters", "field_iters", parse=int),
            Opt("--field-size", "field_side", parse=int),
            Opt("--preview-size", "preview_side", parse=int),

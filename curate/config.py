@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from curate.core.budget import parse_budget
 from curate.evaluate.config import EvalConfig
 from curate.export.config import ExportConfig
-from curate.occupancy.masks import OccupancyConfig, RefineConfig
+from curate.occupancy.config import OccupancyConfig, RefineConfig
 from curate.select.select import SelectConfig
 from curate.sfm.config import SfmConfig
 

@@ -147,11 +147,26 @@ def test_plan_names_poses_and_list(tmp_path):
     items = plan(folders, tmp_path / "runs")
     names = [it.name for it in items]
     assert len(items) == 4 and len(set(names)) == 4  # duplicates dropped, clashing names made unique
-    assert names[0].startswith("scene-") and names[2:] == ["colmap_cap", "plain"]
+    assert names == ["x-scene", "y-scene", "colmap_cap", "plain"]   # clashing names: with their parent's
     assert [it.source for it in items] == ["transforms.json", "sfm", "colmap", "sfm"]
     assert find_poses(tmp_path / "colmap_cap") == (str(tmp_path / "colmap_cap" / "images"),
                                                    str(tmp_path / "colmap_cap" / "sparse" / "0"), "colmap")
     assert all(Path(it.run_dir).parent == (tmp_path / "runs").resolve() for it in items)
+
+
+def test_batch_names_folders_as_a_person_recognises_them(tmp_path):
+    """Issue 50: two folders named `images` became `images-37daac` and `images-419dd3`."""
+    for sub in ("kitchen/images", "garden/images", "a/photos/images", "b/photos/images", "walk.mp4"):
+        (tmp_path / sub).parent.mkdir(parents=True, exist_ok=True)
+        if sub.endswith(".mp4"):
+            (tmp_path / sub).write_bytes(b"")
+        else:
+            (tmp_path / sub).mkdir()
+    items = plan([tmp_path / s for s in ("kitchen/images", "garden/images", "a/photos/images", "b/photos/images",
+                                         "walk.mp4")], tmp_path / "runs")
+    names = [it.name for it in items]
+    assert names[:2] == ["kitchen", "garden"] and names[4] == "walk"
+    assert names[2].startswith("photos-") and names[3].startswith("photos-") and names[2] != names[3]
 
 
 @pytest.mark.slow
@@ -172,3 +187,18 @@ def test_batch_budget_auto_chooses_per_folder(folders, tmp_path):
         assert sel["budget_text"] == "auto" and auto["tolerance_db"] == 1.0
         assert auto["pool"] == len(sel["pool"]) > 30             # its own pool (40 less the held-out views)
         assert 2 <= auto["budget"] < auto["pool"] and rows[name]["chosen"] == auto["budget"] == len(sel["chosen"])
+
+
+def test_a_summary_without_evaluation_shows_no_psnr_columns(tmp_path):
+    """Issue 50: with --no-evaluate the summary kept five empty PSNR columns."""
+    from curate.batch.summary import write_summary_html
+    row = {"name": "kitchen", "folder": "/x/kitchen/images", "poses": "sfm", "status": "ok", "photos": 40,
+           "registered": 40, "chosen": 8, "psnr": {"selection": None, "random": None, "fvs": None, "all": None},
+           "selection_minus_random": None, "wall_seconds": 12.0, "report": "kitchen/report.html", "reason": ""}
+    summ = {"rows": [row], "n_folders": 1, "n_ok": 1, "n_failed": 0, "executor": "local", "wall_seconds": 12.0,
+            "config": {"budget": "8"}}
+    page = write_summary_html(tmp_path, summ).read_text()
+    assert "PSNR" not in page and "Not evaluated" in page and 'href="kitchen/report.html"' in page
+    row["psnr"] = {"selection": 24.1, "random": 23.0, "fvs": 23.5, "all": 25.0}
+    page = write_summary_html(tmp_path, summ).read_text()
+    assert "PSNR selection" in page and "24.10" in page

@@ -410,23 +410,25 @@ def test_add_beyond_what_a_reshoot_can_use_is_refused_naming_the_flag_and_its_bo
 
 
 # ------------------------------------------------------------------ standing in the room (issue 49)
-def _object_capture(n=36, radius=2.0, rise=0.8, seed=0):
-    """A ring of cameras around a cube (half side 0.4) at the origin of a 4^3 box on a 25^3 grid, looking at it."""
+def _object_capture(n=36, radius=2.0, rise=0.8, seed=0, half=3.0):
+    """A ring of cameras around a cube (half side 0.4) at the origin of a (2 half)^3 box on a 25^3 grid, looking at
+    it (``half`` < 2: the cameras stand outside the grid, as the occupancy's box of an object capture leaves them)."""
     rng = np.random.default_rng(seed)
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
     c = np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, rise)], 1) + rng.normal(0, 0.03, (n, 3))
     cams = Cameras(look_at(c, np.zeros((n, 3))), 60.0, 60.0, 40.0, 30.0, 80, 60)
-    lo, hi = np.full(3, -3.0), np.full(3, 3.0)
-    x = np.linspace(-3, 3, 25)
+    lo, hi = np.full(3, -half), np.full(3, half)
+    x = np.linspace(-half, half, 25)
     X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
     occ = (np.abs(X) <= 0.4) & (np.abs(Y) <= 0.4) & (np.abs(Z) <= 0.4)
     return cams, occ, lo, hi
 
 
-def test_an_object_capture_gets_suggestions_on_its_view_sphere_at_heights_it_did_not_film():
+@pytest.mark.parametrize("half", [3.0, 1.2])
+def test_an_object_capture_gets_suggestions_on_its_view_sphere_at_heights_it_did_not_film(half):
     from curate.suggest.config import SuggestConfig
     from curate.suggest.stage import RunInputs, suggest, surface_band
-    cams, occ, lo, hi = _object_capture()
+    cams, occ, lo, hi = _object_capture(half=half)
     inp = RunInputs(cams, [""] * len(cams), [f"f{i}" for i in range(len(cams))], "m", occ, surface_band(occ, 1),
                     lo, hi, [], [])
     pl, feas, *_ = suggest(SuggestConfig(add=6, n_candidates=200), inp)

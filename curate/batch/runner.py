@@ -116,6 +116,22 @@ def _safe_name(s: str) -> str:
     return s or "folder"
 
 
+GENERIC_NAMES = {"images", "image", "imgs", "img", "photos", "pictures", "frames", "input", "rgb", "color", "dcim",
+                 "100apple", "100media", "raw", "jpg", "jpeg"}
+"""Folder names that say nothing of the capture: a batch names such a folder by its parent (``scene1/images`` is
+``scene1``)."""
+
+
+def _display_base(p: Path) -> str:
+    """The name a person recognises a capture by: a video's stem; a folder's name, or its parent's when the folder's
+    name is generic (:data:`GENERIC_NAMES`)."""
+    if _is_video(p):
+        return _safe_name(p.stem)
+    if p.name.lower() in GENERIC_NAMES and p.parent.name:
+        return _safe_name(p.parent.name)
+    return _safe_name(p.name)
+
+
 def _is_video(p: Path) -> bool:
     from curate.sfm.config import VIDEO_EXTS
     return p.is_file() and p.suffix.lower() in VIDEO_EXTS
@@ -123,8 +139,9 @@ def _is_video(p: Path) -> bool:
 
 def plan(folders: Iterable[str | Path], out: str | Path) -> list[Folder]:
     """One :class:`Folder` per distinct input folder (or video file: one capture, as ``curate run
-    walk.mp4`` takes it), in order; names are the folders' base names (a video's stem), with a
-    short hash of the full path where two base names clash."""
+    walk.mp4`` takes it), in order; names are what a person recognises (:func:`_display_base`: a video's stem, a
+    folder's name or, for ``images``-like names, its parent's), then parent-name where two clash, then a short
+    hash of the full path."""
     out = Path(out).resolve()
     seen, paths = set(), []
     for f in folders:
@@ -132,11 +149,17 @@ def plan(folders: Iterable[str | Path], out: str | Path) -> list[Folder]:
         if p not in seen:
             seen.add(p)
             paths.append(p)
-    base = [_safe_name(p.stem if _is_video(p) else p.name) for p in paths]
+    base = [_display_base(p) for p in paths]
+    longer = [_safe_name(f"{p.parent.name}-{p.stem if _is_video(p) else p.name}") for p in paths]
     items = []
-    for p, b in zip(paths, base):
-        name = b if base.count(b) == 1 and b not in ("summary.json", "summary.html", "batch.log") else \
-            f"{b}-{hashlib.sha1(str(p).encode()).hexdigest()[:6]}"
+    for p, b, lb in zip(paths, base, longer):
+        reserved = ("summary.json", "summary.html", "batch.log")
+        if base.count(b) == 1 and b not in reserved:
+            name = b
+        elif longer.count(lb) == 1 and lb not in reserved:       # scene1-images, scene2-images
+            name = lb
+        else:
+            name = f"{b}-{hashlib.sha1(str(p).encode()).hexdigest()[:6]}"
         photos, poses, source = (str(p), None, "sfm") if _is_video(p) else find_poses(p)
         items.append(Folder(str(p), name, photos, poses, source, str(out / name)))
     return items

@@ -68,9 +68,12 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
 def write_summary_html(out: Path, summ: dict) -> Path:
     """``RUNS/summary.html``: one self-contained table, each folder linking to its report."""
     e = html.escape
+    # the PSNR columns only where some folder was evaluated (a --no-evaluate batch has none to show)
+    evaluated = any(v is not None for r in summ["rows"] for v in (r.get("psnr") or {}).values())
     head = ("<tr><th class=l>folder</th><th>status</th><th>photos</th><th>registered</th><th>chosen</th>"
-            "<th>PSNR selection</th><th>random (mean ± sd)</th><th>FVS</th><th>all</th><th>selection − random</th>"
-            "<th>wall</th><th class=l>report</th></tr>")
+            + ("<th>PSNR selection</th><th>random (mean ± sd)</th><th>FVS</th><th>all</th><th>selection − random</th>"
+               if evaluated else "")
+            + "<th>wall</th><th class=l>report</th></tr>")
     body = []
     for r in summ["rows"]:
         p = r.get("psnr") or {}
@@ -84,10 +87,11 @@ def write_summary_html(out: Path, summ: dict) -> Path:
         wall = "—" if r.get("wall_seconds") is None else f"{r['wall_seconds']:.0f} s"
         body.append(f"<tr><td class=l><b>{e(r['name'])}</b><br><small>{e(r['folder'])} ({e(r['poses'])})</small></td>"
                     f"<td>{status}</td><td>{_n(r.get('photos'))}</td><td>{_n(r.get('registered'))}</td>"
-                    f"<td>{_n(r.get('chosen'))}</td><td><b>{fmt_num(p.get('selection'))}</b></td><td>{rnd}</td>"
-                    f"<td>{fmt_num(p.get('fvs'))}</td><td>{fmt_num(p.get('all'))}</td>"
-                    f"<td>{fmt_num(dif, 2, True)}</td>"
-                    f"<td>{wall}</td>"
+                    f"<td>{_n(r.get('chosen'))}</td>"
+                    + (f"<td><b>{fmt_num(p.get('selection'))}</b></td><td>{rnd}</td>"
+                       f"<td>{fmt_num(p.get('fvs'))}</td><td>{fmt_num(p.get('all'))}</td>"
+                       f"<td>{fmt_num(dif, 2, True)}</td>" if evaluated else "")
+                    + f"<td>{wall}</td>"
                     f"<td class=l>{link}</td></tr>")
     css = ("body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px;color:#222}"
            "table{border-collapse:collapse}td,th{border:1px solid #ddd;padding:4px 10px;text-align:right;"
@@ -96,8 +100,9 @@ def write_summary_html(out: Path, summ: dict) -> Path:
     page = (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>curate batch</title>'
             f"<style>{css}</style></head><body>\n<h1>curate batch</h1>\n"
             f"<p>{summ['n_folders']} folders: {summ['n_ok']} ok, {summ['n_failed']} failed; executor "
-            f"{e(summ['executor'])}; {summ['wall_seconds']:.0f} s. Held-out PSNR in dB (each folder's own "
-            f"hold-out views); budget {e(str(summ['config'].get('budget')))}.</p>\n"
+            f"{e(summ['executor'])}; {summ['wall_seconds']:.0f} s. "
+            + ("Held-out PSNR in dB (each folder's own hold-out views); " if evaluated else "Not evaluated; ")
+            + f"budget {e(str(summ['config'].get('budget')))}.</p>\n"
             f"<table>{head}\n" + "\n".join(body) + "</table>\n"
             '<p><small>Written by curate batch. Self-contained; the report links are relative to this file.'
             "</small></p></body></html>\n")

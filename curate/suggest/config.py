@@ -6,11 +6,7 @@ import math
 from dataclasses import dataclass, field as dc_field
 
 from curate.select.energy import EnergyConfig
-
-FIELD_MODES = ("auto", "train", "none")
-"""``SuggestConfig.field`` choices."""
-NODE_MODES = ("surface", "surface+frontier")
-"""``SuggestConfig.nodes`` choices."""
+from curate.suggest.choices import FIELD_MODES, NODE_MODES  # noqa: F401  (re-exported)
 
 
 MAX_ADD = 200

@@ -62,20 +62,34 @@ def capture_orbit(cams: Cameras, up: np.ndarray) -> Orbit | None:
     return Orbit(p, (float(np.percentile(r[ok], 5)), float(np.percentile(r[ok], 95))), (lo, hi), cap)
 
 
+def _OpenOracle(box_min, box_max, occ, margin):
+    """:class:`curate.simulate.progressive.GridOracle` with the space outside the grid taken as empty: an object
+    capture's grid spans the object and what is near it, and its cameras stand outside it (the walk's grid spans
+    the room, where outside is behind the walls)."""
+    from curate.simulate.progressive import GridOracle
+
+    class Open(GridOracle):
+        def occupied(self, points) -> np.ndarray:
+            p = np.asarray(points, float).reshape(-1, 3)
+            inside = np.all((p >= self.lo) & (p <= self.hi), axis=1)
+            return inside & super().occupied(p)
+
+    return Open(box_min, box_max, occ, margin)
+
+
 class OrbitFeasibility:
     """Which poses around an object are feasible, and uniform draws of them (module docstring). The same interface
     as :class:`curate.suggest.candidates.Feasibility`."""
 
     def __init__(self, occ: np.ndarray, box_min, box_max, env: Envelope, orbit: Orbit, probe: int = 2000):
         from scipy.spatial import cKDTree
-        from curate.simulate.progressive import GridOracle
         self.occ = np.asarray(occ, bool)
         self.R = self.occ.shape[0]
         self.lo, self.hi = np.asarray(box_min, float), np.asarray(box_max, float)
         self.env, self.orbit = env, orbit
         pts = occupied_points(self.occ, self.lo, self.hi)
         self._tree = cKDTree(pts) if len(pts) else None
-        self._oracle = GridOracle(self.lo, self.hi, self.occ, margin=env.view_margin)
+        self._oracle = _OpenOracle(self.lo, self.hi, self.occ, margin=env.view_margin)
         # how much of the view sphere is feasible (a fixed draw, for the record and for "nowhere to stand")
         self.cells = np.flatnonzero(self.feasible(self._sample(np.random.default_rng(0), probe)))
         self.probe = probe

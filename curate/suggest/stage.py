@@ -244,9 +244,9 @@ def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
         if len(feas.cells) == 0:
             raise ValueError("no feasible place for a camera: no space the capture saw to be empty keeps the "
                              f"capture's own clearance ({env.clearance:.3g}) from surfaces and from what it did not "
-                             "see, at the heights it was filmed at (a capture from one spot, or of plain walls, "
-                             "sees too little of the room around it; walk through the room once, then run curate "
-                             "again)")
+                             "see, at the heights it was filmed at (a capture from one spot, one that only looks "
+                             "down, as a mapping flight does, or one of plain walls sees too little of the space "
+                             "around it; film that space, walking through it once, then run curate again)")
     front = frontier(fs.free, occ) if cfg.nodes == "surface+frontier" else np.zeros_like(occ)
     used = nodes_mask | front
     from curate.core.grid import NodeGrid
