@@ -621,6 +621,8 @@ def print_verdict(rep: dict, run_dir: Path) -> None:
     from curate.report.verdict import verdict
     v = rep.get("verdict") or verdict(rep)
     print(f"{v['exported']} -> {run_dir / 'export'}")
+    if v.get("frames"):
+        print(v["frames"])
     if v.get("coverage"):
         print(v["coverage"])
     print(f"verdict: {v['short']}")

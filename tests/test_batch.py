@@ -202,3 +202,19 @@ def test_a_summary_without_evaluation_shows_no_psnr_columns(tmp_path):
     row["psnr"] = {"selection": 24.1, "random": 23.0, "fvs": 23.5, "all": 25.0}
     page = write_summary_html(tmp_path, summ).read_text()
     assert "PSNR selection" in page and "24.10" in page
+
+
+def test_the_progress_line_names_each_running_folders_stage(tmp_path):
+    """Issue 50: for ten minutes the only progress was 'folders 0/2'."""
+    from curate.batch.runner import stage_in_progress
+    run = tmp_path / "kitchen"
+    assert stage_in_progress(run) == "starting"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"config": {"run_evaluation": False}}))
+    assert stage_in_progress(run) == "sfm"
+    for st, nxt in (("sfm", "occupancy"), ("occupancy", "select"), ("select", "export"), ("export", "report")):
+        (run / st).mkdir()
+        (run / st / "stage.json").write_text("{}")
+        assert stage_in_progress(run) == nxt
+    (run / "run.json").write_text(json.dumps({"config": {"run_evaluation": True}}))
+    assert stage_in_progress(run) == "evaluate"

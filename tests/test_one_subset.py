@@ -168,6 +168,10 @@ def test_the_verdict_names_every_rival_with_its_interval_what_it_decides_and_the
     assert v["against"] == {"random": "ahead of", "fvs": "not told apart from", "stride": "level with"}
     rep["estimate"] = {**rep["estimate"], "n_holdout": 12, "stopped": "every photo"}     # a small capture: said
     assert "Only 12 photos could be held out" in verdict(rep)["quality"]
+    assert v["frames"] is None                                        # photos: nothing more to say
+    rep["sfm"] = {"videos": [{"video": "room.mp4", "decoded": 1000, "candidates": 282}]}   # issue 50: "20 of 40" alone
+    assert verdict(rep)["frames"] == ("The 282 candidates are the sharpest distinct frames of the 1000 in room.mp4 "
+                                      "that SfM registered.")
     rep["estimate"] = {**rep["estimate"], "n_holdout": 282}                           # all held out, still undecided
     assert "Every photo has been held out once" in verdict(rep)["quality"]
 

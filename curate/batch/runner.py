@@ -259,6 +259,23 @@ def _ray_task(item: Folder, cfg, force: bool, phase: str, gpus: float, key: str)
     return run_folder(item, cfg, force, executor=ex, phase=phase, key=key)
 
 
+def stage_in_progress(run_dir: str | Path) -> str:
+    """The stage a folder's run is at: the first of ``curate run``'s stages without a finished record (or 'report'
+    once they all have one); 'starting' before the run folder holds anything."""
+    from curate.core.stage import STAGES
+    d = Path(run_dir)
+    try:
+        evaluated = json.loads((d / "run.json").read_text())["config"].get("run_evaluation", True)
+    except (OSError, ValueError, KeyError, TypeError):
+        return "starting"
+    for st in STAGES[:-1]:
+        if st == "budget" or (st == "evaluate" and not evaluated):
+            continue                   # budget: only with --budget auto on an evaluated run
+        if not (d / st / "stage.json").is_file() and not (st == "evaluate" and (d / st / "summary.json").is_file()):
+            return st
+    return "report"
+
+
 # ------------------------------------------------------------------ executors
 def _run_local(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, event: Callable) -> None:
     import multiprocessing as mp
@@ -275,7 +292,10 @@ def _run_local(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, eve
                 p.start()
                 running[p.sentinel] = (it, p, time.perf_counter())
                 event("start", it, None)
-            for s in wait(list(running), timeout=5.0):
+            ready = wait(list(running), timeout=5.0)
+            if not ready:
+                event("tick", None, None)      # the folders' stages, for the progress line
+            for s in ready:
                 it, p, t0 = running.pop(s)
                 p.join()
                 row = _read_row(it)
@@ -403,7 +423,9 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
                dynamic_ncols=True)
 
     def postfix():
-        bar.set_postfix_str(f"ok {counts['ok']}, failed {counts['failed']}, running {counts['running']}")
+        now = [f"{it.name}: {stage_in_progress(it.run_dir)}" for it in items if rows[it.name].get("status") == "running"]
+        bar.set_postfix_str(f"ok {counts['ok']}, failed {counts['failed']}"
+                            + (f"; {', '.join(now)}" if now else f", running {counts['running']}"))
 
     def write_summary():
         summ = {"out": str(out), "executor": executor, "jobs": jobs, "n_folders": len(items),
@@ -416,9 +438,12 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
         write_summary_html(out, summ)
         return summ
 
-    def event(kind: str, it: Folder, row: dict | None) -> None:
+    def event(kind: str, it: Folder | None, row: dict | None) -> None:
         with lock:
             stamp = time.strftime("%H:%M:%S")
+            if kind == "tick":
+                postfix()
+                return
             if kind == "start":
                 counts["running"] += 1
                 rows[it.name] = {**rows[it.name], "status": "running"}

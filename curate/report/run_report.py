@@ -177,6 +177,8 @@ def _verdict(run: _Run) -> str:
              + (f", exported to <code>{esc(run.dir / 'export')}</code> "
                 f"({esc(exp.get('n_images', '?'))} photos for COLMAP / 3DGS, nerfstudio and Instant-NGP)." if exp
                 else ".") + "</p>"]
+    if v.get("frames"):
+        lines.append(f"<p>{esc(v['frames'])}</p>")
     if v.get("coverage"):
         lines.append(f"<p>{esc(v['coverage'])}</p>")
     q = v.get("quality", "")

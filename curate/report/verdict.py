@@ -86,12 +86,20 @@ def estimate_said(est: dict, run_dir: str) -> str:
 
 
 def verdict(rep: dict) -> dict:
-    """{"exported": sentence, "coverage": sentence or None, "quality": sentence, "short": one line,
+    """{"exported": sentence, "frames": sentence or None (a video's: how many frames it had), "coverage": sentence
+    or None, "quality": sentence, "short": one line,
     "against": {rival: 'ahead of' | 'behind' | 'level with' | 'not told apart from'}, "how_many": sentence or
     None} for a ``report.json`` dict."""
     sel = rep.get("selection") or {}
     k, n = len(sel.get("chosen") or []), rep.get("n_candidates") or rep.get("n_registered") or 0
     exported = f"{k} of {n} photos chosen" + (f" ({sel['method']})" if sel.get("method") else "")
+    videos = [v for v in ((rep.get("sfm") or {}).get("videos") or []) if isinstance(v, dict) and v.get("decoded")]
+    frames = None
+    if videos:          # a video's frames: how many it had, and that the candidates are its usable ones
+        dec = sum(int(v["decoded"]) for v in videos)
+        what = videos[0].get("video", "the video") if len(videos) == 1 else f"{len(videos)} videos"
+        frames = (f"The {n} candidates are the sharpest distinct frames of the {dec} in {what} that SfM "
+                  "registered.")
     cov = sel.get("coverage")
     coverage = None
     if cov and cov.get("n_nodes_seen"):
@@ -140,7 +148,8 @@ def verdict(rep: dict) -> dict:
         quality = ("Not evaluated: no field was trained to compare this selection with random subsets and FVS"
                    f" (`{ev.get('refresh', 'curate evaluate RUN')}` does, in a few minutes).")
         short_line = "not evaluated"
-    return {"exported": exported, "coverage": coverage, "quality": quality, "short": short_line, "against": against,
+    return {"exported": exported, "frames": frames, "coverage": coverage, "quality": quality, "short": short_line,
+            "against": against,
             "how_many": how_many_said(sel.get("budget_auto"), k, rep.get("budget_check"))}
 
 
