@@ -119,6 +119,8 @@ POSES = {
     "no_intrinsics": (_del("fl_x"), "fl_x"),
     "duplicate_files": (_dup, "more than one frame"),
     "nested_deep": (lambda m: "[" * 100000 + "]" * 100000, "nested too deeply"),
+    "camera_fisheye": (lambda m: m.update(camera_model="OPENCV_FISHEYE"), "camera_model 'OPENCV_FISHEYE'"),
+    "camera_unknown": (_set(["camera_model"], "FISHEYE_9000"), "camera_model 'FISHEYE_9000'"),
 }
 COMMANDS = {
     "score": lambda p, out: ["score", str(p), "--res", "8"],
@@ -164,7 +166,7 @@ OPTIONS = [
     (["--gamma", "nan"], "gamma"), (["--box=0,0,0,1,1"], "six numbers"), (["--box=0,0,0,inf,1,1"], "finite"),
     (["--box=0,0,0,nan,1,1"], "finite"), (["--box=1,0,0,0,1,1"], "max"), (["--bins", "0x10"], "--bins"),
     (["--bins", "ax3"], "--bins"), (["--res", "0"], "res"), (["--device", "gpu9"], "--device"),
-    (["--device", "cuda"], "--device"), (["--method", "best"], "--method"), (["--export-mode", "move"], "--export-mode"),
+    (["--device", "cuda"], "--device"), (["--method", "best"], "--method"), (["--export-mode", "move"], "--export-mode"), (["--bins", "99999999999x2"], "--bins"),
     (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "--max-size"),
     (["--budget", "-5%"], "--budget"), (["--sift-peak-threshold", "-1"], "--sift-peak-threshold"),
     (["--sift-peak-threshold", "2"], "--sift-peak-threshold"), (["--eval-minutes", "-1"], "--eval-minutes"),

@@ -351,3 +351,26 @@ def test_a_link_loop_in_the_photo_folder_does_not_stop_a_pose_import(tmp_path):
     run = tmp_path / "run"
     assert main(["run", str(cap / "images"), "--poses", str(cap / "transforms.json"), "--out", str(run), *FAST]) == 0
     assert len(load_sfm(run).cameras) == 12
+
+
+def test_a_colmap_image_with_a_zero_quaternion_is_an_error_naming_the_file_and_image(tmp_path):
+    """The adversarial sweep (issue 49): `0 0 0 0` in images.txt was read as the identity rotation and exported."""
+    import numpy as np
+    from curate.core.cameras import Cameras, look_at
+    from curate.sfm.colmap import read_colmap_model, reconstruction_from_cameras
+    c = np.array([[3.0, 0, 0], [0, 3.0, 0], [-3, 0, 0]])
+    rec = reconstruction_from_cameras(Cameras(look_at(c, np.zeros((3, 3))), 50.0, 50.0, 32.0, 24.0, 64, 48,
+                                              names=("a.jpg", "b.jpg", "c.jpg")))
+    for kind in ("txt", "bin"):
+        d = tmp_path / kind
+        d.mkdir()
+        (rec.write_text if kind == "txt" else rec.write)(str(d))
+        assert len(read_colmap_model(d, None).cameras) == 3
+    txt = tmp_path / "txt" / "images.txt"
+    lines = txt.read_text().splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.endswith(" b.jpg"))
+    f = lines[i].split()
+    lines[i] = " ".join([f[0], "0", "0", "0", "0"] + f[5:])
+    txt.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"images.txt: image b.jpg has a rotation quaternion of zero length"):
+        read_colmap_model(tmp_path / "txt", None)

@@ -477,3 +477,26 @@ def test_a_suggestion_keeps_its_clearance_from_space_the_capture_did_not_see():
     ch = feas.checks(cams)
     assert ch["clearance"].all() and list(ch["seen"]) == [False, True]
     assert all(feas.node_xyz(feas.cells)[:, 0] <= 3.0)          # no feasible voxel within the clearance of x = 5
+
+
+def test_a_truncated_occupancy_or_stage_record_is_a_one_line_error_not_a_crash(tmp_path):
+    """The adversarial sweep (issue 49): a truncated occupancy.npz ended `curate suggest` in BadZipFile, and a
+    stage.json that is not UTF-8 ended `curate export` in UnicodeDecodeError."""
+    from curate.core.stage import read_stage
+    from curate.suggest.stage import read_run
+    run = tmp_path / "run"
+    (run / "sfm").mkdir(parents=True)
+    (run / "occupancy").mkdir()
+    cams = Cameras.concat([_cam([0, 0, 1.0], [1, 0, 1.0]), _cam([0, 1, 1.0], [1, 1, 1.0])])
+    (run / "sfm" / "cameras.json").write_text(json.dumps(cams.to_dict()))
+    (run / "sfm" / "images.json").write_text("{}")
+    np.savez_compressed(run / "occupancy" / "occupancy.npz", refined_mask=np.zeros((4, 4, 4), bool))
+    data = (run / "occupancy" / "occupancy.npz").read_bytes()
+    (run / "occupancy" / "occupancy.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match=r"occupancy.npz: not an occupancy grid of curate"):
+        read_run(run)
+    (run / "occupancy" / "stage.json").write_bytes(b'{"key": "\xaf\xff"}')
+    assert read_stage(run / "occupancy") is None
+    (run / "sfm" / "cameras.json").write_text('{"c2w": [[')
+    with pytest.raises(ValueError, match=r"cameras.json: not a cameras file of curate"):
+        read_run(run)

@@ -215,9 +215,14 @@ class Cameras:
 
     @staticmethod
     def load(path) -> "Cameras":
+        """The cameras of a ``cameras.json``; ValueError naming the file when it is not one."""
         import json
         from pathlib import Path
-        return Cameras.from_dict(json.loads(Path(path).read_text()))
+        try:
+            return Cameras.from_dict(json.loads(Path(path).read_text()))
+        except (ValueError, KeyError, TypeError) as e:   # truncated, not JSON, not UTF-8, fields missing
+            raise ValueError(f"{path}: not a cameras file of curate ({type(e).__name__}: {e}); the stage that "
+                             "wrote it can write it again with --force") from None
 
 
 # ---------------------------------------------------------------------- conversions

@@ -120,9 +120,10 @@ def read_stage(stage_dir: str | Path) -> dict | None:
     if not p.is_file():
         return None
     try:
-        return json.loads(p.read_text())
-    except (OSError, json.JSONDecodeError):
+        rec = json.loads(p.read_text())
+    except (OSError, ValueError):          # unreadable, not JSON, not UTF-8: not a finished stage
         return None
+    return rec if isinstance(rec, dict) else None
 
 
 def is_fresh(stage_dir: str | Path, key: str) -> bool:

@@ -42,6 +42,11 @@ def _image_size(path: Path | None) -> tuple[int, int] | None:
         return im.size
 
 
+CAMERA_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
+"""transforms.json ``camera_model`` values :func:`read_transforms` reads: perspective cameras, with OpenCV's k1 k2 p1 p2
+(no value: the same)."""
+
+
 def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
     """Read a transforms.json.
 
@@ -65,6 +70,12 @@ def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple
     frames = meta.get("frames")
     if not isinstance(frames, list) or not frames:
         raise ValueError(f"{path}: no 'frames' list")
+    models = {m for m in [meta.get("camera_model")] + [fr.get("camera_model") for fr in frames if isinstance(fr, dict)]
+              if m is not None}
+    odd = sorted(str(m) for m in models if str(m).upper() not in CAMERA_MODELS)
+    if odd:     # a fisheye or 360 camera read as a perspective one would be a silent wrong result
+        raise ValueError(f"{path}: camera_model {odd[0]!r} is not one curate reads ({', '.join(CAMERA_MODELS)}): "
+                         "undistort the photos to a perspective camera first (COLMAP's image_undistorter)")
     root = path.parent
     c2w, fx, fy, cx, cy, ws, hs, dist, names, files = [], [], [], [], [], [], [], [], [], []
     for i, fr in enumerate(frames):

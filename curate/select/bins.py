@@ -30,6 +30,10 @@ VERTICAL_TOL = 1e-12
 """A direction whose horizontal part is at most this fraction of its largest component is vertical."""
 
 
+MAX_BINS = 4096
+"""The most direction bins (theta x phi) a node's histogram may have: memory grows with nodes x bins."""
+
+
 @dataclass(frozen=True)
 class DirectionBins:
     """Polar direction binning.
@@ -47,6 +51,9 @@ class DirectionBins:
     def __post_init__(self) -> None:
         if self.n_theta < 1 or self.n_phi < 1:
             raise ValueError("n_theta and n_phi must be >= 1")
+        if self.n_theta * self.n_phi > MAX_BINS:   # each node keeps a histogram of this many bins
+            raise ValueError(f"--bins {self.n_theta}x{self.n_phi}: at most {MAX_BINS} direction bins in all (the "
+                             "paper uses 5x10)")
         if self.binning not in BINNINGS:
             raise ValueError(f"binning must be one of {BINNINGS}, got {self.binning!r}")
 

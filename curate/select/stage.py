@@ -142,4 +142,11 @@ def read_selection(run_dir: Path) -> dict:
     p = Path(run_dir) / "select" / "selection.json"
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no selection yet (run `curate select RUN` first)")
-    return json.loads(p.read_text())
+    try:
+        rec = json.loads(p.read_text())
+    except ValueError as e:                 # truncated, not JSON, not UTF-8
+        raise ValueError(f"{p}: not a selection record of curate ({e}); `curate select {run_dir}` writes it "
+                         "again") from None
+    if not isinstance(rec, dict):
+        raise ValueError(f"{p}: not a selection record of curate")
+    return rec

@@ -929,6 +929,37 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
 
 
 # ------------------------------------------------------------------ import
+def raw_quaternions(model: Path) -> list[tuple[Path, str, np.ndarray]]:
+    """(file, image name, [4] quaternion as written) of every image of the model in ``model`` (``images.bin`` or
+    ``images.txt``), before pycolmap normalises them; [] when neither is readable."""
+    import struct
+    out = []
+    b, t = model / "images.bin", model / "images.txt"
+    try:
+        if b.is_file():
+            data = b.read_bytes()
+            (n,), o = struct.unpack_from("<Q", data, 0), 8
+            for _ in range(n):
+                q = np.array(struct.unpack_from("<4d", data, o + 4))
+                o += 4 + 32 + 24 + 4
+                end = data.index(b"\0", o)
+                name = data[o:end].decode("utf-8", "replace")
+                o = end + 1
+                (k,) = struct.unpack_from("<Q", data, o)
+                o += 8 + 24 * k
+                out.append((b, name, q))
+        elif t.is_file():
+            # two lines an image (the second, its points, empty when it has none), after the comments
+            lines = [ln for ln in t.read_text(errors="replace").splitlines() if not ln.startswith("#")]
+            for ln in lines[0::2]:
+                f = ln.split()
+                if len(f) >= 10:
+                    out.append((t, " ".join(f[9:]), np.array([float(v) for v in f[1:5]])))
+    except (OSError, ValueError, struct.error, IndexError):
+        return out      # a broken file: pycolmap has already said so, or reads what there is
+    return out
+
+
 def read_colmap_model(model: Path, photos: Path | None):
     """A COLMAP model folder as :class:`curate.sfm.poses.Poses` (image paths under ``photos`` when given)."""
     pycolmap = load_pycolmap()
@@ -936,7 +967,13 @@ def read_colmap_model(model: Path, photos: Path | None):
     try:
         rec = pycolmap.Reconstruction(model)
     except Exception as e:  # noqa: BLE001 - pycolmap raises its own error types
-        raise ValueError(f"{model}: cannot read the COLMAP model ({e})") from None
+        said = re.sub(r"\[[\w./-]+:\d+\] Check failed: ", "COLMAP's check of ", str(e)).strip()
+        raise ValueError(f"{model}: cannot read the COLMAP model ({said})") from None
+    bad = [(f, n) for f, n, q in raw_quaternions(Path(model))
+           if not (np.all(np.isfinite(q)) and np.linalg.norm(q) > 1e-6)]
+    if bad:   # pycolmap normalises a zero quaternion to the identity: a made-up pose, never a silent one
+        raise ValueError(f"{bad[0][0]}: image {bad[0][1]} has a rotation quaternion of zero length or not finite "
+                         f"({len(bad)} image(s)); fix or remove it")
     cams, xyz, rgb, err = cameras_from_reconstruction(rec)
     files = [str((photos / n).resolve()) if photos is not None else n for n in cams.names]
     return Poses(cams, files, xyz, rgb, err, rec)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -113,8 +114,9 @@ def read_run(run_dir: Path) -> RunInputs:
         z = np.load(run_dir / "occupancy" / "occupancy.npz")
         occ, nodes = np.asarray(z["refined_mask"], bool), np.asarray(z["nodes_mask"], bool)
         lo, hi = np.asarray(z["box_min"], float), np.asarray(z["box_max"], float)
-    except (KeyError, ValueError, OSError) as e:
-        raise ValueError(f"{run_dir / 'occupancy' / 'occupancy.npz'}: not an occupancy grid of curate ({e})") from None
+    except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{run_dir / 'occupancy' / 'occupancy.npz'}: not an occupancy grid of curate ({e}); "
+                         f"`curate occupancy {run_dir} --force` writes it again") from None
     if occ.ndim != 3 or occ.shape != nodes.shape or len(set(occ.shape)) != 1:
         raise ValueError(f"{run_dir / 'occupancy' / 'occupancy.npz'}: masks of shape {occ.shape} / {nodes.shape}")
     chosen: list[int] = []
