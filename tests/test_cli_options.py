@@ -200,3 +200,12 @@ def test_method_help_has_one_line_per_method_from_the_registry():
     assert tuple(action.choices) == tuple(REGISTRY)
     block = text.split("\n  --method {")[1].split("\n  --")[0]
     assert re.findall(r"^\s+(\w+)  +\S", block, re.M) == list(REGISTRY)
+
+
+def test_a_saved_run_of_an_earlier_curate_keeps_its_export_mode():
+    """curate 0.3 saved `export_mode`; it is now `export.mode` (ExportConfig), and a stage re-run keeps it."""
+    from curate.config import RunConfig, upgrade_config
+    from curate.core.stage import config_from_dict
+    cfg = config_from_dict(RunConfig, upgrade_config({"budget": "12", "export_mode": "copy"}, "0.3.0"))
+    assert cfg.export.mode == "copy" and cfg.export.undistort == "auto" and cfg.budget == "12"
+    assert config_from_dict(RunConfig, upgrade_config({}, "0.3.0")).export.mode == "hardlink"

@@ -154,7 +154,7 @@ def test_a_distorted_capture_exports_undistorted_pinhole_images_every_reader_loa
     assert {p.name: p.read_bytes() for p in photos.iterdir()} == before      # the originals untouched
     man = json.loads((out / "export.json").read_text())
     assert man["model"]["undistorted"] and man["model"]["camera_model"] == "PINHOLE"
-    assert not (out / "distorted").exists() and not (out / ".undistort").exists()
+    assert not (out / "distorted").exists() and not list(out.glob(".curate-undistort-*"))
 
 
 def test_the_distorted_set_is_kept_on_request_and_a_re_export_removes_only_what_it_wrote(distorted_run):
@@ -206,3 +206,21 @@ def test_the_samples_export_loads_in_every_reader(tmp_path):
     n = len(json.loads((run / "select" / "selection.json").read_text())["chosen"])
     _check_export(run / "export", n, distorted_source=False)
     assert len(read_like_nerfstudio(run / "export", downscale=2)) == n
+
+
+def test_undistorting_never_touches_the_users_files_beside_the_export(distorted_run, tmp_path):
+    """A user's own files in the export folder (a photo in images/, a text model in sparse/0) stay as they are
+    through an undistorted export, with or without the distorted set kept."""
+    cams, photos, run = distorted_run
+    out = tmp_path / "mine"
+    (out / "images").mkdir(parents=True)
+    (out / "sparse" / "0").mkdir(parents=True)
+    (out / "images" / "notes.jpg").write_bytes(b"mine")
+    (out / "sparse" / "0" / "cameras.txt").write_text("# mine\n")
+    (out / "export.json").write_text(json.dumps({"images": [], "files": {}}))   # a record with nothing in it
+    for keep in (False, True):
+        export_subset(run, list(cams.names[:3]), out, config=ExportConfig(keep_distorted=keep))
+        assert (out / "images" / "notes.jpg").read_bytes() == b"mine"
+        assert (out / "sparse" / "0" / "cameras.txt").read_text() == "# mine\n"
+        assert sorted(p.name for p in (out / "images").iterdir()) == ["img_00.jpg", "img_01.jpg", "img_02.jpg",
+                                                                        "notes.jpg"]

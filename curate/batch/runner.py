@@ -455,9 +455,10 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
                 rows[it.name] = row
                 if row["status"] == "ok":
                     p = row["psnr"]
-                    msg = (f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, PSNR selection "
-                           f"{fmt_num(p['selection'])} / random {fmt_num(p['random'])} / fvs {fmt_num(p['fvs'])} / all {fmt_num(p['all'])} "
-                           f"({row['wall_seconds']:.0f}s)")
+                    said = (f"PSNR selection {fmt_num(p['selection'])} / random {fmt_num(p['random'])} / fvs "
+                            f"{fmt_num(p['fvs'])} / all {fmt_num(p['all'])}"
+                            if any(v is not None for v in p.values()) else "not evaluated")
+                    msg = f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, {said} ({row['wall_seconds']:.0f}s)"
                 else:
                     msg = f"{it.name}: FAILED in {row.get('failed_stage')}: {row['reason']}"
                 blog.write(f"{stamp} {msg}\n")

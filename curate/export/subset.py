@@ -84,8 +84,8 @@ _DIRS = ("images", "images_2", "images_4", "images_8", "sparse/0", "sparse", "di
          "distorted/sparse", "distorted")
 """Folders an export may have made, deepest first: removed by a re-export when left empty."""
 _MODEL_FILES = tuple(f"{n}.bin" for n in ("cameras", "images", "points3D", "rigs", "frames"))
-"""What an export before ``files`` was recorded (curate 0.2) may have written in ``sparse/0`` (binary only: a
-``.txt`` model there is the user's, from ``colmap model_converter``)."""
+"""What an export writes in ``sparse/0`` (binary only: a ``.txt`` model there is the user's, from ``colmap
+model_converter``); all an export of curate 0.2, before ``files`` was recorded, may have written there."""
 
 
 def _sha256(p: Path) -> str:
@@ -291,13 +291,14 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     write_transforms(out / "transforms.json", sub, [f"images/{n}" for n in names], extra=extra)
     (out / "images.txt").write_text("".join(r + "\n" for r in rels))
     files = ["transforms.json", "images.txt"] + ([PLY_NAME] if len(xyz) else [])
-    files += sorted(f"sparse/0/{p.name}" for p in (out / "sparse" / "0").iterdir() if p.is_file())
+    # the model's files this export wrote (a text model the user converted beside them, or left there, is theirs)
+    files += [f"sparse/0/{n}" for n in _MODEL_FILES if (out / "sparse" / "0" / n).is_file()]
     for f in cfg.downscale:
         files += [f"images_{f}/{n}" for n in downscale_images(img_dir, names, f, out / f"images_{f}")]
     if cfg.mode != "link" or undistorted:   # a file is checked against what was written, wherever its original is
         files += [f"images/{n}" for n in names]
     if undistorted and cfg.keep_distorted:
-        files += sorted(f"distorted/sparse/0/{p.name}" for p in (out / "distorted" / "sparse" / "0").iterdir())
+        files += [f"distorted/sparse/0/{n}" for n in _MODEL_FILES if (out / "distorted" / "sparse" / "0" / n).is_file()]
         if cfg.mode != "link":
             files += [f"distorted/images/{n}" for n in names]
     model.update({"undistorted": undistorted, "camera_model": "PINHOLE" if undistorted else
@@ -325,11 +326,10 @@ def _undistort(out: Path, sub, names: list[str], rotated: list[bool], originals:
     if raw:
         logger.warning("export: RAW originals are not undistorted: their distorted cameras are exported as they are")
         return sub, False
-    tmp = out / ".undistort"
-    if tmp.exists():
-        shutil.rmtree(tmp)
+    import tempfile
+    tmp = Path(tempfile.mkdtemp(prefix=".curate-undistort-", dir=out))   # its own, never a folder found there
     src = tmp / "src"
-    src.mkdir(parents=True)
+    src.mkdir()
     for name, rot, orig in zip(names, rotated, originals):
         if rot:            # COLMAP reads the pixels as stored: an EXIF rotation is applied first
             from PIL import Image
@@ -338,19 +338,30 @@ def _undistort(out: Path, sub, names: list[str], rotated: list[bool], originals:
         else:
             os.symlink(out / "images" / name, src / name)
     intr = undistort_model(out / "sparse" / "0", src, tmp / "out", log=tmp / "undistort.log")
+    # file by file: only what this export wrote moves or goes (a folder may hold the user's files too)
+    model = [out / "sparse" / "0" / f for f in _MODEL_FILES if (out / "sparse" / "0" / f).is_file()]
     if cfg.keep_distorted:
-        (out / "distorted" / "sparse").mkdir(parents=True, exist_ok=True)
-        os.replace(out / "images", out / "distorted" / "images")
-        os.replace(out / "sparse" / "0", out / "distorted" / "sparse" / "0")
+        kept_img, kept_model = out / "distorted" / "images", out / "distorted" / "sparse" / "0"
+        clash = [p for p in [kept_img / n for n in names] + [kept_model / m.name for m in model]
+                 if p.exists() or p.is_symlink()]
+        if clash:
+            shutil.rmtree(tmp)
+            raise ValueError(f"{clash[0]} exists and was not written by a curate export: choose an empty folder")
+        kept_img.mkdir(parents=True, exist_ok=True)
+        kept_model.mkdir(parents=True, exist_ok=True)
+        for n in names:
+            os.replace(out / "images" / n, kept_img / n)
+        for m in model:
+            os.replace(m, kept_model / m.name)
     else:
         for n in names:
             (out / "images" / n).unlink()
-        for p in (out / "sparse" / "0").iterdir():
-            p.unlink()
-        (out / "images").rmdir()
-        (out / "sparse" / "0").rmdir()
-    os.replace(tmp / "out" / "images", out / "images")
-    os.replace(tmp / "out" / "sparse", out / "sparse" / "0")
+        for m in model:
+            m.unlink()
+    for n in names:
+        os.replace(tmp / "out" / "images" / n, out / "images" / n)
+    for m in (tmp / "out" / "sparse").iterdir():
+        os.replace(m, out / "sparse" / "0" / m.name)
     shutil.rmtree(tmp)
     from curate.core.cameras import Cameras
     k = [intr[n] for n in names]

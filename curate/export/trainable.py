@@ -56,15 +56,15 @@ def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 def downscale_images(image_dir: Path, names: list[str], factor: int, out_dir: Path) -> list[str]:
     """Write each of ``names`` in ``image_dir`` shrunk by ``factor`` (size floored, Lanczos) into ``out_dir``
-    under the same name and format; returns the names written. The images are read upright (EXIF applied) only
-    when they carry no rotation: an exported image is already upright or undistorted."""
+    under the same name and format; returns the names written. Pixels are taken as stored and a JPEG's EXIF is
+    kept, so a copy carries the same orientation tag as the image it shrinks."""
     from PIL import Image
     out_dir.mkdir(parents=True, exist_ok=True)
     for n in names:
         with Image.open(image_dir / n) as im:
             w, h = max(1, im.width // factor), max(1, im.height // factor)
             small = im.resize((w, h), Image.Resampling.LANCZOS)
-            kw = {"quality": 95} if (im.format or "").upper() == "JPEG" else {}
+            kw = {"quality": 95, "exif": im.info.get("exif", b"")} if (im.format or "").upper() == "JPEG" else {}
             small.save(out_dir / n, format=im.format, **kw)
     return list(names)
 

@@ -7,9 +7,10 @@ surface each one saw; at most :data:`MAX_CLEARANCE_SHARE` and :data:`MAX_VIEW_MA
 viewing distance, at least one voxel). A pose is *feasible* (:class:`Feasibility`) when its centre lies in an
 observed-free, unoccupied voxel (:mod:`curate.suggest.freespace`), at a height and pitch within the envelope, no
 nearer to an occupied node than the envelope's clearance, no nearer than the clearance either (in its horizontal
-plane) to space the capture has not seen to be empty (a plain wall gives no points, so only the rays that stop beside
-it say where it is: what lies beyond what the capture saw is taken as a wall), and nothing occupied lies in its view nearer than the
-envelope's view margin. Candidates (:meth:`Feasibility.draw`) are drawn in the feasible voxels (each equally likely, the position
+plane) to space the capture has not seen to be empty (a plain wall gives no points, so only the rays that stop
+beside it say where it is: what lies beyond what the capture saw is taken as a wall), and nothing occupied lies in
+its view nearer than the envelope's view margin. Candidates (:meth:`Feasibility.draw`) are drawn in the feasible
+voxels (each equally likely, the position
 uniform across the voxel and the height uniform in the envelope's range), with a uniform yaw, a pitch uniform in
 the envelope's range and no roll (the image's x axis level).
 """

@@ -9,11 +9,11 @@ Each camera casts a ``probe`` grid of rays (pixel centres of a ``W x H`` image w
 view), sampled every ``step`` along the ray. A ray's *hit* is its first sample in an occupied voxel, at least
 ``near`` from the camera (occupied voxels nearer than that are taken as noise of the occupancy: a camera
 stood there). Every voxel a ray's samples traverse before its hit is *observed free*. A ray that hits nothing
-is evidence of free space only as far as the surfaces next to it in the same image: it carves up to the
-nearest hit among its neighbours (the rays within ``fill`` probe cells, their z-depth taken along its own
-direction), and nothing when none of them hits. A plain wall has no SfM points, so its rays hit nothing: they
-carve up to the things seen beside it, never through it (the median depth of the camera's hits, the rule
-before, carved through a wall the camera stood near while looking along it).
+carves nothing: a plain wall has no SfM points, so its rays hit nothing, and the space behind it is never taken
+for free. (The rule before carved such a ray up to the median depth of the camera's hits, through a wall the
+camera stood near while looking along it. ``fill`` > 0 carves it up to the nearest hit among the rays within
+``fill`` probe cells, their z-depth taken along its own direction: measured and not adopted, a neighbour's hit
+on another surface carries the ray through the wall; docs/suggest.md.)
 """
 
 from __future__ import annotations

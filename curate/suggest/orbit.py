@@ -62,7 +62,7 @@ def capture_orbit(cams: Cameras, up: np.ndarray) -> Orbit | None:
     return Orbit(p, (float(np.percentile(r[ok], 5)), float(np.percentile(r[ok], 95))), (lo, hi), cap)
 
 
-def _OpenOracle(box_min, box_max, occ, margin):
+def _open_oracle(box_min, box_max, occ, margin):
     """:class:`curate.simulate.progressive.GridOracle` with the space outside the grid taken as empty: an object
     capture's grid spans the object and what is near it, and its cameras stand outside it (the walk's grid spans
     the room, where outside is behind the walls)."""
@@ -89,7 +89,7 @@ class OrbitFeasibility:
         self.env, self.orbit = env, orbit
         pts = occupied_points(self.occ, self.lo, self.hi)
         self._tree = cKDTree(pts) if len(pts) else None
-        self._oracle = _OpenOracle(self.lo, self.hi, self.occ, margin=env.view_margin)
+        self._oracle = _open_oracle(self.lo, self.hi, self.occ, margin=env.view_margin)
         # how much of the view sphere is feasible (a fixed draw, for the record and for "nowhere to stand")
         self.cells = np.flatnonzero(self.feasible(self._sample(np.random.default_rng(0), probe)))
         self.probe = probe
