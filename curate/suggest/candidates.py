@@ -213,27 +213,38 @@ class Feasibility:
         ch = self.checks(cams)
         return np.logical_and.reduce(list(ch.values())) if len(cams) else np.zeros(0, bool)
 
+    def _sample(self, rng: np.random.Generator, m: int) -> Cameras:
+        """``m`` candidate poses, feasible or not: the position uniform in a feasible voxel (each equally likely),
+        the height uniform in the envelope's range (a range of zero width too: a capture on a tripod), a uniform yaw,
+        a pitch uniform in the envelope's range."""
+        env = self.env
+        cell = self.cells[rng.integers(0, len(self.cells), m)]
+        c = self.node_xyz(cell) + rng.uniform(-0.5, 0.5, (m, 3)) * self.vox
+        c += env.up[None, :] * (rng.uniform(env.heights[0], env.heights[1], m) - c @ env.up)[:, None]
+        yaw = rng.uniform(-np.pi, np.pi, m)
+        pitch = rng.uniform(env.pitches[0], env.pitches[1], m)
+        return make_cameras(c, yaw, pitch, env)
+
     def draw(self, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
         """Up to ``n`` feasible cameras drawn uniformly (module docstring); fewer only when ``max_rounds`` rounds
         of draws do not find them (a nearly infeasible capture)."""
-        if len(self.cells) == 0 or n <= 0:
-            return Cameras.empty()
-        env = self.env
-        got: list[Cameras] = []
-        total = 0
-        for _ in range(max_rounds):
-            m = 2 * (n - total) + 16
-            cell = self.cells[rng.integers(0, len(self.cells), m)]
-            c = self.node_xyz(cell) + rng.uniform(-0.5, 0.5, (m, 3)) * self.vox
-            # the height drawn in the envelope's range (a range of zero width too: a capture on a tripod)
-            c += env.up[None, :] * (rng.uniform(env.heights[0], env.heights[1], m) - c @ env.up)[:, None]
-            yaw = rng.uniform(-np.pi, np.pi, m)
-            pitch = rng.uniform(env.pitches[0], env.pitches[1], m)
-            cams = make_cameras(c, yaw, pitch, env)
-            cams = cams[self.feasible(cams)]
-            take = min(len(cams), n - total)
-            got.append(cams[:take])
-            total += take
-            if total >= n:
-                break
-        return Cameras.concat(got)
+        return draw_feasible(self, rng, n, max_rounds)
+
+
+def draw_feasible(feas, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
+    """Up to ``n`` feasible poses of ``feas`` (its ``_sample(rng, m)`` and ``feasible(cams)``), drawn in rounds of
+    twice what is missing and 16 more; fewer only when ``max_rounds`` rounds do not find them (none without
+    feasible ``cells``)."""
+    if len(feas.cells) == 0 or n <= 0:
+        return Cameras.empty()
+    got: list[Cameras] = []
+    total = 0
+    for _ in range(max_rounds):
+        cams = feas._sample(rng, 2 * (n - total) + 16)
+        cams = cams[feas.feasible(cams)]
+        take = min(len(cams), n - total)
+        got.append(cams[:take])
+        total += take
+        if total >= n:
+            break
+    return Cameras.concat(got)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from curate.core.cameras import Cameras, look_at
-from curate.suggest.candidates import Envelope, horizontal_basis, occupied_points
+from curate.suggest.candidates import Envelope, draw_feasible, horizontal_basis, occupied_points
 from curate.suggest.freespace import voxel_index
 
 ELEVATION_MAX_DEG = 75.0
@@ -132,16 +132,4 @@ class OrbitFeasibility:
     def draw(self, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
         """Up to ``n`` feasible poses drawn uniformly on the view sphere; fewer only when ``max_rounds`` rounds of
         draws do not find them."""
-        if len(self.cells) == 0 or n <= 0:
-            return Cameras.empty()
-        got: list[Cameras] = []
-        total = 0
-        for _ in range(max_rounds):
-            cams = self._sample(rng, 2 * (n - total) + 16)
-            cams = cams[self.feasible(cams)]
-            take = min(len(cams), n - total)
-            got.append(cams[:take])
-            total += take
-            if total >= n:
-                break
-        return Cameras.concat(got)
+        return draw_feasible(self, rng, n, max_rounds)
