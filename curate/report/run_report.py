@@ -221,7 +221,7 @@ def _first_screen(run: _Run) -> str:
     if sug:
         out.append(f'<p>Going back to film more? <a href="suggest/suggest.html">Where to shoot next</a>: '
                    f'{esc(sug.get("placed", "?"))} suggested camera poses, with how to reach each from your capture.</p>')
-    elif (why := (read_json(run.dir / "suggest" / "unanswered.json") or {}).get("reason")):
+    elif (why := _unanswered(run.dir)):
         out.append(f'<p class="small">Going back to film more? <code>curate suggest</code> found nowhere to propose '
                    f"for this capture: {esc(why)}.</p>")
     else:
@@ -587,6 +587,14 @@ def _timings(run: _Run) -> str:
             "per core, so the clock time is shorter, and a training's own time grows when the machine is busy."
             + (f" The last <code>curate run</code> on this folder took {esc(duration(wall))} from start to end "
                "(stages it found unchanged were not redone)." if wall is not None else "") + "</p>")
+
+
+def _unanswered(run_dir: Path) -> str | None:
+    """Why ``curate suggest`` found nothing to propose for this capture, while the SfM and occupancy it read hold."""
+    from curate.core.stage import read_stage
+    rec = read_json(run_dir / "suggest" / "unanswered.json") or {}
+    now = [(read_stage(run_dir / s) or {}).get("key", "") for s in ("sfm", "occupancy")]
+    return rec.get("reason") if rec.get("inputs") == now else None
 
 
 def _train(run: _Run) -> str:

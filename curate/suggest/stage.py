@@ -40,7 +40,8 @@ log = logging.getLogger(__name__)
 STAGE = "suggest"
 FIELD_STAGE = "suggest_field"
 UNANSWERED = "unanswered.json"
-"""Written in ``RUN/suggest`` when the capture leaves nothing to suggest: ``reason`` (what it lacks) and ``key``."""
+"""Written in ``RUN/suggest`` when the capture leaves nothing to suggest: ``reason`` (what it lacks), ``key``, and
+``inputs`` (the keys of the sfm and occupancy stages it read: the report says the reason while they hold)."""
 RUN_FIELDS = ("occupancy/field.pt", "evaluate/all/field.pt")
 """Fields a run may hold, in the order they are preferred for previews."""
 
@@ -292,7 +293,7 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
         if len(pl.cams) == 0:
             raise ValueError("no feasible candidate could be drawn: nothing to suggest")
     except ValueError as e:     # the report says why instead of recommending the command
-        write_json_atomic(d / UNANSWERED, {"reason": str(e), "key": key})
+        write_json_atomic(d / UNANSWERED, {"reason": str(e), "key": key, "inputs": inp.keys[:2]})
         if (run_dir / "report.json").is_file():
             from curate.report.run_report import write_html
             write_html(run_dir)
