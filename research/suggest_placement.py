@@ -34,7 +34,6 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +124,7 @@ def truth_clearance(world, cams, env, look_depth: float, vox: float, pct: float)
     return max(min(float(np.percentile(d, pct)), MAX_CLEARANCE_SHARE * look_depth), vox)
 
 
-def cell(room: str, walk: str, finish: str, add: int, seed: int, fill: int | None = None) -> dict:
+def cell(room: str, walk: str, finish: str, add: int, seed: int) -> dict:
     from curate.simulate.synthetic import make_scene
     from curate.suggest.config import SuggestConfig
     from curate.suggest.freespace import voxel_size
@@ -137,10 +136,8 @@ def cell(room: str, walk: str, finish: str, add: int, seed: int, fill: int | Non
     pts = finish_points(world, se.sfm_points(cams, depths, seed=seed), finish, seed)
     inp = run_inputs(cams, pts)
     cfg = SuggestConfig(add=add, seed=seed)
-    if fill is not None:
-        cfg = replace(cfg, probe_fill=fill)
     t0 = time.perf_counter()
-    row = {"room": room, "walk": walk, "finish": finish, "fill": cfg.probe_fill, "n_capture": len(cams), "n_points": len(pts)}
+    row = {"room": room, "walk": walk, "finish": finish, "n_capture": len(cams), "n_points": len(pts)}
     try:
         pl, feas, fs, *_ = suggest(cfg, inp)
     except ValueError as e:
@@ -173,7 +170,6 @@ def main(argv=None) -> int:
     ap.add_argument("--finishes", nargs="+", default=list(FINISHES), choices=FINISHES)
     ap.add_argument("--add", type=int, default=8)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
-    ap.add_argument("--fill", type=int, nargs="+", default=[None], help="probe fills to compare (default: curate's)")
     ap.add_argument("--out", type=Path, default=None, help="also append the JSON lines here")
     a = ap.parse_args(argv)
     rows = []
@@ -181,24 +177,17 @@ def main(argv=None) -> int:
         for walk in a.walks:
             for finish in a.finishes:
                 for seed in a.seeds:
-                    for fill in a.fill:
-                        r = cell(room, walk, finish, a.add, seed, fill)
-                        rows.append(r)
-                        line = json.dumps(r)
-                        print(line, flush=True)
-                        if a.out:
-                            with open(a.out, "a") as f:
-                                f.write(line + "\n")
+                    r = cell(room, walk, finish, a.add, seed)
+                    rows.append(r)
+                    line = json.dumps(r)
+                    print(line, flush=True)
+                    if a.out:
+                        with open(a.out, "a") as f:
+                            f.write(line + "\n")
     tot = {"cells": len(rows), "placed": sum(r["placed"] for r in rows), "inside": sum(r["inside"] for r in rows),
            "near": sum(r["near"] for r in rows), "near_stated": sum(r["near_stated"] for r in rows),
            "no_placement": sum(1 for r in rows if r["placed"] == 0)}
     print(json.dumps({"summary": tot}), flush=True)
-    for fill in sorted({r["fill"] for r in rows}):
-        rr = [r for r in rows if r["fill"] == fill]
-        print(json.dumps({"fill": fill, "cells": len(rr), "placed": sum(r["placed"] for r in rr),
-                          "inside": sum(r["inside"] for r in rr), "near": sum(r["near"] for r in rr),
-                          "near_stated": sum(r["near_stated"] for r in rr),
-                          "no_placement": sum(1 for r in rr if r["placed"] == 0)}), flush=True)
     return 0
 
 

@@ -45,10 +45,6 @@ class SuggestConfig:
     probe: tuple[int, int] = (32, 24)
     """Rays (columns, rows) each capture camera casts through the occupancy grid to find the free space it
     observed."""
-    probe_fill: int = 0
-    """A ray that hits no occupied node carves free space up to the nearest hit among the rays within this many
-    probe cells of it (0: it carves nothing; a plain wall gives no points, and a neighbour's hit on another
-    surface carries a ray through the wall)."""
     field: str = "auto"
     """Radiance field for the preview renders: 'auto' (the run's field when it has one; a field is trained only
     when the run's occupancy cannot place cameras, e.g. imported poses without points), 'train' (the run's
@@ -83,8 +79,6 @@ class SuggestConfig:
             lo, hi = getattr(self, name)
             if not (0 <= lo <= hi <= 100):
                 raise ValueError(f"{name} must be (lo, hi) with 0 <= lo <= hi <= 100, got {(lo, hi)}")
-        if not isinstance(self.probe_fill, int) or self.probe_fill < 0:
-            raise ValueError(f"probe_fill must be an integer >= 0, got {self.probe_fill!r}")
         if len(self.probe) != 2 or min(self.probe) < 1:
             raise ValueError(f"probe must be two positive counts, got {self.probe}")
         for flag, v, lo in (("--field-iters", self.field_iters, 1), ("--field-size", self.field_side, 16),

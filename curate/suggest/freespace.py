@@ -11,9 +11,8 @@ view), sampled every ``step`` along the ray. A ray's *hit* is its first sample i
 stood there). Every voxel a ray's samples traverse before its hit is *observed free*. A ray that hits nothing
 carves nothing: a plain wall has no SfM points, so its rays hit nothing, and the space behind it is never taken
 for free. (The rule before carved such a ray up to the median depth of the camera's hits, through a wall the
-camera stood near while looking along it. ``fill`` > 0 carves it up to the nearest hit among the rays within
-``fill`` probe cells, their z-depth taken along its own direction: measured and not adopted, a neighbour's hit
-on another surface carries the ray through the wall; docs/suggest.md.)
+camera stood near while looking along it. Carving it up to the nearest hit of the rays beside it was measured and
+not adopted: a neighbour's hit on another surface carries the ray through the wall; docs/suggest.md.)
 """
 
 from __future__ import annotations
@@ -75,24 +74,13 @@ def probe_directions(cams: Cameras, probe: tuple[int, int]) -> tuple[np.ndarray,
     return np.einsum("npj,nij->npi", dc, cams.rotations), dc[..., 2]
 
 
-def fill_depth(zdepth: np.ndarray, fill: int) -> np.ndarray:
-    """[H, W] the nearest z-depth within ``fill`` cells of each cell of ``zdepth`` [H, W] (inf = no hit); a cell's
-    own hit is kept."""
-    from scipy.ndimage import minimum_filter
-    if fill <= 0:
-        return zdepth
-    return np.where(np.isfinite(zdepth), zdepth, minimum_filter(zdepth, size=2 * int(fill) + 1, mode="nearest"))
-
-
 def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tuple[int, int] = (32, 24),
-                    step: float | None = None, near: float | None = None, fill: int = 0,
-                    chunk: int = 1 << 21) -> FreeSpace:
+                    step: float | None = None, near: float | None = None, chunk: int = 1 << 21) -> FreeSpace:
     """Observed free space of ``cams`` in the occupancy ``occ`` [R, R, R] over the box (module docstring).
 
     Args:
         step: sample spacing along the rays (default: half the smallest voxel side).
         near: hits nearer than this are ignored (default: the largest voxel side).
-        fill: a ray that hits nothing carves up to the nearest hit within this many probe cells (0: nothing).
         chunk: samples evaluated at once (bounds memory: ~40 bytes each).
     """
     occ = np.asarray(occ, bool)
@@ -105,8 +93,7 @@ def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tup
     near = float(vox.max()) if near is None else float(near)
     if not step > 0:
         raise ValueError(f"step must be > 0, got {step}")
-    W, H = int(probe[0]), int(probe[1])
-    N, P = len(cams), W * H
+    N, P = len(cams), int(probe[0]) * int(probe[1])
     free = np.zeros(R ** 3, bool)
     hit = np.full((N, P), np.inf)
     med = np.full(N, np.nan)
@@ -121,25 +108,17 @@ def cast_free_space(cams: Cameras, occ: np.ndarray, box_min, box_max, probe: tup
         ts = (np.arange(int(np.ceil(t_max / step))) + 0.5) * step               # [S]
         S = len(ts)
         per = max(1, chunk // max(S, 1))
-        lim_parts, flat_parts = [], []
         for s in range(0, P, per):
             d = dirs[k, s:s + per]                                               # [p, 3]
             flat = voxel_index(c[None, None, :] + ts[None, :, None] * d[:, None, :], lo, hi, R)   # [p, S]
             o = (flat >= 0) & occ_flat[np.maximum(flat, 0)] & (ts[None, :] >= near)
             has = o.any(1)
-            first = np.where(has, o.argmax(1), S)
-            hit[k, s:s + per] = np.where(has, ts[np.minimum(first, S - 1)], np.inf)
-            lim_parts.append(first)
-            flat_parts.append(flat)
+            first = np.where(has, o.argmax(1), 0)                                # a miss carves nothing
+            hit[k, s:s + per] = np.where(has, ts[first], np.inf)
+            carve = (np.arange(S)[None, :] < first[:, None]) & (flat >= 0)
+            free[flat[carve]] = True
         h = hit[k][np.isfinite(hit[k])]
         if h.size:
             med[k] = float(np.median(h))
-        # a miss carves up to the nearest hit beside it: its neighbours' z-depth along its own direction
-        z = fill_depth((hit[k] * axis_cos[k]).reshape(H, W), fill).ravel()
-        miss_lim = np.where(np.isfinite(z), np.searchsorted(ts, z / np.maximum(axis_cos[k], 1e-9)), 0)   # [P]
-        for s, (first, flat) in zip(range(0, P, per), zip(lim_parts, flat_parts)):
-            lim = np.where(first < S, first, miss_lim[s:s + per])
-            carve = (np.arange(S)[None, :] < lim[:, None]) & (flat >= 0)
-            free[flat[carve]] = True
     free &= ~occ_flat
     return FreeSpace(free.reshape(occ.shape), hit, axis_cos, med)

@@ -227,7 +227,7 @@ def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
     from curate.suggest.freespace import cast_free_space
     from curate.suggest.orbit import OrbitFeasibility, capture_orbit
     from curate.suggest.place import place_cameras
-    fs = cast_free_space(inp.cams, occ, inp.box_min, inp.box_max, probe=tuple(cfg.probe), fill=cfg.probe_fill)
+    fs = cast_free_space(inp.cams, occ, inp.box_min, inp.box_max, probe=tuple(cfg.probe))
     env = capture_envelope(inp.cams, fs, occ, inp.box_min, inp.box_max, cfg.clearance_percentile,
                            cfg.view_percentile, cfg.height_percentiles, cfg.pitch_percentiles)
     kind = capture_kind(inp.cams)[0]
