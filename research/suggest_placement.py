@@ -150,7 +150,7 @@ def cell(room: str, walk: str, finish: str, add: int, seed: int) -> dict:
     near = (~inside) & (dist < need - 0.5 * vox)
     stated = (~inside) & (dist < feas.env.clearance - 0.5 * vox)
     extra = {}
-    if hasattr(feas, "orbit"):       # an object capture: how many suggestions film above / below the ring
+    if feas.kind == "object":       # an object capture: how many suggestions film above / below the ring
         o = feas.orbit
         v = s.centres - o.centre
         el = np.arcsin(np.clip(v @ feas.env.up / np.linalg.norm(v, axis=1), -1, 1))

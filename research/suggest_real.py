@@ -67,7 +67,7 @@ def row(run: Path, add: int, depth: Path | None, tolerance: float) -> dict:
     except ValueError as e:
         return {**out, "placed": 0, "said": str(e), "seconds": time.perf_counter() - t0}
     s = pl.cams
-    out.update({"placed": len(s), "kind": "object" if hasattr(feas, "orbit") else "walk",
+    out.update({"placed": len(s), "kind": feas.kind,
                 "clearance": feas.env.clearance, "seconds": time.perf_counter() - t0})
     if depth is not None:
         chk = depth_check(inp.cams, depth, s.centres, tolerance)

@@ -137,8 +137,53 @@ def make_cameras(centres: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, env: E
     return Cameras(look_at(centres, centres + d, up=env.up), fx, fy, cx, cy, w, h)
 
 
-class Feasibility:
-    """Which poses are feasible (module docstring), and uniform draws of them."""
+class PoseSet:
+    """What the feasible poses of a walk (:class:`Feasibility`) and of an object capture
+    (:class:`curate.suggest.orbit.OrbitFeasibility`) share: the clearance from occupied nodes, the tests of
+    ``checks`` all passed, and uniform draws of ``_sample`` kept when feasible. A subclass sets ``kind``, ``cells``
+    (non-empty when anything is feasible) and ``_tree`` (the occupied nodes' KD tree, None without one)."""
+
+    kind = ""
+    """'walk' or 'object'."""
+
+    def checks(self, cams: Cameras) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _sample(self, rng: np.random.Generator, m: int) -> Cameras:
+        raise NotImplementedError
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """[n] distance from each point [n, 3] to the nearest occupied node (inf when none is occupied)."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        return self._tree.query(p)[0] if self._tree is not None else np.full(len(p), np.inf)
+
+    def feasible(self, cams: Cameras) -> np.ndarray:
+        """[N] bool: every test of ``checks`` passes."""
+        ch = self.checks(cams)
+        return np.logical_and.reduce(list(ch.values())) if len(cams) else np.zeros(0, bool)
+
+    def draw(self, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
+        """Up to ``n`` feasible poses, drawn by ``_sample`` in rounds of twice what is missing and 16 more; fewer
+        only when ``max_rounds`` rounds do not find them (a nearly infeasible capture; none without ``cells``)."""
+        if len(self.cells) == 0 or n <= 0:
+            return Cameras.empty()
+        got: list[Cameras] = []
+        total = 0
+        for _ in range(max_rounds):
+            cams = self._sample(rng, 2 * (n - total) + 16)
+            cams = cams[self.feasible(cams)]
+            take = min(len(cams), n - total)
+            got.append(cams[:take])
+            total += take
+            if total >= n:
+                break
+        return Cameras.concat(got)
+
+
+class Feasibility(PoseSet):
+    """Which poses of a walk-through are feasible (module docstring), and uniform draws of them."""
+
+    kind = "walk"
 
     def __init__(self, occ: np.ndarray, box_min, box_max, free: np.ndarray, env: Envelope):
         from scipy.spatial import cKDTree
@@ -175,11 +220,6 @@ class Feasibility:
         i, j, k = np.unravel_index(np.asarray(flat, np.int64), (self.R,) * 3)
         return self.lo + np.stack([i, j, k], 1) * self.vox
 
-    def clearance(self, points: np.ndarray) -> np.ndarray:
-        """[n] distance from each point [n, 3] to the nearest occupied node (inf when none is occupied)."""
-        p = np.asarray(points, float).reshape(-1, 3)
-        return self._tree.query(p)[0] if self._tree is not None else np.full(len(p), np.inf)
-
     def seen_around(self, points: np.ndarray) -> np.ndarray:
         """[n] bool: the ring around each point [n, 3] in its horizontal plane (the clearance and half a voxel out,
         and half that) lies in observed-free, unoccupied voxels."""
@@ -208,11 +248,6 @@ class Feasibility:
             out["view"][pre] = self._oracle.min_depth(cams[np.flatnonzero(pre)]) >= env.view_margin
         return out
 
-    def feasible(self, cams: Cameras) -> np.ndarray:
-        """[N] bool: every test of :meth:`checks` passes."""
-        ch = self.checks(cams)
-        return np.logical_and.reduce(list(ch.values())) if len(cams) else np.zeros(0, bool)
-
     def _sample(self, rng: np.random.Generator, m: int) -> Cameras:
         """``m`` candidate poses, feasible or not: the position uniform in a feasible voxel (each equally likely),
         the height uniform in the envelope's range (a range of zero width too: a capture on a tripod), a uniform yaw,
@@ -224,27 +259,3 @@ class Feasibility:
         yaw = rng.uniform(-np.pi, np.pi, m)
         pitch = rng.uniform(env.pitches[0], env.pitches[1], m)
         return make_cameras(c, yaw, pitch, env)
-
-    def draw(self, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
-        """Up to ``n`` feasible cameras drawn uniformly (module docstring); fewer only when ``max_rounds`` rounds
-        of draws do not find them (a nearly infeasible capture)."""
-        return draw_feasible(self, rng, n, max_rounds)
-
-
-def draw_feasible(feas, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
-    """Up to ``n`` feasible poses of ``feas`` (its ``_sample(rng, m)`` and ``feasible(cams)``), drawn in rounds of
-    twice what is missing and 16 more; fewer only when ``max_rounds`` rounds do not find them (none without
-    feasible ``cells``)."""
-    if len(feas.cells) == 0 or n <= 0:
-        return Cameras.empty()
-    got: list[Cameras] = []
-    total = 0
-    for _ in range(max_rounds):
-        cams = feas._sample(rng, 2 * (n - total) + 16)
-        cams = cams[feas.feasible(cams)]
-        take = min(len(cams), n - total)
-        got.append(cams[:take])
-        total += take
-        if total >= n:
-            break
-    return Cameras.concat(got)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from curate.core.cameras import Cameras, look_at
-from curate.suggest.candidates import Envelope, draw_feasible, horizontal_basis, occupied_points
+from curate.suggest.candidates import Envelope, PoseSet, horizontal_basis, occupied_points
 from curate.suggest.freespace import voxel_index
 
 ELEVATION_MAX_DEG = 75.0
@@ -77,9 +77,11 @@ def _open_oracle(box_min, box_max, occ, margin):
     return Open(box_min, box_max, occ, margin)
 
 
-class OrbitFeasibility:
-    """Which poses around an object are feasible, and uniform draws of them (module docstring). The same interface
-    as :class:`curate.suggest.candidates.Feasibility`."""
+class OrbitFeasibility(PoseSet):
+    """Which poses around an object are feasible, and uniform draws of them on the view sphere (module
+    docstring)."""
+
+    kind = "object"
 
     def __init__(self, occ: np.ndarray, box_min, box_max, env: Envelope, orbit: Orbit, probe: int = 2000):
         from scipy.spatial import cKDTree
@@ -106,11 +108,6 @@ class OrbitFeasibility:
         fx, fy, cx, cy, w, h = env.intrinsics
         return Cameras(look_at(c, np.broadcast_to(o.centre, c.shape), up=env.up), fx, fy, cx, cy, w, h)
 
-    def clearance(self, points: np.ndarray) -> np.ndarray:
-        """[n] distance from each point [n, 3] to the nearest occupied node (inf when none is occupied)."""
-        p = np.asarray(points, float).reshape(-1, 3)
-        return self._tree.query(p)[0] if self._tree is not None else np.full(len(p), np.inf)
-
     def checks(self, cams: Cameras) -> dict[str, np.ndarray]:
         """Each feasibility test, [N] bool per name: 'free' (centre not in an occupied voxel), 'clearance' and
         'view'."""
@@ -123,13 +120,3 @@ class OrbitFeasibility:
         if pre.any():
             out["view"][pre] = self._oracle.min_depth(cams[np.flatnonzero(pre)]) >= self.env.view_margin
         return out
-
-    def feasible(self, cams: Cameras) -> np.ndarray:
-        """[N] bool: every test of :meth:`checks` passes."""
-        ch = self.checks(cams)
-        return np.logical_and.reduce(list(ch.values())) if len(cams) else np.zeros(0, bool)
-
-    def draw(self, rng: np.random.Generator, n: int, max_rounds: int = 40) -> Cameras:
-        """Up to ``n`` feasible poses drawn uniformly on the view sphere; fewer only when ``max_rounds`` rounds of
-        draws do not find them."""
-        return draw_feasible(self, rng, n, max_rounds)

@@ -322,9 +322,9 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
            "occupancy": occ_source, "nodes": cfg.nodes, "n_nodes": int(len(flat)),
            "n_frontier": int(front.sum()), "n_capture": len(inp.cams), "chosen": inp.chosen,
            "field": str(field.relative_to(run_dir)) if field is not None else None,
-           "envelope": env.to_dict(), "kind": "object" if hasattr(feas, "orbit") else "walk",
+           "envelope": env.to_dict(), "kind": feas.kind,
            **({"orbit": feas.orbit.to_dict(), "feasible_share": len(feas.cells) / feas.probe}
-              if hasattr(feas, "orbit") else {"feasible_voxels": int(len(feas.cells))}),
+              if feas.kind == "object" else {"feasible_voxels": int(len(feas.cells))}),
            "free_voxels": int(fs.free.sum()), "energy_before": pl.energy_before, "energy": pl.energy,
            "timing": {**timing, "place_seconds": place_s}, "n_candidates": pl.n_candidates,
            "suggestions": [{"index": s + 1, "name": names[s], "c2w": sugg.c2w[s].tolist(),
