@@ -132,12 +132,13 @@ def _changed(out: Path, prev: dict) -> str | None:
             orig = Path(it["original"])
             if not (orig.is_file() and filecmp.cmp(p, orig, shallow=False)):
                 return str(p)
-    for it in prev.get("images", []):               # the originals kept beside an undistorted export, as links
+    kept = set(prev.get("distorted", []))
+    for it in (it for it in prev.get("images", []) if it["name"] in kept):   # originals kept beside undistorted
         p = out / "distorted" / "images" / it["name"]
-        if it["name"] in prev.get("distorted", []) and p.is_symlink() and os.readlink(p) != it["original"]:
-            return str(p)
-        if it["name"] in prev.get("distorted", []) and not p.is_symlink() and p.is_file() \
-                and f"distorted/images/{it['name']}" not in digests:
+        if p.is_symlink():
+            if os.readlink(p) != it["original"]:
+                return str(p)
+        elif p.is_file() and f"distorted/images/{it['name']}" not in digests:   # a file where a link was
             return str(p)
     for rel, digest in digests.items():             # since 0.3: each file written, copies included
         p = out / rel
