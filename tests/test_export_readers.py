@@ -93,9 +93,8 @@ def _check_export(export: Path, n_images: int, distorted_source: bool) -> None:
         assert f["size"] == (f["w"], f["h"]) and f["k1"] == 0.0
     rec = pycolmap.Reconstruction(str(export / "sparse" / "0"))
     assert rec.compute_mean_reprojection_error() < 0.5          # the points project onto their keypoints
-    from curate.export.trainable import read_ply
-    xyz, _ = read_ply(export / "sparse_pc.ply")
-    assert len(xyz) == rec.num_points3D()
+    import open3d as o3d
+    assert len(o3d.io.read_point_cloud(str(export / "sparse_pc.ply")).points) == rec.num_points3D()
 
 
 @pytest.fixture()

@@ -42,18 +42,6 @@ def write_ply(path: str | Path, xyz: np.ndarray, rgb: np.ndarray) -> Path:
     return path
 
 
-def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """(xyz [P, 3] float32, rgb [P, 3] uint8) of a PLY written by :func:`write_ply`."""
-    data = Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    head = data[:end].decode("ascii").splitlines()
-    n = int(next(line.split()[2] for line in head if line.startswith("element vertex")))
-    rec = np.frombuffer(data[end:], dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
-                                           ("red", "u1"), ("green", "u1"), ("blue", "u1")], count=n)
-    return (np.stack([rec["x"], rec["y"], rec["z"]], 1),
-            np.stack([rec["red"], rec["green"], rec["blue"]], 1))
-
-
 def downscale_images(image_dir: Path, names: list[str], factor: int, out_dir: Path) -> list[str]:
     """Write each of ``names`` in ``image_dir`` shrunk by ``factor`` (size floored, Lanczos) into ``out_dir``
     under the same name and format; returns the names written. Pixels are taken as stored and a JPEG's EXIF is
