@@ -949,12 +949,8 @@ def raw_quaternions(model: Path) -> list[tuple[Path, str, np.ndarray]]:
                 o += 8 + 24 * k
                 out.append((b, name, q))
         elif t.is_file():
-            # two lines an image (the second, its points, empty when it has none), after the comments
-            lines = [ln for ln in t.read_text(errors="replace").splitlines() if not ln.startswith("#")]
-            for ln in lines[0::2]:
-                f = ln.split()
-                if len(f) >= 10:
-                    out.append((t, " ".join(f[9:]), np.array([float(v) for v in f[1:5]])))
+            from curate.sfm.io import images_txt_rows
+            out = [(t, name, np.array(q)) for name, q, _, _ in images_txt_rows(t, errors="replace")]
     except (OSError, ValueError, struct.error, IndexError):
         return out      # a broken file: pycolmap has already said so, or reads what there is
     return out

@@ -166,3 +166,29 @@ def image_paths(run_dir: str | Path, names: list[str], records: dict) -> list[st
         kind, r = by[n]
         out.append(str(run_dir / "sfm" / "images" / n) if kind == "working" else r["original"])
     return out
+
+
+def images_txt_rows(path: str | Path, errors: str = "strict") -> list[tuple[str, list[float], list[float], int]]:
+    """(name, [4] quaternion QW QX QY QZ as written, [3] translation, camera id) of each image of a COLMAP
+    ``images.txt``; ValueError naming the file and line on a malformed image line (``errors``: how bytes that are
+    not UTF-8 are decoded, as :meth:`str.decode` takes it)."""
+    path = Path(path)
+    lines = [ln for ln in path.read_text(errors=errors).splitlines() if not ln.startswith("#")]
+    rows = []
+    i = 0
+    while i < len(lines):
+        ln = lines[i].strip()
+        if not ln:
+            i += 1
+            continue
+        parts = ln.split()
+        try:
+            if len(parts) < 10:
+                raise ValueError
+            vals = [float(v) for v in parts[1:8]]
+            cid = int(parts[8])
+        except ValueError:
+            raise ValueError(f"{path}: not an image line of COLMAP's images.txt: {ln!r}") from None
+        rows.append((" ".join(parts[9:]), vals[:4], vals[4:], cid))
+        i += 2                                   # the POINTS2D line (possibly empty) follows each image line
+    return rows

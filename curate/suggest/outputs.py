@@ -51,30 +51,12 @@ def write_colmap_text(folder: Path, cams: Cameras, names: list[str]) -> tuple[Pa
 def read_images_txt(path: Path) -> tuple[list[str], np.ndarray, list[int]]:
     """(names, OpenCV camera-to-world [N, 4, 4], camera ids) of a COLMAP ``images.txt``; ValueError naming the
     file and line on a malformed image line."""
-    path = Path(path)
-    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
-    names, q, t, cids = [], [], [], []
-    i = 0
-    while i < len(lines):
-        ln = lines[i].strip()
-        if not ln:
-            i += 1
-            continue
-        parts = ln.split()
-        try:
-            if len(parts) < 10:
-                raise ValueError
-            vals = [float(v) for v in parts[1:8]]
-            cid = int(parts[8])
-        except ValueError:
-            raise ValueError(f"{path}: not an image line of COLMAP's images.txt: {ln!r}") from None
-        q.append(vals[:4])
-        t.append(vals[4:])
-        cids.append(cid)
-        names.append(" ".join(parts[9:]))
-        i += 2                                   # the POINTS2D line (possibly empty) follows each image line
-    c2w = c2w_from_colmap(np.array(q).reshape(-1, 4), np.array(t).reshape(-1, 3)) if q else np.zeros((0, 4, 4))
-    return names, c2w, cids
+    from curate.sfm.io import images_txt_rows
+    rows = images_txt_rows(path)
+    q = np.array([r[1] for r in rows]).reshape(-1, 4)
+    t = np.array([r[2] for r in rows]).reshape(-1, 3)
+    c2w = c2w_from_colmap(q, t) if rows else np.zeros((0, 4, 4))
+    return [r[0] for r in rows], c2w, [r[3] for r in rows]
 
 
 def write_transforms_json(path: Path, cams: Cameras, names: list[str]) -> Path:
