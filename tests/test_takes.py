@@ -167,8 +167,10 @@ def test_two_overlapping_takes_make_one_model_and_a_foreign_take_is_named(tmp_pa
     st = json.loads((run / "sfm" / "stage.json").read_text())["stats"]
     takes = {t["take"]: t for t in st["takes"]}
     assert set(takes) == {"walk1.mp4", "walk2.mp4", "other_room.mp4"}
-    for t in ("walk1.mp4", "walk2.mp4"):
-        assert takes[t]["n_in_model"] >= 0.9 * takes[t]["n_frames"], takes
+    for t in ("walk1.mp4", "walk2.mp4"):     # joined: most of each take in the one model; the checks of a global
+        # model may leave out a few frames at the seam (5 of 42 on one CI run, 0-2 of ~40 in 13 runs here), a
+        # take left in its own model would have under half its frames in it
+        assert takes[t]["n_in_model"] >= 0.8 * takes[t]["n_frames"], takes
     assert takes["other_room.mp4"]["n_in_model"] == 0, takes
     assert st["cross_take"]["verified"] > 0, st["cross_take"]
     recs = json.loads((run / "sfm" / "images.json").read_text())["photos"]
