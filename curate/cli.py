@@ -168,7 +168,8 @@ def _budget(text: str) -> str:
     try:
         parse_budget(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--budget wants a count (200), a percentage (15%) or 'auto', got {text!r}")
+        raise argparse.ArgumentTypeError(f"--budget wants a count (200), a percentage (15%), 'auto' or 'default', "
+                                         f"got {text!r}")
     return text.strip()
 
 
@@ -188,7 +189,7 @@ def _words(text: str) -> tuple[str, ...]:
 
 
 # ---------------------------------------------------------------------- flag -> field tables (paths in RunConfig)
-BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto"),
+BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto|default"),
           Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
 BUDGET_CHECK = [Opt("--no-budget-check", "budget_check", const=False,
                     help="with --budget auto: skip the two extra trainings that measure how many photos this capture needs")]
@@ -408,7 +409,7 @@ def _select_posed(args) -> int:
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
     from curate.select.select import select
-    from curate.select.stage import selection_record
+    from curate.select.stage import budget_of_pool, selection_record
 
     if not hasattr(args, Opt("--budget", "budget").dest):
         raise CliError("--budget is required (except for a run folder, which keeps its own)")
@@ -419,7 +420,8 @@ def _select_posed(args) -> int:
         raise CliError(f"{args.input}: the pool has no cameras")
     grid = _grid(cfg, cams)
     index = auto = None
-    if parse_budget(cfg.budget) == AUTO:
+    text, said = budget_of_pool(cfg.budget, cams)
+    if parse_budget(text) == AUTO:
         from curate.select.auto_budget import choose_for_pool
         from curate.select.visibility import build_pair_index
         index = build_pair_index(cams, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device)
@@ -431,8 +433,8 @@ def _select_posed(args) -> int:
         if not args.json:
             print(auto.note)
     else:
-        budget = resolve_budget(parse_budget(cfg.budget), len(cams))
-        check_pool_budget(cfg.budget, budget, len(cams), args.input)
+        budget = resolve_budget(parse_budget(text), len(cams))
+        check_pool_budget(said, budget, len(cams), args.input)
     sel = select(cams, grid, budget, cfg.select, progress=not args.json, index=index)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -441,7 +443,7 @@ def _select_posed(args) -> int:
     rel = [os_relpath(files[k], out) for k in chosen]
     write_transforms(out / "transforms.json", cams[chosen], rel)
     (out / "selected.txt").write_text("".join(Path(files[k]).name + "\n" for k in chosen))
-    rec = {**selection_record(sel, cams, list(range(len(cams))), [], 0, cfg.budget, grid),
+    rec = {**selection_record(sel, cams, list(range(len(cams))), [], 0, said, grid),
            **({"budget_auto": auto.to_dict()} if auto is not None else {}),
            "config": json.loads(json.dumps(_config_dict(cfg.select), default=str))}
     write_json_atomic(out / "selection.json", rec)

@@ -21,9 +21,10 @@ from curate.sfm.config import SfmConfig
 class RunConfig:
     """Every option of ``curate run``."""
 
-    budget: str = "15%"
-    """How many photos to choose: a count (60), a share of the pool (15%), or auto: the fewest
-    predicted, from the poses alone, to come within --budget-tolerance of all photos."""
+    budget: str = "default"
+    """How many photos to choose: a count (60), a share of the pool (15%), auto: the fewest
+    predicted, from the poses alone, to come within --budget-tolerance of all photos, or default:
+    15% of a walk-through, auto on an object capture (which needs most of its photos)."""
     budget_tolerance: float = 0.5
     """With --budget auto: how much held-out PSNR, in dB, the chosen photos may lose against all
     photos (as predicted).

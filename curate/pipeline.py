@@ -143,13 +143,15 @@ def check_budget(budget: str, run_dir: Path) -> None:
     import json
     from curate.core.budget import AUTO, parse_budget, resolve_budget
     from curate.occupancy.stage import check_budget_fits
+    from curate.select.stage import budget_of_run
     n = len(json.loads((Path(run_dir) / "sfm" / "cameras.json").read_text())["cameras"])
-    b = parse_budget(budget)
+    text, said = budget_of_run(budget, run_dir)
+    b = parse_budget(text)
     if b == AUTO:
         if n < 3:
-            raise ValueError(f"budget auto: {n} registered photos leave nothing to choose")
+            raise ValueError(f"budget {said}: {n} registered photos leave nothing to choose")
     else:
-        check_budget_fits(budget, resolve_budget(b, n), n)
+        check_budget_fits(said, resolve_budget(b, n), n)
 
 
 def refresh_after(cfg: RunConfig, run_dir: Path, stage: str, photos: str | None = None) -> list[StageResult]:
@@ -217,7 +219,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
         print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {cfg.budget} -> {run_dir}", flush=True)
     check_budget(cfg.budget, run_dir)   # before any training
     steps = [("occupancy", occupancy.run)]
-    if budget.wanted(cfg):   # --budget auto, evaluated: how many photos, measured before choosing them
+    if budget.wanted(cfg, run_dir):   # budget auto (default on an object), evaluated: measured before choosing
         steps.append(("budget", lambda c, d, f: budget.run(c, d, f, executor=executor)))
     steps.append(("select", select.run))
     if cfg.run_evaluation:

@@ -98,3 +98,32 @@ def test_equal_units_train_once(tmp_path, monkeypatch):
     keys["energy2"] = "k1"
     res = ev.run_units(tmp_path, units, keys, ev.EvalConfig(workers=1), cams, [""] * 8, [0], None, progress=False)
     assert calls == [] and res["energy2"]["copied_from"] == "energy"
+
+
+def test_the_default_budget_follows_the_kind_of_capture(tmp_path):
+    """``--budget default`` (the default of ``curate run``) keeps 15% of a walk-through and what ``auto``
+    advises on an object capture, which needs most of its photos (15% kept 10 of 65 skull photos); the
+    selection record says what the default meant."""
+    import subprocess
+    import sys
+    from curate.config import RunConfig
+    from curate.core.budget import DEFAULT, by_kind, parse_budget
+    from curate.core.transforms_json import write_transforms
+    from curate.select.stage import budget_of_pool
+    assert RunConfig().budget == DEFAULT and parse_budget("Default") == DEFAULT
+    assert by_kind("default", "walk") == "15%" and by_kind("default", "object") == "auto"
+    assert by_kind("40", "object") == "40" and by_kind("15%", "object") == "15%"   # a budget given stays
+    obj, walk = orbit(60), random_pool(60, seed=2)
+    assert budget_of_pool("default", obj) == ("auto", "default: auto (an object capture)")
+    assert budget_of_pool("default", walk) == ("15%", "default: 15% (a walk-through)")
+    assert budget_of_pool("12", obj) == ("12", "12")
+    got = {}
+    for name, cams in (("object", obj), ("walk", walk)):
+        path = write_transforms(tmp_path / name / "transforms.json", cams, [f"img_{i:03d}.png" for i in range(60)])
+        out = tmp_path / f"{name}_out"
+        subprocess.run([sys.executable, "-m", "curate", "select", str(path), "--budget", "default", "--res", "8",
+                        "--out", str(out), "--json"], check=True, capture_output=True, text=True, timeout=300)
+        got[name] = json.loads((out / "selection.json").read_text())
+    assert got["walk"]["budget"] == 9 and got["walk"]["budget_text"] == "default: 15% (a walk-through)"
+    assert got["object"]["budget_text"] == "default: auto (an object capture)"
+    assert got["object"]["budget"] == got["object"]["budget_auto"]["budget"] > 9     # more than 15% of the orbit

@@ -15,7 +15,7 @@ def test_parse_and_round_trip(text, value):
 
 @pytest.mark.parametrize("text", ["ten", "-3", "0%", "101%", "%", "", "1.5", "nan%"])
 def test_bad_budgets_are_refused(text):
-    with pytest.raises(ValueError, match="count .* a percentage .* or .auto."):
+    with pytest.raises(ValueError, match="count .* a percentage .*, .auto. or .default."):
         parse_budget(text)
 
 

@@ -20,7 +20,7 @@ METHODS = ("selection", "random", "fvs", "all")
 def failed_stage(run_dir: Path, cfg) -> str | None:
     """The first stage of a run folder without a finished record."""
     from curate.evaluate.budget import wanted
-    for s in ("sfm", "occupancy") + (("budget",) if wanted(cfg) else ()) + ("select",):
+    for s in ("sfm", "occupancy") + (("budget",) if wanted(cfg, run_dir) else ()) + ("select",):
         if not (run_dir / s / "stage.json").is_file():
             return s
     if cfg.run_evaluation and not (run_dir / "evaluate" / "summary.json").is_file():

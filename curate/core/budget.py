@@ -1,5 +1,6 @@
-"""Budgets: how many images to choose, as a count ("60"), a fraction of the pool ("15%") or
-"auto" (the fewest predicted within a tolerance of all frames: :mod:`curate.select.auto_budget`).
+"""Budgets: how many images to choose, as a count ("60"), a fraction of the pool ("15%"), "auto"
+(the fewest predicted within a tolerance of all frames: :mod:`curate.select.auto_budget`) or
+"default" (one of those by the kind of capture: :data:`DEFAULT_BY_KIND`).
 
 Light (no heavy imports): the CLI, the pipeline and the benchmark scripts share it.
 """
@@ -10,15 +11,25 @@ from __future__ import annotations
 AUTO = "auto"
 """The budget chosen from the pool (``--budget auto``)."""
 
+DEFAULT = "default"
+"""The budget by the kind of capture (:func:`by_kind`), known once the cameras are posed."""
+
+DEFAULT_BY_KIND = {"walk": "15%", "object": AUTO}
+"""What ``default`` means for each kind of capture (``curate.select.select.capture_kind``): a walk-through
+keeps 15% of its frames; an object capture keeps what ``auto`` advises, most of a capture of 40-60
+photos (measured on the three real object sets: 34-48 of 40-57, docs/evaluation.md, "How many photos"),
+where 15% kept 10 of 65 skull photos."""
+
 
 def parse_budget(text) -> int | float | str:
-    """'200' -> 200 (a count); '15%' -> 0.15 (a fraction of the pool, in (0, 1]); 'auto' -> AUTO.
+    """'200' -> 200 (a count); '15%' -> 0.15 (a fraction of the pool, in (0, 1]); 'auto' -> AUTO;
+    'default' -> DEFAULT.
 
     Raises ValueError on anything else (negative counts, 0% or over 100%, other words).
     """
     t = str(text).strip()
-    if t.lower() == AUTO:
-        return AUTO
+    if t.lower() in (AUTO, DEFAULT):
+        return t.lower()
     try:
         if t.endswith("%"):
             f = float(t[:-1]) / 100.0
@@ -30,7 +41,7 @@ def parse_budget(text) -> int | float | str:
             raise ValueError
         return n
     except ValueError:
-        raise ValueError(f"a budget is a count (200), a percentage (15%) or 'auto', got {text!r}") from None
+        raise ValueError(f"a budget is a count (200), a percentage (15%), 'auto' or 'default', got {text!r}") from None
 
 
 def budget_text(budget: int | float | str) -> str:
@@ -38,9 +49,17 @@ def budget_text(budget: int | float | str) -> str:
     return f"{budget * 100:g}%" if isinstance(budget, float) else str(budget)
 
 
+def by_kind(text: str, kind: str) -> str:
+    """The budget ``text`` that applies to a capture of ``kind`` ("walk" | "object"): ``default`` becomes
+    :data:`DEFAULT_BY_KIND`'s entry, any other budget stays as given."""
+    return DEFAULT_BY_KIND[kind] if parse_budget(text) == DEFAULT else str(text)
+
+
 def resolve_budget(budget: int | float, n_pool: int) -> int:
     """A count stays; a fraction becomes round(fraction * pool), at least 1. AUTO is chosen from the
     pool's views by :func:`curate.select.auto_budget.choose_budget`, not here (ValueError)."""
+    if budget == DEFAULT:
+        raise ValueError("budget 'default' depends on the kind of capture (by_kind), not resolved")
     if budget == AUTO:
         raise ValueError("budget 'auto' is chosen from the pool's views (curate.select.auto_budget), not resolved")
     if isinstance(budget, float):

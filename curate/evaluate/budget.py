@@ -32,10 +32,20 @@ FOLDS = 2
 """Hold-out folds the learning curve is measured on."""
 
 
-def wanted(cfg: "RunConfig") -> bool:
-    """The stage runs: ``--budget auto`` on an evaluated run with the check on."""
-    from curate.core.budget import AUTO, parse_budget
-    return parse_budget(cfg.budget) == AUTO and cfg.run_evaluation and cfg.budget_check
+def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
+    """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
+    check on. False while the run has no poses to tell the kind of capture by."""
+    from curate.core.budget import AUTO, DEFAULT, parse_budget
+    from curate.select.stage import budget_of_run
+    if not (cfg.run_evaluation and cfg.budget_check):
+        return False
+    b = parse_budget(cfg.budget)
+    if b == DEFAULT:
+        try:
+            b = parse_budget(budget_of_run(cfg.budget, run_dir)[0])
+        except (FileNotFoundError, ValueError):
+            return False
+    return b == AUTO
 
 
 def key_for(cfg: "RunConfig", run_dir: Path) -> str:

@@ -7,7 +7,8 @@ the evaluation: it chooses among all registered photos, with or without ``--no-e
 
 ``selection.json`` has one schema, written by :func:`selection_record` for a run folder
 and for ``curate select`` on a pose file alike: ``method`` (what ran), ``budget`` (the
-resolved count), ``budget_text`` (as given), ``pool`` (the candidates: every registered camera)
+resolved count), ``budget_text`` (as given; ``default`` with what it meant for this capture, "default: 15%
+(a walk-through)"), ``pool`` (the candidates: every registered camera)
 and ``holdout`` (empty: kept for older readers), ``holdout_every`` (0),
 ``chosen`` (camera indices in the order chosen), ``chosen_names``,
 per-step ``energy`` / ``angular`` / ``frequency``, ``seconds``, ``n_nodes``, ``up_axis``,
@@ -71,6 +72,32 @@ def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout
             "res": int(grid.res), "box": grid.box_min.tolist() + grid.box_max.tolist()}
 
 
+KIND_WORDS = {"walk": "a walk-through", "object": "an object capture"}
+
+
+def budget_of_run(text: str, run_dir: Path) -> tuple[str, str]:
+    """(the budget that applies to the run's registered photos, how it reads in a report): ``default``
+    by the capture's kind (:func:`curate.core.budget.by_kind`, the kind from ``RUN/sfm/cameras.json``);
+    any other budget as given, twice."""
+    from curate.core.budget import DEFAULT, parse_budget
+    if parse_budget(text) != DEFAULT:
+        return str(text), str(text)
+    from curate.core.cameras import Cameras
+    from curate.sfm.io import sfm_dir
+    return budget_of_pool(text, Cameras.load(sfm_dir(run_dir) / "cameras.json"))
+
+
+def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
+    """:func:`budget_of_run` for a pool of cameras (``curate select POSES``)."""
+    from curate.core.budget import DEFAULT, by_kind, parse_budget
+    if parse_budget(text) != DEFAULT:
+        return str(text), str(text)
+    from curate.select.select import capture_kind
+    kind = capture_kind(cams)[0]
+    b = by_kind(text, kind)
+    return b, f"{DEFAULT}: {b} ({KIND_WORDS[kind]})"
+
+
 def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, parse_budget, resolve_budget
@@ -84,8 +111,9 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "select"
-    b = parse_budget(cfg.budget)
-    parts = {"select": cfg.select, "budget": cfg.budget}
+    text, said = budget_of_run(cfg.budget, run_dir)
+    b = parse_budget(text)
+    parts = {"select": cfg.select, "budget": text}
     measured = None
     if b == AUTO:
         from curate.evaluate.budget import measured_budget
@@ -100,7 +128,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     pool = list(range(len(sfm.cameras)))
     if b != AUTO:
         budget = resolve_budget(b, len(pool))
-        check_budget_fits(cfg.budget, budget, len(pool))
+        check_budget_fits(said, budget, len(pool))
     grid = load_node_grid(run_dir)
     pc = sfm.cameras[pool]
     t_vis = time.perf_counter()
@@ -118,7 +146,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
                         frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
                         res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
-    rec = selection_record(sel, sfm.cameras, pool, [], 0, cfg.budget, grid)
+    rec = selection_record(sel, sfm.cameras, pool, [], 0, said, grid)
     rec["coverage"] = coverage(index, sel.chosen)
     if auto is not None:   # the law's prediction; with the measurement, what was measured and exported
         rec["budget_auto"] = {**auto.to_dict(), "predicted": auto.budget, "source": "law" if measured is None else
