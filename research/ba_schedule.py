@@ -6,7 +6,7 @@ error and the time of each global refinement, one JSON line (docs/sfm.md, "Mappi
 
 Without ``--curate``: COLMAP's schedule of global adjustments, or OPTION=VALUE overrides of
 pycolmap.IncrementalPipelineOptions (dotted for nested options: ``mapper.ba_global_ignore_redundant_points3D=1``).
-With ``--curate``: curate's own mapping (``_map``, as ``curate sfm`` maps) under SfmConfig
+With ``--curate``: curate's own mapping (``map_incremental``, as ``curate sfm`` maps) under SfmConfig
 FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set on top (past 1,000 photos
 curate's loop, :mod:`curate.sfm.mapping`, choosing each global adjustment's solver by the fill:
 ``direct_ba_max_fill=0`` keeps Ceres' choice, COLMAP's own); with ``--direct-ba N`` that loop maps with
@@ -59,16 +59,15 @@ def refinements_from_log(log: Path) -> list[list[float]]:
 def path_record(rec, sfm: Path) -> dict:
     """Per video take of the model ``rec``: its largest step as a multiple of the speed around it
     (curate.sfm.continuity.step_ratios) and the one-way jumps ``curate sfm`` would warn of
-    (curate.sfm.colmap.jumps_along); ``sfm``: the run's sfm folder (images.json)."""
-    import curate.sfm.colmap as C
-    from curate.sfm.continuity import step_ratios
+    (curate.sfm.continuity.jumps_along); ``sfm``: the run's sfm folder (images.json)."""
+    from curate.sfm.continuity import frame_times, jumps_along, step_ratios, times_and_centres, video_takes
     from research.path_check import kept_records
     kept = kept_records(sfm.parent)      # PhotoRecords: jumps_along reads numbered photos by their names too
     out = {}
-    for take, frames in C._video_takes(rec, C._frame_times(kept)).items():
-        r = step_ratios(*C._along(frames)) if len(frames) > 1 else np.zeros(0)
+    for take, frames in video_takes(rec, frame_times(kept)).items():
+        r = step_ratios(*times_and_centres(frames)) if len(frames) > 1 else np.zeros(0)
         out[take] = {"frames": len(frames), "largest_step_x_around": round(float(r.max()), 2) if len(r) else None}
-    return {"takes": out, "jumps": C.jumps_along(rec, kept)}
+    return {"takes": out, "jumps": jumps_along(rec, kept)}
 
 
 def set_option(options, path: str, value: str) -> None:
@@ -94,8 +93,10 @@ def _take(args: list[str], flag: str) -> int | None:
 def main(argv: list[str]) -> dict:
     import pycolmap
 
-    import curate.sfm.colmap as C
     import curate.sfm.mapping as M
+    import curate.sfm.reconstruction as C     # incremental_options patched where map_incremental reads it
+    from curate.sfm.model import cameras_from_reconstruction
+    from curate.sfm.native import colmap_log
     from curate.sfm.config import SfmConfig
     from research.sfm_mappers import sfm_config_overrides
     run, truth, capture, rest = Path(argv[0]), argv[1], argv[2], list(argv[3:])
@@ -141,14 +142,14 @@ def main(argv: list[str]) -> dict:
     pycolmap.set_random_seed(0)
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
-    with C.colmap_log(tmp / "colmap.log"):
+    with colmap_log(tmp / "colmap.log"):
         if direct:
             opts = C.incremental_options(cfg, len(names))
             ba = opts.get_global_bundle_adjustment()
             ba.ceres.max_num_images_direct_sparse_cpu_solver = direct
             models = M.incremental_mapping(db, sfm / "images", tmp / "m", opts, global_ba=ba)
         else:
-            models = C._map(cfg, db, sfm / "images", tmp / "m", len(names), False, adjustments)
+            models = C.map_incremental(cfg, db, sfm / "images", tmp / "m", len(names), False, adjustments)
     M._Loop.global_refinement = plain
     r1 = resource.getrusage(resource.RUSAGE_SELF)
     rec = {"run": str(run), "mode": "curate" if curate_mode else "colmap_schedule", "overrides": ov,
@@ -161,7 +162,7 @@ def main(argv: list[str]) -> dict:
            "global_adjustments": adjustments}
     if capture in ("video", "takes"):
         best = max(models.values(), key=lambda r: r.num_reg_images())
-        cams = C.cameras_from_reconstruction(best, warn=False)[0]
+        cams = cameras_from_reconstruction(best, warn=False)[0]
         if capture == "video":
             from research.align import pose_errors
             from research.datasets import load_ground_truth

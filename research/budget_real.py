@@ -39,7 +39,7 @@ OBJECT_FRACTIONS = DEFAULT_FRACTIONS + (0.75,)
 def scene_run(scene: str, out: Path, runs: dict[str, Path]):
     """A run folder holding the capture's cameras (RUN/sfm): an import of its poses, or the given
     ``curate sfm`` run folder. Returns its path."""
-    from curate.sfm.colmap import import_poses
+    from curate.sfm.pose_import import import_poses
     from curate.sfm.config import SfmConfig
     if scene in runs:
         return runs[scene]

@@ -136,7 +136,7 @@ def _start_model(cfg, db: Path, images: Path, out: Path, size: int, n_images: in
     (COLMAP's snapshot at that count; the mapper is cancelled after it): a Reconstruction, or None."""
     import pycolmap
 
-    from curate.sfm.colmap import incremental_options
+    from curate.sfm.reconstruction import incremental_options
     opts = incremental_options(cfg, n_images)
     opts.multiple_models = False
     snaps = out / "snapshots"
@@ -162,7 +162,7 @@ def _map_chunk(cfg, db: Path, images: Path, out: Path, names: list[str], seed):
     the largest), or None."""
     import pycolmap
 
-    from curate.sfm.colmap import incremental_options
+    from curate.sfm.reconstruction import incremental_options
     opts = incremental_options(cfg, len(names))
     opts.image_names = list(names)
     out.mkdir(parents=True, exist_ok=True)
@@ -245,7 +245,7 @@ def _join(cfg, db: Path, images: Path, out: Path, results: dict, pick: dict[str,
     the matches, one bundle adjustment of the whole. A single chunk's model is returned as it is."""
     import pycolmap
 
-    from curate.sfm.colmap import _seeded_pipeline_options
+    from curate.sfm.reconstruction import seeded_pipeline_options
     if len(results) == 1:
         return next(iter(results.values()))
     poses = pycolmap.Reconstruction()
@@ -255,7 +255,7 @@ def _join(cfg, db: Path, images: Path, out: Path, results: dict, pick: dict[str,
             if pick.get(im.name) != k:
                 continue
             copy_image(poses, src, iid, keypoints=False)
-    opts = _seeded_pipeline_options(cfg)
+    opts = seeded_pipeline_options(cfg)
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     rec = pycolmap.triangulate_points(poses, db, images, out, clear_points=True, options=opts,
@@ -279,7 +279,7 @@ def map_rounds(cfg, db: Path, images: Path, out: Path, n_images: int, stats: dic
     instead of its sparse direct one). ``stats["rounds"]``: per round its registered count and seconds."""
     import pycolmap
 
-    from curate.sfm.colmap import incremental_options
+    from curate.sfm.reconstruction import incremental_options
     info: dict = {"rounds": []}
     stats["rounds"] = info
     seed = None

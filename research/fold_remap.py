@@ -1,6 +1,6 @@
 """A folded incremental model mapped again by the global mapper (measured, not adopted: docs/sfm.md, "A walk
 down a hall and back"): on a finished run whose incremental model's path jumps and does not come back
-(``curate.sfm.colmap.jumps_along``), the global mapper on a copy of the same matches, the jumps of its own
+(``curate.sfm.continuity.jumps_along``), the global mapper on a copy of the same matches, the jumps of its own
 path, and both models' pose errors against the rendered truth, one JSON line. The variant tried was
 "keep the global model when its path does not jump and it holds as many photos": on the walk down a hall
 and back the global model was far the better one (38 frames over 5 deg against 1,556) and its path still
@@ -22,7 +22,11 @@ from pathlib import Path
 def main(argv: list[str]) -> dict:
     import pycolmap
 
-    import curate.sfm.colmap as C
+    from curate.sfm.continuity import drop_off_path, jumps_along
+    from curate.sfm.model import cameras_from_reconstruction
+    from curate.sfm.native import colmap_log
+    from curate.sfm.parts import without_contained
+    from curate.sfm.reconstruction import map_global, model_sizes
     from curate.sfm.config import SfmConfig
     from research.bench.bench_mapping import pose_record, truth_cameras
     from research.path_check import kept_records
@@ -32,20 +36,20 @@ def main(argv: list[str]) -> dict:
     truth = truth_cameras(frames, kind)
     best = pycolmap.Reconstruction(sfm / "sparse" / "0")
     rec: dict = {"run": str(run), "incremental": {
-        "photos": int(best.num_reg_images()), "jumps": C.jumps_along(best, kept),
-        **pose_record(C.cameras_from_reconstruction(best, warn=False)[0], truth)}}
+        "photos": int(best.num_reg_images()), "jumps": jumps_along(best, kept),
+        **pose_record(cameras_from_reconstruction(best, warn=False)[0], truth)}}
     tmp = Path(tempfile.mkdtemp())
     shutil.copy2(sfm / "database.db", tmp / "g.db")
     t = time.perf_counter()
-    with C.colmap_log(tmp / "colmap.log"):
-        glob = C.without_contained(C._map_global(SfmConfig(progress=False), tmp / "g.db", sfm / "images", tmp / "g"))
+    with colmap_log(tmp / "colmap.log"):
+        glob = without_contained(map_global(SfmConfig(progress=False), tmp / "g.db", sfm / "images", tmp / "g"))
     rec["seconds"] = round(time.perf_counter() - t, 1)
     if glob:
-        off = C.drop_off_path(glob, kept)
+        off = drop_off_path(glob, kept)
         g = max(glob.values(), key=lambda r: r.num_reg_images())
-        rec["global"] = {"model_sizes": C._sizes(glob), "photos": int(g.num_reg_images()), "off_path": off,
-                         "jumps": C.jumps_along(g, kept),
-                         **pose_record(C.cameras_from_reconstruction(g, warn=False)[0], truth)}
+        rec["global"] = {"model_sizes": model_sizes(glob), "photos": int(g.num_reg_images()), "off_path": off,
+                         "jumps": jumps_along(g, kept),
+                         **pose_record(cameras_from_reconstruction(g, warn=False)[0], truth)}
     shutil.rmtree(tmp)
     return rec
 

@@ -10,7 +10,7 @@ two-view geometries from a copy of the database) and, per variant, prints one JS
 model as COLMAP returns it (sizes, the orientation agreement with each incremental part, its error
 against the rendered walk, and per incremental part the number of its points also seen by
 frames outside it, the seam), the largest incremental model (sizes, its error) and what
-:func:`curate.sfm.colmap.map_capture` keeps (mapper, sizes, the
+:func:`curate.sfm.reconstruction.map_capture` keeps (mapper, sizes, the
 parts joined, each take's frames in the model, the error).
 
     python3 -m research.join_check /tmp/join_check/89_29 --walk2 89:29 --drops 0:110:7
@@ -71,7 +71,10 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     from curate.core.cameras import Cameras
     from curate.core.transforms_json import read_transforms
-    from curate.sfm import colmap as C
+    from curate.sfm.colmap import run_sfm
+    from curate.sfm.model import cameras_from_reconstruction
+    from curate.sfm.parts import part_agreement
+    from curate.sfm.reconstruction import map_capture, map_global, map_incremental, model_sizes
     from curate.sfm.config import SfmConfig
     from research.align import pose_errors
     A, B = (int(v) for v in a.walk2.split(":"))
@@ -80,7 +83,7 @@ def main(argv=None) -> None:
         make_capture(cap, (A, B))
     cfg = SfmConfig(matcher="sequential", max_image_size=320, progress=False)
     if not (run / "sfm" / "database.db").exists():
-        C.run_sfm(cfg, cap, run)
+        run_sfm(cfg, cap, run)
     sfm = run / "sfm"
     recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
     of = {r["working"]: (r["extra"]["video_rel"], r["extra"]["frame"]) for r in recs}
@@ -88,7 +91,7 @@ def main(argv=None) -> None:
     truth, _ = read_transforms(SAMPLE / "transforms.json")
 
     def judge(rec) -> dict:
-        got = C.cameras_from_reconstruction(rec, warn=False)[0]
+        got = cameras_from_reconstruction(rec, warn=False)[0]
         sub = got[[i for i, n in enumerate(got.names) if of[n][0] in src]]
         est = Cameras(sub.c2w, sub.fx, sub.fy, sub.cx, sub.cy, sub.width, sub.height,
                       names=tuple(truth.names[src[of[n][0]][of[n][1]]] for n in sub.names))
@@ -107,11 +110,11 @@ def main(argv=None) -> None:
         var.mkdir(parents=True)
         db = without_photo(sfm / "database.db", var / "g.db", ids[d]) if d >= 0 else shutil.copy2(
             sfm / "database.db", var / "g.db")
-        inc = C._map(cfg, Path(db), sfm / "images", var / "inc", len(recs), False)
-        glob = C._map_global(cfg, Path(shutil.copy2(db, var / "g2.db")), sfm / "images", var / "glob")
+        inc = map_incremental(cfg, Path(db), sfm / "images", var / "inc", len(recs), False)
+        glob = map_global(cfg, Path(shutil.copy2(db, var / "g2.db")), sfm / "images", var / "glob")
         gbest = max(glob.values(), key=lambda r: r.num_reg_images())
         stats: dict = {}
-        models = C.map_capture(cfg, Path(shutil.copy2(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
+        models = map_capture(cfg, Path(shutil.copy2(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
                                stats)
         g = stats.get("mappers_tried", {}).get("global", {})
         seams = []                              # per incremental part: the global model's points it shares with the rest
@@ -122,11 +125,11 @@ def main(argv=None) -> None:
                              if (lambda s: s & inside and s - inside)({e.image_id for e in p.track.elements})))
         print(json.dumps({
             "removed": None if d < 0 else name_of[ids[d]],
-            "incremental": {"sizes": C._sizes(inc), **judge(max(inc.values(), key=lambda r: r.num_reg_images()))},
-            "global": {"sizes": C._sizes(glob), "part_disagreement_deg": [q for q, _ in C.part_agreement(glob, inc)],
+            "incremental": {"sizes": model_sizes(inc), **judge(max(inc.values(), key=lambda r: r.num_reg_images()))},
+            "global": {"sizes": model_sizes(glob), "part_disagreement_deg": [q for q, _ in part_agreement(glob, inc)],
                        "seam_points": seams,
                        **judge(gbest)},
-            "auto": {"mapper": stats["mapper"], "sizes": C._sizes(models), "joins": g.get("joins"),
+            "auto": {"mapper": stats["mapper"], "sizes": model_sizes(models), "joins": g.get("joins"),
                      **judge(max(models.values(), key=lambda r: r.num_reg_images()))}}), flush=True)
 
 

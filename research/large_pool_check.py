@@ -5,12 +5,12 @@ and the incremental mapper's time grows faster than the square of the pool. For 
 photos, two cheaper checks of a global model are measured here on a run folder whose SfM kept a
 global model (``curate sfm PHOTOS --mapper global``) of a rendered capture with ground truth:
 
-1. every frame checked by its own evidence (:func:`curate.sfm.colmap.verify_frames`: PnP from its
+1. every frame checked by its own evidence (:func:`curate.sfm.parts.verify_frames`: PnP from its
    matches to the points the other frames see, the model held fixed): which frames it refuses,
    against the frames the truth says are wrong (over 5 deg, or a centre off by 5% of the extent);
 2. an incremental model of every k-th photo only (the pool cut to at most ``--subsample`` photos):
    its time, and how far the global model disagrees with it
-   (:func:`curate.sfm.colmap.part_agreement`, the check ``auto`` applies to incremental parts).
+   (:func:`curate.sfm.parts.part_agreement`, the check ``auto`` applies to incremental parts).
 
     python3 -m research.large_pool_check /tmp/curate_bench_mapping/runs/walk_3000 \\
         --frames /tmp/curate_bench_mapping/frames/walk_livingroom_s0_n3000 --subsample 400
@@ -39,7 +39,9 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     import pycolmap
 
-    from curate.sfm.colmap import cameras_from_reconstruction, colmap_log, part_agreement, verify_frames
+    from curate.sfm.model import cameras_from_reconstruction
+    from curate.sfm.native import colmap_log
+    from curate.sfm.parts import part_agreement, verify_frames
     from curate.sfm.config import SfmConfig
     from research.align import pose_errors
     from research.bench.bench_mapping import truth_cameras

@@ -27,7 +27,7 @@ class _Enough(Exception):
 def main(argv: list[str]) -> dict:
     import pycolmap
 
-    import curate.sfm.colmap as C
+    import curate.sfm.reconstruction as C
     import curate.sfm.mapping as M
     from curate.sfm.config import SfmConfig
     from research.sfm_mappers import sfm_config_overrides

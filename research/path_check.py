@@ -34,14 +34,14 @@ def kept_records(run: Path) -> list:
 def takes_along(run: Path):
     """Yield (model folder name, take, [n] times, [n] names, [n, 3] centres) per model and take: video
     takes, and takes of numbered photos in name order (their numbers as the time), as
-    ``curate.sfm.colmap.jumps_along`` reads them."""
+    ``curate.sfm.continuity.jumps_along`` reads them."""
     import pycolmap
 
-    from curate.sfm.colmap import _along, _frame_times, _video_takes
-    when = _frame_times(kept_records(run), numbered=True)
+    from curate.sfm.continuity import frame_times, times_and_centres, video_takes
+    when = frame_times(kept_records(run), numbered=True)
     for model in sorted((run / "sfm" / "sparse").iterdir()):
-        for take, frames in _video_takes(pycolmap.Reconstruction(model), when).items():
-            t, c = _along(frames)
+        for take, frames in video_takes(pycolmap.Reconstruction(model), when).items():
+            t, c = times_and_centres(frames)
             yield model.name, take, t, [im.name for _, im in frames], c
 
 

@@ -25,19 +25,19 @@ import numpy as np
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
     """{model id: Reconstruction} of ``kind`` ('incremental', 'global', 'hierarchical[:N]' or 'auto': curate's
-    :func:`curate.sfm.colmap.map_capture`) on the matches of ``db``, and its seconds."""
+    :func:`curate.sfm.reconstruction.map_capture`) on the matches of ``db``, and its seconds."""
     import pycolmap
     pycolmap.set_random_seed(seed)
     out.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     if kind in ("incremental", "incremental:colmap_ba"):   # curate's options; ':colmap_ba': COLMAP's BA schedule
-        from curate.sfm.colmap import incremental_options
+        from curate.sfm.reconstruction import incremental_options
         from curate.sfm.config import SfmConfig
         cfg = SfmConfig(seed=seed, **({"global_ba_above": 10**9} if kind.endswith("colmap_ba") else {}))
         n = len(pycolmap.Database.open(db).read_all_images())
         models = pycolmap.incremental_mapping(db, images, out, options=incremental_options(cfg, n))
     elif kind == "auto":  # curate's own choice (SfmConfig.mapper = 'auto'), what `curate sfm` keeps
-        from curate.sfm.colmap import map_capture
+        from curate.sfm.reconstruction import map_capture
         from curate.sfm.config import SfmConfig
         n = len(pycolmap.Database.open(db).read_all_images())
         stats: dict = {}
@@ -112,7 +112,7 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | 
 
     import pycolmap
 
-    from curate.sfm.colmap import _match
+    from curate.sfm.matching import match
     from curate.sfm.config import SfmConfig
     over = sfm_config_overrides(overrides)
     cfg = SfmConfig(**over)
@@ -125,7 +125,7 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | 
     matcher = out.get("matcher") or "sequential"
     t = time.perf_counter()
     info: dict = {}
-    _match(cfg, new, matcher, takes, info)
+    match(cfg, new, matcher, takes, info)
     out["rematch"] = {"overrides": over, "matcher": matcher, "match_seconds": round(time.perf_counter() - t, 1),
                       **info}
     print(json.dumps(out["rematch"]), flush=True)
@@ -136,7 +136,7 @@ def part_rows(glob: dict, parts: dict, truth, frame_of: dict) -> list[dict]:
     """Per model of ``parts`` (largest first): its size, first and last video frame, the largest
     ``glob`` model's orientation disagreement with it (median, 90th percentile, max, degrees) and,
     with ``truth``, the part's own rotation error (median, max) after its own similarity alignment."""
-    from curate.sfm.colmap import part_disagreements
+    from curate.sfm.parts import part_disagreements
     from research.align import pose_errors
     rows = []
     for d, pc in part_disagreements(glob, parts):
@@ -159,7 +159,7 @@ def map_subset(db: Path, images: Path, out: Path, names: list[str], seed: int = 
     pair, fixed principal point) on the photos ``names`` of ``db`` only."""
     import pycolmap
 
-    from curate.sfm.colmap import incremental_options
+    from curate.sfm.reconstruction import incremental_options
     from curate.sfm.config import SfmConfig
     opts = incremental_options(SfmConfig(progress=False, seed=seed), len(names))
     opts.image_names = list(names)
@@ -183,7 +183,7 @@ def main(argv=None) -> dict:
                     "(median, 90th percentile, max) and the part's own error against the truth")
     ap.add_argument("--dump", type=Path, default=None, help="write each kept frame's pose error to this JSON file")
     a = ap.parse_args(argv)
-    from curate.sfm.colmap import cameras_from_reconstruction
+    from curate.sfm.model import cameras_from_reconstruction
     from research.align import pose_errors
     from research.datasets import load_ground_truth
     sfm = a.run / "sfm"
@@ -227,7 +227,7 @@ def main(argv=None) -> dict:
             out[kind] = row
             kept[kind] = models
             print(json.dumps({kind: row}), flush=True)
-        from curate.sfm.colmap import part_agreement   # what curate's --mapper auto checks before it
+        from curate.sfm.parts import part_agreement   # what curate's --mapper auto checks before it
         if "global" in kept and "incremental" in kept:  # prefers the global model
             out["global"]["part_disagreement_deg"] = [d for d, _ in part_agreement(kept["global"],
                                                                                     kept["incremental"])]

@@ -295,7 +295,7 @@ def test_an_unsupported_camera_model_is_one_warning_per_run(good, tmp_path, capl
     """A COLMAP model with fisheye cameras is imported through their pinhole part, said once for the
     whole run (with the count of images), not once per image."""
     import pycolmap
-    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
     cams, files = read_transforms(good / "transforms.json")
     cams = type(cams)(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.dist,
                       tuple(Path(f).name for f in files))
@@ -366,7 +366,7 @@ def test_the_databases_space_is_estimated_at_its_real_size_not_far_beyond():
     """The free-space check must not refuse a run on a roomy disk: the estimate is above the real databases of
     ../shared's sets and within a few times them (the drone flight, 75 photos matched exhaustively: 96 MB;
     the office walk, 373 sequentially: 77 MB)."""
-    from curate.sfm.colmap import SfmConfig
+    from curate.sfm.config import SfmConfig
     from curate.sfm.prep import database_bytes
     cfg = SfmConfig()
     assert 96e6 < database_bytes(75, "exhaustive", cfg) < 5 * 96e6      # photos with features near the cap

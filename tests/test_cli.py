@@ -119,7 +119,7 @@ def test_simulate_rejects_bad_size():
 @pytest.mark.slow
 def test_score_accepts_a_colmap_model(tmp_path, pool_json):
     """The same cameras written as a COLMAP model (binary and text) score the same as the transforms.json."""
-    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
     path, cams = pool_json
     rec = reconstruction_from_cameras(cams)
     (tmp_path / "bin").mkdir()
@@ -215,7 +215,7 @@ def _posed_run(tmp_path, stages_done: str):
     run = runfolder.claim(tmp_path / "my run")
     save_run_config(RunConfig(), run, None, tj)
     if stages_done == "sfm":
-        from curate.sfm.colmap import import_poses
+        from curate.sfm.pose_import import import_poses
         from curate.sfm.config import SfmConfig
         import_poses(SfmConfig(progress=False), tj, run)
     return run, tj

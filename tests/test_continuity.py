@@ -94,7 +94,8 @@ def test_jump_factor_sits_between_a_sound_walk_and_a_wrong_piece():
 def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_path):
     pytest.importorskip("pycolmap")
     from curate.core.cameras import Cameras, look_at
-    from curate.sfm.colmap import drop_off_path, reconstruction_from_cameras
+    from curate.sfm.continuity import drop_off_path
+    from curate.sfm.model import reconstruction_from_cameras
     from curate.sfm.ingest import PhotoRecord
     from curate.sfm.stage import split_warning
     t, c = walk(60)
@@ -157,7 +158,8 @@ def test_fold_factor_sits_between_a_sound_capture_and_the_fold():
 def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     pytest.importorskip("pycolmap")
     from curate.core.cameras import Cameras, look_at
-    from curate.sfm.colmap import drop_off_path, jumps_along, reconstruction_from_cameras
+    from curate.sfm.continuity import drop_off_path, jumps_along
+    from curate.sfm.model import reconstruction_from_cameras
     from curate.sfm.ingest import PhotoRecord
     from curate.sfm.stage import path_warning
     t, c = walk(60)
@@ -204,7 +206,8 @@ def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_n
     jumping order, the temple ring, would lose 18 of its 46)."""
     pytest.importorskip("pycolmap")
     from curate.core.cameras import Cameras, look_at
-    from curate.sfm.colmap import drop_off_path, jumps_along, reconstruction_from_cameras
+    from curate.sfm.continuity import drop_off_path, jumps_along
+    from curate.sfm.model import reconstruction_from_cameras
     from curate.sfm.ingest import PhotoRecord
     from curate.sfm.stage import path_warning
     t, c = walk(60)

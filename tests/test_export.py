@@ -16,7 +16,8 @@ from test_ingest import sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
 from curate.export.subset import ExportConfig, check_unchanged, export_names, export_subset  # noqa: E402
-from curate.sfm.colmap import SfmConfig, import_poses, read_cameras  # noqa: E402
+from curate.sfm.config import SfmConfig  # noqa: E402
+from curate.sfm.pose_import import import_poses, read_cameras  # noqa: E402
 
 
 def ring(n: int, w: int = 64, h: int = 48) -> Cameras:
@@ -114,7 +115,7 @@ def test_export_names_unique():
 
 def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
     """An SfM-like run: working copies at half size, a model with points; the export describes the originals."""
-    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
     from curate.sfm.prep import write_outputs
 
     orig = ring(8, 128, 96)
@@ -169,7 +170,7 @@ def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
     with pytest.raises(ValueError, match="photo folder"):
         export_subset(run, chosen, photos / "sub")
     # connectivity of the subset through shared points, as a brute force over the projections counts it
-    from curate.sfm.colmap import covisible_groups, write_subset_model
+    from curate.sfm.subset_model import covisible_groups, write_subset_model
     for min_shared in (1, 15, 10_000):
         got = write_subset_model(out_sfm / "sparse" / "0", chosen, tmp_path / f"m{min_shared}",
                                  min_shared=min_shared)["components"]
@@ -182,7 +183,7 @@ def test_export_sfm_run_rescales_to_originals_and_filters_points(tmp_path):
 
 
 def test_covisible_groups():
-    from curate.sfm.colmap import covisible_groups
+    from curate.sfm.subset_model import covisible_groups
     assert covisible_groups([1, 2, 3, 4, 5], [(1, 2), (2, 3), (4, 5)]) == [3, 2]
     assert covisible_groups([1, 2, 3], []) == [1, 1, 1]
     assert covisible_groups([], []) == []

@@ -102,7 +102,7 @@ def distorted_run(tmp_path):
     """A run folder as SfM leaves it for a camera with lens distortion: 10 photos (128 x 96) of a textured
     scene around the origin, an OPENCV camera (k1 = -0.12), 60 points observed at their distorted pixels."""
     from PIL import Image
-    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
     from curate.sfm.prep import write_outputs
     n, w, h = 10, 128, 96
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)

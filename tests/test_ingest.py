@@ -168,10 +168,11 @@ def test_images_json_records_skips(tmp_path):
 
 
 def test_later_stages_do_not_import_pycolmap():
-    """Only curate.sfm.colmap may import pycolmap, and only inside its functions."""
+    """Only curate.sfm may import pycolmap, and only inside its functions."""
     import subprocess
     import sys
-    code = ("import sys, curate.sfm.colmap, curate.sfm.io, curate.sfm.prep, curate.sfm.ingest, curate.sfm.quality, "
+    code = ("import sys, curate.sfm.colmap, curate.sfm.pose_import, curate.sfm.parts, curate.sfm.continuity, "
+            "curate.sfm.undistort, curate.sfm.io, curate.sfm.prep, curate.sfm.ingest, curate.sfm.quality, "
             "research.align, research.datasets; assert 'pycolmap' not in sys.modules, 'pycolmap imported'")
     r = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
                        capture_output=True, text=True)

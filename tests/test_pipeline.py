@@ -168,7 +168,7 @@ def test_run_refuses_a_run_folder_inside_the_photos(tmp_path):
 
 
 def test_original_cameras_of_an_import_point_to_the_photos(tmp_path):
-    from curate.sfm.colmap import import_poses
+    from curate.sfm.pose_import import import_poses
     from curate.sfm.config import SfmConfig
     from curate.sfm.io import load_sfm, original_cameras
     from curate.sfm.io import image_paths
@@ -263,7 +263,7 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     from curate.core.stage import read_stage, write_json_atomic
     from curate.core.transforms_json import read_transforms
     from curate.sfm import stage as sfm_stage
-    from curate.sfm.colmap import reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
 
     def sha():
         return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((SAMPLE / "images").iterdir())}

@@ -16,7 +16,9 @@ from curate.core.transforms_json import read_transforms, write_transforms
 from test_export import ring, write_photos
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.sfm.colmap import SfmConfig, import_poses, reconstruction_from_cameras  # noqa: E402
+from curate.sfm.config import SfmConfig  # noqa: E402
+from curate.sfm.model import reconstruction_from_cameras  # noqa: E402
+from curate.sfm.pose_import import import_poses  # noqa: E402
 from curate.sfm.io import load_sfm  # noqa: E402
 from curate.sfm.poses import match_photos  # noqa: E402
 
@@ -181,7 +183,7 @@ def test_points_are_triangulated_for_known_poses_and_exported(tmp_path):
     in RUN/sfm/sparse/0 and points.npy, the poses and intrinsics untouched, keypoints at the photos' own
     size (the points reproject within a pixel there), and the export keeps the points its images see."""
     from curate.export.subset import export_subset
-    from curate.sfm.colmap import cameras_from_reconstruction
+    from curate.sfm.model import cameras_from_reconstruction
     cap = walk(tmp_path / "cap", range(0, 32, 2))
     ref, _ = read_transforms(cap / "transforms.json")
     run = tmp_path / "run"
@@ -357,7 +359,7 @@ def test_a_colmap_image_with_a_zero_quaternion_is_an_error_naming_the_file_and_i
     """The adversarial sweep (issue 49): `0 0 0 0` in images.txt was read as the identity rotation and exported."""
     import numpy as np
     from curate.core.cameras import Cameras, look_at
-    from curate.sfm.colmap import read_colmap_model, reconstruction_from_cameras
+    from curate.sfm.model import read_colmap_model, reconstruction_from_cameras
     c = np.array([[3.0, 0, 0], [0, 3.0, 0], [-3, 0, 0]])
     rec = reconstruction_from_cameras(Cameras(look_at(c, np.zeros((3, 3))), 50.0, 50.0, 32.0, 24.0, 64, 48,
                                               names=("a.jpg", "b.jpg", "c.jpg")))

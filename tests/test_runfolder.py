@@ -290,7 +290,7 @@ def test_clear_tree_rules(tmp_path):
 
 def test_export_into_a_users_folder_never_clears_it(tmp_path):
     from curate.export.subset import export_subset
-    from curate.sfm.colmap import import_poses
+    from curate.sfm.pose_import import import_poses
     from curate.sfm.config import SfmConfig
     photos = project(tmp_path / "cap", n=6)
     run = rf.claim(tmp_path / "run")
@@ -375,7 +375,7 @@ def test_a_worker_whose_run_lost_the_lock_does_not_write_its_unit(tmp_path):
     from curate.evaluate.units import EvalConfig, Unit, eval_cameras, train_unit
     from curate.field.train import default_box
     from curate.sfm.io import image_paths
-    from curate.sfm.colmap import import_poses
+    from curate.sfm.pose_import import import_poses
     from curate.sfm.config import SfmConfig
     from curate.sfm.io import load_sfm
     photos = project(tmp_path / "cap", n=12)

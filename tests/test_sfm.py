@@ -16,7 +16,9 @@ from curate.sfm.io import load_sfm, original_cameras
 from test_ingest import make_mixed_folder, need, sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.sfm.colmap import SfmConfig, import_poses, run_sfm  # noqa: E402
+from curate.sfm.colmap import run_sfm  # noqa: E402
+from curate.sfm.config import SfmConfig  # noqa: E402
+from curate.sfm.pose_import import import_poses  # noqa: E402
 
 
 def small_cfg(**kw) -> SfmConfig:
@@ -57,15 +59,15 @@ def test_pose_errors_zero_for_similar_copy():
 @pytest.mark.parametrize("matcher", ["exhaustive", "sequential"])
 def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     """Verification RANSAC gets cfg.seed (COLMAP's -1 reseeds every run), the mapper the strict initial pair."""
-    from curate.sfm import colmap as sfm
+    from curate.sfm import matching, reconstruction
     got: dict = {}
     monkeypatch.setattr(pycolmap, "match_" + matcher, lambda db, **kw: got.update(kw))
-    sfm._match(small_cfg(seed=7, loop_detection=False), tmp_path / "database.db", matcher)
+    matching.match(small_cfg(seed=7, loop_detection=False), tmp_path / "database.db", matcher)
     vo = got["verification_options"]
     assert vo.ransac.random_seed == 7 and vo.min_num_inliers == SfmConfig().min_num_matches
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
-    sfm._map(small_cfg(seed=7, init_min_num_inliers=150), tmp_path / "database.db", tmp_path, tmp_path / "m", 3,
-             progress=False)
+    reconstruction.map_incremental(small_cfg(seed=7, init_min_num_inliers=150), tmp_path / "database.db", tmp_path,
+                                   tmp_path / "m", 3, progress=False)
     o = got["options"]
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
@@ -75,7 +77,7 @@ def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
     adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before.
     Every pool keeps COLMAP's two local refinements: one folded office.mp4 cut into two takes
     (docs/sfm.md)."""
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
@@ -84,7 +86,7 @@ def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
     for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio,
                                    colmap_default.ba_global_max_refinements),
                                   (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
-        sfm._map(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
+        sfm.map_incremental(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
         o = got["options"]
         assert o.ba_global_frames_ratio == pytest.approx(ratio) and o.ba_global_points_ratio == pytest.approx(ratio)
         assert o.ba_global_max_refinements == refinements
@@ -115,6 +117,14 @@ class _Model:
         self.images[frame_id].has_pose = False
 
 
+def _patch_verify(monkeypatch, fn):
+    """``verify_frames`` where map_capture calls it (curate.sfm.reconstruction) and where join_parts does
+    (curate.sfm.parts)."""
+    from curate.sfm import parts, reconstruction
+    for mod in (reconstruction, parts):
+        monkeypatch.setattr(mod, "verify_frames", fn)
+
+
 @pytest.mark.parametrize("inc, glob, kept, tried", [
     ([10], [10], "incremental", False),           # one model of every photo: the global mapper never runs
     ([5, 4], [10], "global", True),               # the capture split: the global mapper kept it whole
@@ -122,19 +132,20 @@ class _Model:
     ([], [9], "global", True),                    # the incremental mapper found nothing
 ])
 def test_auto_mapper_tries_global_when_the_capture_splits(monkeypatch, tmp_path, inc, glob, kept, tried):
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     calls = []
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: [(1.0, set())] * len(p))   # the global model agrees
-    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg, trusted=None:      # and its frames check out
-                        {x: {"ok": True, "why": ""} for x in names})
-    monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {i: _Model(n) for i, n in enumerate(inc)})
-    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or
+    _patch_verify(monkeypatch, lambda rec, names, deg, trusted=None:      # and its frames check out
+                  {x: {"ok": True, "why": ""} for x in names})
+    monkeypatch.setattr(sfm, "map_incremental", lambda *a, **k: calls.append("inc") or
+                        {i: _Model(n) for i, n in enumerate(inc)})
+    monkeypatch.setattr(sfm, "map_global", lambda *a, **k: calls.append("glob") or
                         {i: _Model(n) for i, n in enumerate(glob)})
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
     assert stats["mapper"] == kept and ("glob" in calls) == tried
-    assert sfm._sizes(models) == (glob[:1] if kept == "global" else inc)
+    assert sfm.model_sizes(models) == (glob[:1] if kept == "global" else inc)
     if tried:
         assert stats["mappers_tried"]["incremental"]["model_sizes"] == inc
         assert stats["mappers_tried"]["global"]["model_sizes"] == glob
@@ -156,18 +167,18 @@ def test_a_global_model_must_gain_enough_photos_to_replace_the_incremental_one(m
     434 photos (the foreign take's 63 apart), the global mapper 371, agreeing with every part, and the
     global model had 12 frames over 5 deg where the incremental one had none. On the real walks measured
     the global model is the less accurate: it must gain ``min_global_gain`` of the pool to be kept."""
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: [(1.0, set())] * len(p))
-    monkeypatch.setattr(sfm, "verify_frames", lambda rec, names, deg, trusted=None:
-                        {x: {"ok": True, "why": ""} for x in names})
-    monkeypatch.setattr(sfm, "_map", lambda *a, **k: {i: _Model(n) for i, n in enumerate(inc)})
-    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: {i: _Model(n) for i, n in enumerate(glob)})
+    _patch_verify(monkeypatch, lambda rec, names, deg, trusted=None:
+                  {x: {"ok": True, "why": ""} for x in names})
+    monkeypatch.setattr(sfm, "map_incremental", lambda *a, **k: {i: _Model(n) for i, n in enumerate(inc)})
+    monkeypatch.setattr(sfm, "map_global", lambda *a, **k: {i: _Model(n) for i, n in enumerate(glob)})
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     models = sfm.map_capture(small_cfg(min_global_gain=gain), tmp_path / "database.db", tmp_path, tmp_path / "m",
                              100, stats)
     assert stats["mapper"] == kept
-    assert sfm._sizes(models) == (glob[:1] if kept == "global" else inc)
+    assert sfm.model_sizes(models) == (glob[:1] if kept == "global" else inc)
     g = stats["mappers_tried"]["global"]
     i = (inc or [0])[0]
     if glob[0] > i:
@@ -188,10 +199,10 @@ def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_p
     is no better than sound parts: only the parts it agrees with stay in it, and only where their
     frames tie them to the largest of them (a two-take walk: a part tied by 22 points was put a quarter
     of the walk off on a CI run, every part still agreeing)."""
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     a, b, c = [f"a{i}" for i in range(5)], [f"b{i}" for i in range(3)], [f"c{i}" for i in range(2)]
-    monkeypatch.setattr(sfm, "_map", lambda *a_, **k: {0: _Model(5, a), 1: _Model(3, b), 2: _Model(2, c)})
-    monkeypatch.setattr(sfm, "_map_global", lambda *a_, **k: {0: _Model(10, a + b + c)})
+    monkeypatch.setattr(sfm, "map_incremental", lambda *a_, **k: {0: _Model(5, a), 1: _Model(3, b), 2: _Model(2, c)})
+    monkeypatch.setattr(sfm, "map_global", lambda *a_, **k: {0: _Model(10, a + b + c)})
     monkeypatch.setattr(sfm, "part_agreement", lambda g, p: list(zip(dis, (set(a), set(b), set(c)))))
     unchecked = set().union(*(set(p) for d, p in zip(dis, (a, b, c)) if d is None))
     calls = []
@@ -199,13 +210,13 @@ def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_p
     def verify(rec, names, deg, trusted=None):   # a frame of a checked part passes when the seam holds
         calls.append((set(names), set(trusted or ())))
         return {x: {"ok": alone if x in unchecked else ties, "why": "" if ties else "too few"} for x in names}
-    monkeypatch.setattr(sfm, "verify_frames", verify)
+    _patch_verify(monkeypatch, verify)
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     models = sfm.map_capture(small_cfg(), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
     g = stats["mappers_tried"]["global"]
     assert stats["mapper"] == kept and g["part_disagreement_deg"] == dis
-    assert sfm._sizes(models) == ([n] if kept == "global" else [5, 3, 2])
+    assert sfm.model_sizes(models) == ([n] if kept == "global" else [5, 3, 2])
     refuted = set().union(*(set(p) for d, p in zip(dis, (a, b, c)) if d is not None and d > 3.0))
     anchor = next(set(p) for d, p in zip(dis, (a, b, c)) if d is not None and d <= 3.0)
     checked = set().union(*(nm for nm, _ in calls))
@@ -218,10 +229,10 @@ def test_the_global_model_keeps_only_the_parts_it_agrees_with(monkeypatch, tmp_p
 
 @pytest.mark.parametrize("mapper, calls_expected", [("incremental", ["inc"]), ("global", ["glob"])])
 def test_a_named_mapper_runs_alone(monkeypatch, tmp_path, mapper, calls_expected):
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     calls = []
-    monkeypatch.setattr(sfm, "_map", lambda *a, **k: calls.append("inc") or {0: _Model(3)})
-    monkeypatch.setattr(sfm, "_map_global", lambda *a, **k: calls.append("glob") or {0: _Model(3)})
+    monkeypatch.setattr(sfm, "map_incremental", lambda *a, **k: calls.append("inc") or {0: _Model(3)})
+    monkeypatch.setattr(sfm, "map_global", lambda *a, **k: calls.append("glob") or {0: _Model(3)})
     (tmp_path / "database.db").write_bytes(b"db")
     stats: dict = {}
     sfm.map_capture(small_cfg(mapper=mapper), tmp_path / "database.db", tmp_path, tmp_path / "m", 10, stats)
@@ -229,10 +240,10 @@ def test_a_named_mapper_runs_alone(monkeypatch, tmp_path, mapper, calls_expected
 
 
 def test_global_mapper_is_seeded(monkeypatch, tmp_path):
-    from curate.sfm import colmap as sfm
+    from curate.sfm import reconstruction as sfm
     got: dict = {}
     monkeypatch.setattr(pycolmap, "global_mapping", lambda *a, **kw: got.update(kw) or {})
-    sfm._map_global(small_cfg(seed=5, min_num_matches=20), tmp_path / "db", tmp_path, tmp_path / "g")
+    sfm.map_global(small_cfg(seed=5, min_num_matches=20), tmp_path / "db", tmp_path, tmp_path / "g")
     o = got["options"]
     assert o.random_seed == 5 and o.mapper.random_seed == 5 and o.min_num_matches == 20
 
@@ -240,7 +251,7 @@ def test_global_mapper_is_seeded(monkeypatch, tmp_path):
 def test_vocabulary_tree_sample_is_bounded_and_even():
     """The tree trains on a fixed-size sample however large the pool (its time must not grow with it),
     drawn from every image."""
-    from curate.sfm.colmap import tree_sample
+    from curate.sfm.features import tree_sample
     rng = np.random.default_rng(0)
     for n_images in (10, 400, 3000):
         per = [np.full((300, 4), i, np.float32) for i in range(n_images)]
@@ -299,7 +310,7 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
 
     from PIL import Image
 
-    from curate.sfm.colmap import _extract
+    from curate.sfm.features import extract
     rng = np.random.default_rng(0)
     photos = tmp_path / "photos"
     photos.mkdir()
@@ -308,7 +319,7 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
         side = 1600 if i == 0 else 96
         Image.fromarray(rng.integers(0, 255, (side, side, 3), dtype=np.uint8)).save(photos / name)
     db = tmp_path / "database.db"
-    _extract(small_cfg(max_image_size=1600, num_threads=2), db, photos, names[::-1], False)
+    extract(small_cfg(max_image_size=1600, num_threads=2), db, photos, names[::-1], False)
     with sqlite3.connect(db) as con:
         rows = con.execute("SELECT name FROM images ORDER BY image_id").fetchall()
         n_kp = con.execute("SELECT COUNT(*) FROM keypoints WHERE rows > 0").fetchone()[0]
@@ -319,7 +330,8 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
 def test_a_part_inside_the_largest_model_is_no_split():
     """COLMAP may keep a first model of a few photos that the next model also registers: nothing is
     lost, so it is dropped (no split reported); a part with a photo of its own stays."""
-    from curate.sfm.colmap import reconstruction_from_cameras, without_contained
+    from curate.sfm.model import reconstruction_from_cameras
+    from curate.sfm.parts import without_contained
     a = np.linspace(0, 1, 6)
     c2w = look_at(np.stack([np.cos(a), np.sin(a), np.full(6, 0.3)], 1), np.zeros((6, 3)))
     cams = Cameras(c2w, np.full(6, 300.0), np.full(6, 300.0), np.full(6, 160.0), np.full(6, 120.0),
@@ -354,12 +366,13 @@ def test_curates_mapping_loop_maps_as_colmaps_pipeline_with_either_solver(fox_ru
     each global adjustment's solver chosen by the fill), with Ceres' direct-solve limit lowered to 55
     photos (above its dense-solve limit, 50) so that the choice is made: with a fill bar no model reaches (every adjustment direct, as
     COLMAP solves a model of 67 photos) and with one every model passes (iterative past 55 photos), the
-    same photos registered in one model, at the same poses; ``_map`` takes that path past the limit and
+    same photos registered in one model, at the same poses; ``map_incremental`` takes that path past the limit and
     ``map_capture`` records each choice in the stage's stats."""
     import shutil
 
     from curate.sfm import mapping
-    from curate.sfm.colmap import _map, cameras_from_reconstruction, incremental_options, map_capture
+    from curate.sfm.model import cameras_from_reconstruction
+    from curate.sfm.reconstruction import incremental_options, map_capture, map_incremental
     sfm_dir, cfg = fox_run / "sfm", small_cfg()
     n = sum(1 for _ in (sfm_dir / "images").iterdir())
     models, choices = {}, {}
@@ -390,7 +403,8 @@ def test_curates_mapping_loop_maps_as_colmaps_pipeline_with_either_solver(fox_ru
     monkeypatch.setattr(mapping, "ceres_direct_limit", lambda: 55)
     shutil.copy2(sfm_dir / "database.db", tmp_path / "map.db")
     adj: list = []
-    got = _map(small_cfg(direct_ba_max_fill=1e9), tmp_path / "map.db", sfm_dir / "images", tmp_path / "map", n, False, adj)
+    got = map_incremental(small_cfg(direct_ba_max_fill=1e9), tmp_path / "map.db", sfm_dir / "images", tmp_path / "map",
+                          n, False, adj)
     assert adj and {e["solver"] for e in adj} == {"direct"} and sorted(
         (r.num_reg_images() for r in got.values()), reverse=True) == sizes["colmap"]
     shutil.copy2(sfm_dir / "database.db", tmp_path / "cap.db")
@@ -509,7 +523,8 @@ def test_part_agreement_on_reconstructions():
     too few common images is None."""
     from scipy.spatial.transform import Rotation
 
-    from curate.sfm.colmap import part_agreement, reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
+    from curate.sfm.parts import part_agreement
     ang = np.linspace(0, 2 * np.pi, 30, endpoint=False)
     c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(30, 1.0)], 1)
     whole = Cameras(look_at(c, np.zeros((30, 3))), 500, 500, 320, 240, 640, 480,
@@ -536,7 +551,8 @@ def test_a_part_bent_only_at_its_end_disagrees():
     with a single stray frame still does."""
     from scipy.spatial.transform import Rotation
 
-    from curate.sfm.colmap import part_agreement, reconstruction_from_cameras
+    from curate.sfm.model import reconstruction_from_cameras
+    from curate.sfm.parts import part_agreement
     ang = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(40, 1.0)], 1)
     whole = Cameras(look_at(c, np.zeros((40, 3))), 500, 500, 320, 240, 640, 480,

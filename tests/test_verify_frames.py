@@ -9,7 +9,7 @@ import pytest
 pycolmap = pytest.importorskip("pycolmap")
 
 from curate.core.cameras import Cameras, look_at, w2c_from_c2w  # noqa: E402
-from curate.sfm.colmap import JOIN_MIN_FRAMES, VERIFY_MIN_POINTS, join_parts, verify_frames  # noqa: E402
+from curate.sfm.parts import JOIN_MIN_FRAMES, VERIFY_MIN_POINTS, join_parts, verify_frames  # noqa: E402
 
 
 def model(perturb: dict[int, np.ndarray] | None = None, n_points: int = 600, seed: int = 0,

@@ -267,7 +267,7 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     rotated = {n for n in chosen if int(recs.get(n, {}).get("orientation", 1) or 1) != 1}
     raw = [n for n, r in zip(names, chosen) if recs.get(r, {}).get("format") == "raw"]
 
-    from curate.sfm.colmap import write_subset_model  # pycolmap lives there
+    from curate.sfm.subset_model import write_subset_model  # pycolmap lives there
     sizes = {n: (int(sub.width[k]), int(sub.height[k])) for k, n in enumerate(chosen)}
     model = write_subset_model(sfm_dir(run_dir) / "sparse" / "0", chosen, out / "sparse" / "0",
                                rename=dict(zip(chosen, names)), sizes=sizes, min_track=cfg.min_track)

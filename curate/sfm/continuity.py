@@ -21,9 +21,13 @@ candidates) is a gap in time the speed allows for. Neither is an island.
 :data:`FOLD_FACTOR` times the speed of the steps around it. A model folded at such a step holds every
 frame, and the frames on each side agree with their neighbours; which side is wrong the path cannot
 say, so nothing is left out: the user is told (``curate.sfm.stage.path_warning``).
+
+:func:`drop_off_path` and :func:`jumps_along` apply both to the takes of a mapper's models.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -118,3 +122,69 @@ def path_jumps(t: np.ndarray, c: np.ndarray, factor: float = FOLD_FACTOR, window
         return []
     r = step_ratios(t, c, window)
     return [(int(i) + 1, float(r[i])) for i in np.flatnonzero(r > factor)]
+
+
+def video_takes(rec, when: dict) -> dict[str, list]:
+    """{take: [(time, Image)] in time order} of the registered frames of ``rec`` that ``when``
+    ({name: (take, time)}, :func:`frame_times`) places in time: video frames, numbered photos."""
+    takes: dict[str, list] = {}
+    for im in rec.images.values():
+        if im.has_pose and im.name in when:
+            takes.setdefault(when[im.name][0], []).append((when[im.name][1], im))
+    for frames in takes.values():
+        frames.sort(key=lambda x: x[0])
+    return dict(sorted(takes.items()))
+
+
+def frame_times(kept: list, numbered: bool = False) -> dict:
+    """{working name: (take, seconds)} of the video frames among the PhotoRecords ``kept``; with
+    ``numbered``, also the photos of each photo take (:func:`curate.sfm.prep.take_name`) whose names
+    are numbered frames (:func:`curate.sfm.prep.looks_sequential`, which also makes them matched in
+    sequence), their number standing for the time (a photo dropped or deleted between two is a
+    longer time, not a faster step)."""
+    from curate.sfm.prep import _trailing_number, looks_sequential, take_name
+    out = {r.working: (r.extra["video_rel"], float(r.extra["time"])) for r in kept
+           if r.extra.get("video_rel") is not None and r.extra.get("time") is not None}
+    if numbered:
+        takes: dict[str, list] = {}
+        for r in kept:
+            if r.working not in out and not r.extra.get("video"):
+                takes.setdefault(take_name(r), []).append(r)
+        for take, recs in takes.items():
+            recs.sort(key=lambda r: r.rel)
+            if looks_sequential([Path(r.rel).name for r in recs]):
+                out.update((r.working, (take, float(_trailing_number(Path(r.rel).name)[1]))) for r in recs)
+    return out
+
+
+def times_and_centres(frames: list) -> tuple[np.ndarray, np.ndarray]:
+    """([n] times, [n, 3] camera centres) of one take's frames (:func:`video_takes`), as the checks above take them."""
+    return (np.array([x[0] for x in frames]), np.array([np.asarray(im.projection_center()) for _, im in frames]))
+
+
+def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
+    """Deregister, in every model ({id: Reconstruction}), the video frames :func:`off_path`
+    finds on an island off their take's path; ``kept``: the PhotoRecords (a frame's ``extra`` holds its
+    ``video_rel`` and ``time``). Returns {take: [names]} of the frames left out."""
+    when = frame_times(kept)
+    out: dict[str, list[str]] = {}
+    for rec in models.values():
+        for tk, frames in video_takes(rec, when).items():
+            for i in off_path(*times_and_centres(frames)):
+                rec.deregister_frame(frames[i][1].frame_id)
+                out.setdefault(tk, []).append(frames[i][1].name)
+    return out
+
+
+def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
+    """{take: [{"from", "to", "x_around"}]}: the one-way jumps (:func:`path_jumps`)
+    of every video take in the model ``rec``, and of every take of numbered photos (in name order:
+    frames a user extracted from a video), each between two consecutive registered frames, at
+    ``x_around`` times the speed around the step (``step_ratios``). Run after :func:`drop_off_path`
+    (which leaves numbered photos alone: only a warning rests on their order)."""
+    out: dict[str, list[dict]] = {}
+    for tk, frames in video_takes(rec, frame_times(kept, numbered=True)).items():
+        for i, r in path_jumps(*times_and_centres(frames)):
+            out.setdefault(tk, []).append({"from": frames[i - 1][1].name, "to": frames[i][1].name,
+                                           "x_around": round(r, 1) if np.isfinite(r) else None})
+    return out

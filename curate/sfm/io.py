@@ -124,7 +124,7 @@ def original_cameras(cams: Cameras, records: dict) -> tuple[Cameras, list[str]]:
 
     Intrinsics are scaled per axis by the ratio of original to working size recorded
     by ingest; for an import stage (no working copies), by the ratio of the photo's own size (recorded by
-    :func:`curate.sfm.colmap.check_photos`) to the size the poses describe: poses written for 1080x1920 and
+    :func:`curate.sfm.pose_import.check_photos`) to the size the poses describe: poses written for 1080x1920 and
     photos at 180x320 (nerfstudio's ``images_4``) export cameras of the 180x320 photos.
     """
     by_name = {r["working"]: r for r in records.get("photos", []) if r.get("working")}

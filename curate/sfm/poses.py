@@ -72,7 +72,7 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
     if source.is_dir():
         model = _colmap_model(source)
         if model is not None:
-            from curate.sfm.colmap import read_colmap_model
+            from curate.sfm.model import read_colmap_model
             photos = photos if photos is not None else default_photos(source)
             return read_colmap_model(model, Path(photos) if photos is not None else None)
         found = find_pose_source(source)

@@ -8,7 +8,7 @@
   differ in at most ``dup_max_distance`` bits are duplicates; of such a pair the sharper
   one is kept.
 
-Defaults (see ``curate.sfm.colmap.SfmConfig``): duplicates are dropped only when the hashes
+Defaults (see ``curate.sfm.config.SfmConfig``): duplicates are dropped only when the hashes
 are (almost) identical (distance <= 4 of 256 bits; consecutive video frames of a walk
 differ by 12 or more): a burst or a camera standing still,
 which add nothing to SfM or to NeRF training); blurry photos are *flagged but kept*,

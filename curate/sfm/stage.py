@@ -1,7 +1,7 @@
 """The SfM stage as a run-folder stage: photos (or known poses) -> ``RUN/sfm``.
 
 :func:`run` has the shape of every stage (config, run folder, force -> :class:`StageResult`);
-the work is :func:`curate.sfm.colmap.run_sfm` (COLMAP) or :func:`curate.sfm.colmap.import_poses`.
+the work is :func:`curate.sfm.colmap.run_sfm` (COLMAP) or :func:`curate.sfm.pose_import.import_poses`.
 """
 
 from __future__ import annotations
@@ -122,7 +122,7 @@ def path_warning(stats: dict) -> str | None:
     """A warning for each video take whose path in the model jumps at over
     :data:`curate.sfm.continuity.FOLD_FACTOR` times the speed around the step and does not come back (a model
     folded there keeps every frame, the ones on one side wrong); None without such a jump.
-    ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.colmap.jumps_along`, of the
+    ``stats``: the SfM stage's statistics (``path_jumps``: :func:`curate.sfm.continuity.jumps_along`, of the
     model curate uses; each other part of a split capture, ``parts[k]``, may carry its own; ``takes``
     tells a take of numbered photos from a video; ``mapper``: a model of the incremental mapper gets the
     hint to map again with the global one, which kept a rendered walk down a hall and back whole where the
@@ -189,7 +189,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path
     The stage ran when its record changed; an unchanged re-run leaves it as it was.
     """
     from curate.core.stage import read_stage
-    from curate.sfm.colmap import import_poses, run_sfm
+    from curate.sfm.colmap import run_sfm
+    from curate.sfm.pose_import import import_poses
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     d = run_dir / "sfm"

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from curate.sfm.native import load as load_pycolmap
+from curate.sfm.native import colmap_log, load as load_pycolmap
 
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 """Camera models every trainer reads as they are."""
@@ -47,7 +47,6 @@ def undistort_model(sparse_dir: str | Path, image_dir: str | Path, out_dir: str 
     pycolmap = load_pycolmap()
     out_dir = Path(out_dir)
     names = [im.name for im in pycolmap.Reconstruction(str(sparse_dir)).images.values()]
-    from curate.sfm.colmap import colmap_log
     with colmap_log(Path(log) if log else out_dir.parent / "undistort.log"):
         pycolmap.undistort_images(str(out_dir), str(sparse_dir), str(image_dir), image_names=names,
                                   output_type="COLMAP", num_threads=1)

@@ -413,8 +413,10 @@ def _since(t0: tuple[float, float]) -> dict:
 
 def sfm_child(photos: str, run: str, out_json: str, extra: list[str]) -> int:
     """``curate sfm PHOTOS --out RUN EXTRA...`` in this process, each SfM step timed (wall and CPU seconds of
-    the process, all its threads) by wrapping curate.sfm.colmap's steps; the times go to ``out_json``."""
+    the process, all its threads) by wrapping curate.sfm's steps where they are called (the SfM run in
+    curate.sfm.colmap, the two mappers in curate.sfm.reconstruction); the times go to ``out_json``."""
     import curate.sfm.colmap as C
+    import curate.sfm.reconstruction as R
     from curate.cli import main
     steps: dict = {}
 
@@ -427,9 +429,10 @@ def sfm_child(photos: str, run: str, out_json: str, extra: list[str]) -> int:
                 steps.setdefault(name, []).append(_since(t0))
         return f
 
-    for name, attr in (("ingest", "prepare_photos"), ("extract", "_extract"), ("match", "_match"), ("map", "map_capture"),
-                       ("map_incremental", "_map"), ("map_global", "_map_global")):
-        setattr(C, attr, wrap(name, getattr(C, attr)))
+    for name, mod, attr in (("ingest", C, "prepare_photos"), ("extract", C, "extract"), ("match", C, "match"),
+                            ("map", C, "map_capture"), ("map_incremental", R, "map_incremental"),
+                            ("map_global", R, "map_global")):
+        setattr(mod, attr, wrap(name, getattr(mod, attr)))
     t0 = _clock()
     rc = main(["sfm", photos, "--out", run, *extra])
     Path(out_json).write_text(json.dumps({"rc": rc, "total": _since(t0), "steps": steps}))
@@ -461,8 +464,9 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
 
     import pycolmap
 
-    import curate.sfm.colmap as C
+    import curate.sfm.reconstruction as C
     from curate.sfm.config import SfmConfig
+    from curate.sfm.native import colmap_log
     sfm = Path(run) / "sfm"
     n_kept = json.loads((sfm / "stage.json").read_text())["stats"]["n_kept"]
     cfg = SfmConfig(progress=False)
@@ -472,16 +476,16 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
         shutil.copy2(sfm / "database.db", db)
         pycolmap.set_random_seed(cfg.seed)
         t0 = _clock()
-        with C.colmap_log(Path(tmp) / "colmap.log"):
+        with colmap_log(Path(tmp) / "colmap.log"):
             if kind == "incremental":
-                models = C._map(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, False)
+                models = C.map_incremental(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, False)
             elif kind == "global":
-                models = C._map_global(cfg, db, sfm / "images", Path(tmp) / "m")
+                models = C.map_global(cfg, db, sfm / "images", Path(tmp) / "m")
             elif kind == "hierarchical":
                 models = map_hierarchical(cfg, db, sfm / "images", Path(tmp) / "m")
             elif kind == "incremental:colmap_ba":   # COLMAP's global adjustment schedule at every pool size
-                models = C._map(SfmConfig(progress=False, global_ba_above=10**9), db, sfm / "images", Path(tmp) / "m",
-                                n_kept, False)
+                models = C.map_incremental(SfmConfig(progress=False, global_ba_above=10**9), db, sfm / "images",
+                                           Path(tmp) / "m", n_kept, False)
             elif kind == "auto":
                 stats: dict = {}
                 models = C.map_capture(cfg, db, sfm / "images", Path(tmp) / "m", n_kept, stats)
@@ -496,7 +500,7 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
 
 def model_record(models: dict, n_kept: int, truth: str, capture: str) -> dict:
     """Sizes, registered fraction, points and pose errors (against the rendered poses) of a mapper's models."""
-    from curate.sfm.colmap import cameras_from_reconstruction
+    from curate.sfm.model import cameras_from_reconstruction
     sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
     rec: dict = {"model_sizes": sizes, "registered_fraction": round(sizes[0] / n_kept, 4) if sizes else 0.0}
     if not sizes:

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from research.align import pose_errors  # noqa: E402
 from research.datasets import image_folder, load_ground_truth  # noqa: E402
-from curate.sfm.colmap import SfmConfig, run_sfm  # noqa: E402
+from curate.sfm.colmap import run_sfm  # noqa: E402
+from curate.sfm.config import SfmConfig  # noqa: E402
 from curate.sfm.io import load_sfm  # noqa: E402
 
 

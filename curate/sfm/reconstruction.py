@@ -1,0 +1,199 @@
+"""Mapping: COLMAP's incremental and global mappers with curate's options, and the choice between them
+(:func:`map_capture`: the global model replaces the incremental parts only where it agrees with them,
+:mod:`curate.sfm.parts`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import shutil
+import time
+from pathlib import Path
+
+from curate.sfm.config import SfmConfig
+from curate.sfm.native import load as load_pycolmap
+from curate.sfm.parts import join_parts, part_agreement, verify_frames
+
+logger = logging.getLogger(__name__)
+
+
+def seeded_pipeline_options(cfg: SfmConfig):
+    """COLMAP's incremental pipeline options with ``cfg``'s threads, seed (mapper and triangulation) and
+    minimum matches: what mapping and the triangulation of known poses share."""
+    pycolmap = load_pycolmap()
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.seed
+    opts.mapper.random_seed = cfg.seed
+    opts.triangulation.random_seed = cfg.seed
+    opts.min_num_matches = cfg.min_num_matches
+    return opts
+
+
+def incremental_options(cfg: SfmConfig, n_images: int):
+    """The incremental mapper's options for a pool of ``n_images`` photos: :func:`seeded_pipeline_options`,
+    the initial pair's inliers (``cfg.init_min_num_inliers``), the principal point held; past
+    ``cfg.global_ba_above`` photos, a global bundle adjustment each time the model grows by the factor
+    ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
+    Each new photo's local adjustment keeps COLMAP's two refinements (one folded office.mp4 cut into two
+    takes: docs/sfm.md).
+
+    The global adjustments are most of the incremental mapper's time on a long capture (the rendered
+    1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool (docs/sfm.md,
+    "Mapping past 1,000 photos")."""
+    opts = seeded_pipeline_options(cfg)
+    opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    opts.ba_refine_principal_point = False
+    if n_images > cfg.global_ba_above:
+        opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth
+        opts.ba_global_max_refinements = cfg.global_ba_refinements
+    return opts
+
+
+def map_incremental(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool,
+         adjustments: list | None = None):
+    """{id: Reconstruction} of COLMAP's incremental mapper on the matches of ``db``, with curate's options
+    (:func:`incremental_options`). Pools of more photos than Ceres' direct-solve limit (1,000) are mapped by
+    :func:`curate.sfm.mapping.incremental_mapping`, the same steps with each global adjustment's solver chosen
+    from the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
+    global adjustment past the limit (photos, fill per photo, solver, seconds)."""
+    pycolmap = load_pycolmap()
+    from tqdm import tqdm
+
+    from curate.sfm import mapping
+    opts = incremental_options(cfg, n_images)
+    limit = mapping.ceres_direct_limit()
+    bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
+    count = [0]
+
+    def on_image(k: int = 1):  # registrations over all models: the bar stops at the pool size
+        k = min(k, n_images - count[0])
+        count[0] += k
+        bar.update(k)
+
+    try:
+        if n_images > limit and cfg.direct_ba_max_fill > 0:
+            choice = mapping.SolverChoice(cfg.direct_ba_max_fill, limit)
+            models = mapping.incremental_mapping(db, images, out, opts, choice, on_pair=lambda: on_image(2),
+                                                 on_image=on_image)
+            if adjustments is not None:
+                adjustments.extend(choice.record)
+        else:
+            models = pycolmap.incremental_mapping(db, images, out, options=opts, initial_image_pair_callback=
+                                                  lambda: on_image(2), next_image_callback=on_image)
+    finally:
+        bar.close()
+    return models
+
+
+def map_global(cfg: SfmConfig, db: Path, images: Path, out: Path):
+    """{id: Reconstruction} of COLMAP's global mapper (rotation averaging, then global positioning)
+    on the matches of ``db`` (written to: pass a copy to keep the original)."""
+    pycolmap = load_pycolmap()
+    opts = pycolmap.GlobalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.seed
+    opts.min_num_matches = cfg.min_num_matches
+    opts.mapper.random_seed = cfg.seed
+    out.mkdir(parents=True, exist_ok=True)
+    return pycolmap.global_mapping(db, images, out, options=opts)
+
+
+def model_sizes(models: dict) -> list[int]:
+    return sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+
+
+def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
+    """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
+    kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), and past 1,000 photos
+    ``global_adjustments`` (the incremental mapper's solver of each global adjustment, :func:`map_incremental`).
+
+    ``auto`` runs the incremental mapper and, when its largest model holds less than
+    ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
+    were left out), the global mapper on a copy of the same matches. Its largest model is
+    checked against every incremental part (:func:`curate.sfm.parts.part_agreement`, orientation
+    disagreement <= ``cfg.max_part_disagreement_deg`` on 90% of the part's photos). Of it stay the parts
+    it agrees with that :func:`curate.sfm.parts.join_parts` can tie to the largest of them, and the frames
+    of no checked part that pass :func:`curate.sfm.parts.verify_frames` against those (against every other
+    frame where no part agrees).
+    It replaces the incremental models when it then holds at least ``cfg.min_global_gain`` of the
+    ``n_images`` photos (and at least one) more than their largest: on the real walks measured the
+    global model is the less accurate, and a take that joins neither model (a foreign one) leaves the
+    incremental model short of the pool whatever the mapper, so a gain of a few photos is not worth it.
+    """
+    tried: dict = {}
+    work.mkdir(parents=True, exist_ok=True)
+    if cfg.mapper != "global":
+        t = time.perf_counter()
+        adjustments: list = []
+        inc = map_incremental(cfg, db, images, work / "incremental", n_images, cfg.progress, adjustments)
+        tried["incremental"] = {"model_sizes": model_sizes(inc), "seconds": round(time.perf_counter() - t, 2)}
+        if adjustments:
+            stats["global_adjustments"] = adjustments
+        largest = tried["incremental"]["model_sizes"][:1] or [0]
+        if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
+            stats["mapper"] = "incremental"
+            return inc
+        logger.warning("sfm: the incremental mapper kept %d of %d photos in its largest model (models %s); "
+                       "trying the global mapper on the same matches", largest[0], n_images,
+                       tried["incremental"]["model_sizes"])
+    t = time.perf_counter()
+    gdb = work / "global.db"
+    shutil.copy2(db, gdb)
+    glob = map_global(cfg, gdb, images, work / "global")
+    tried["global"] = {"model_sizes": model_sizes(glob), "seconds": round(time.perf_counter() - t, 2)}
+    if cfg.mapper == "global":
+        stats["mapper"] = "global"
+        return glob
+    stats["mappers_tried"] = tried
+    i = (tried["incremental"]["model_sizes"][:1] or [0])[0]
+    if not glob or tried["global"]["model_sizes"][0] <= i:
+        logger.warning("sfm: the global mapper kept no more photos in one model; keeping the incremental models")
+        stats["mapper"] = "incremental"
+        return inc
+    checks = part_agreement(glob, inc)
+    tried["global"]["part_disagreement_deg"] = [d for d, _ in checks]
+    ok = [d is not None and d <= cfg.max_part_disagreement_deg for d, _ in checks]
+    best = max(glob.values(), key=lambda r: r.num_reg_images())
+    refuted: set = set()
+    if checks:  # keep of the global model the parts it agrees with and can tie together, and the frames that pass
+        placed = {im.name for im in best.images.values() if im.has_pose}
+        agreed = [names & placed for (_, names), good in zip(checks, ok) if good]
+        refuted = set().union(*(names for (d, names), good in zip(checks, ok) if d is not None and not good))
+        keep, joins = join_parts(best, [a for a in agreed if a], cfg.max_part_disagreement_deg)
+        unchecked = sorted(placed - keep - refuted - set().union(*agreed))
+        verdicts = verify_frames(best, unchecked, cfg.max_part_disagreement_deg, trusted=keep or None)
+        passed = {n for n, v in verdicts.items() if v["ok"]}
+        keep |= passed
+        tried["global"]["verified"] = {"checked": len(unchecked), "kept": len(passed),
+                                       "refused": {n: v["why"] for n, v in verdicts.items() if not v["ok"]}}
+        tried["global"]["joins"] = joins
+        for im in list(best.images.values()):
+            if im.name not in keep and im.has_pose:
+                best.deregister_frame(im.frame_id)
+        tried["global"]["pruned_to"] = int(best.num_reg_images())
+    dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
+                    for d in tried["global"]["part_disagreement_deg"])
+    need = max(1, math.ceil(cfg.min_global_gain * n_images - 1e-9)) if i else 1   # no incremental model: any will do
+    tried["global"]["gain"], tried["global"]["gain_needed"] = int(best.num_reg_images() - i), need
+    if best.num_reg_images() - i < need:
+        logger.warning("sfm: the global model keeps %d photos (the incremental parts it agrees with, on "
+                       "orientation (90%% of each part's photos, deg: %s; limit %g), where it can tie them "
+                       "together, and the frames that pass a check of their own) against the largest incremental "
+                       "model's %d: it must keep %d more (%g of the %d photos) to replace it; keeping the "
+                       "incremental models", best.num_reg_images(), dis, cfg.max_part_disagreement_deg, i, need,
+                       cfg.min_global_gain, n_images)
+        stats["mapper"] = "incremental"
+        return inc
+    ver = tried["global"].get("verified")
+    loose = [j for j in tried["global"].get("joins", []) if not j["joined"]]
+    logger.warning("sfm: the global mapper keeps %d photos in one model (it agrees with the incremental parts: %s "
+                   "deg%s%s)", best.num_reg_images(), dis,
+                   "; the parts it disagrees with are left out" if refuted else "",
+                   (f"; {len(loose)} part(s) of {sum(j['photos'] for j in loose)} photos left out: too few points "
+                    f"tie them to the rest" if loose else "")
+                   + (f"; of {ver['checked']} photos no part checks, {ver['kept']} pass a check of their own pose"
+                      if ver and ver["checked"] else ""))
+    stats["mapper"] = "global"
+    return {0: best}
