@@ -588,3 +588,76 @@ def test_the_warning_says_which_parts_the_global_model_could_not_tie(tmp_path):
     glob["joins"][0]["joined"] = True
     (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
     assert "too few points" not in split_warning(tmp_path)
+
+
+@pytest.mark.slow
+def test_photos_in_no_order_past_the_exhaustive_limit_are_matched_by_retrieval_and_come_back_whole(tmp_path):
+    """A folder of photos with no order (names that are not a sequence, no GPS) past the exhaustive limit is
+    matched by retrieval (each photo with its most similar, a vocabulary tree trained on the capture: pairs
+    grow linearly, not quadratically) and comes back as one model, its poses agreeing with the truth."""
+    import hashlib
+    import os
+    from curate.core.transforms_json import read_transforms
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    back = {}
+    for p in sorted((sample / "images").glob("*.jpg")):
+        h = hashlib.sha1(p.name.encode()).hexdigest()[:10] + ".jpg"     # no order left in the names
+        os.link(p, photos / h)
+        back[h] = p.name
+    run = tmp_path / "run"
+    run_sfm(SfmConfig(max_image_size=320, exhaustive_max_images=40, retrieval_num_images=20, progress=False),
+            photos, run)
+    st = json.loads((run / "sfm" / "stage.json").read_text())["stats"]
+    n = st["n_kept"]
+    assert st["matcher"] == "retrieval"
+    assert st["n_pairs_matched"] <= n * 20 < n * (n - 1) // 2          # at most N per photo, not every pair
+    got = load_sfm(run).cameras
+    assert len(got) >= 0.9 * n, st["model_sizes"]
+    recs = {r["working"]: r["rel"] for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]}
+    truth, _ = read_transforms(sample / "transforms.json")
+    est = Cameras(got.c2w, got.fx, got.fy, got.cx, got.cy, got.width, got.height,
+                  names=tuple(back[recs[nm]] for nm in got.names))
+    e = pose_errors(est, truth)
+    assert e["rotation_deg_median"] < 1.0, e
+
+
+class _Model:
+    """A stand-in for a pycolmap.Reconstruction: the names of its registered images."""
+
+    def __init__(self, names):
+        self.names = list(names)
+
+    def num_reg_images(self):
+        return len(self.names)
+
+    def reg_image_ids(self):
+        return range(len(self.names))
+
+    def image(self, i):
+        return type("Image", (), {"name": self.names[i]})()
+
+
+def test_retrieval_maps_again_only_when_the_model_leaves_photos_out_and_keeps_the_larger(monkeypatch, tmp_path):
+    """Retrieval's second round: a model holding at least 90% of the photos is kept as it is (no more
+    matching); under that, the photos it left out (and only those) are matched again and the capture mapped
+    again, and the larger of the two largest models is kept."""
+    from curate.sfm import colmap
+    names = [f"p{i:03d}.jpg" for i in range(20)]
+    asked = []
+    monkeypatch.setattr(colmap, "rematch_left_out", lambda cfg, db, left: asked.append(left) or {
+        "photos": len(left), "num_images": 120, "verified": 7})
+    again = {"m": {0: _Model(names[:19])}}
+    monkeypatch.setattr(colmap, "map_capture", lambda *a, **k: again["m"])
+    whole = {0: _Model(names[:18]), 1: _Model(names[18:])}
+    stats: dict = {}
+    assert colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, whole, stats) is whole
+    assert asked == [] and "retrieval_second_round" not in stats
+    split = {0: _Model(names[:12]), 1: _Model(names[12:])}
+    got = colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, split, stats)
+    assert asked == [names[12:]] and got is again["m"]
+    assert stats["retrieval_second_round"]["model_sizes_before"] == [12, 8]
+    assert stats["retrieval_second_round"]["model_sizes_after"] == [19]
+    again["m"] = {0: _Model(names[:10])}                                 # mapped again, worse: the first is kept
+    assert colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, split, {}) is split

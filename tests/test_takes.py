@@ -45,7 +45,8 @@ def test_each_photo_knows_its_take():
 
 def test_videos_are_matched_in_order_and_a_video_with_photos_exhaustively():
     """Beyond the exhaustive limit, two videos are matched sequentially (each take along itself;
-    across takes by retrieval); a video with photos, numbered or not, gets exhaustive matching
+    across takes by retrieval), photos in no order by retrieval (each with its most similar photos:
+    near-linear, where exhaustive is quadratic); a video with photos, numbered or not, gets exhaustive matching
     (matched sequentially, office.mp4's first half with every 5th photo of the second split and
     left every photo out; exhaustive matching kept 30 of 38)."""
     cfg = SfmConfig(exhaustive_max_images=10)
@@ -53,8 +54,10 @@ def test_videos_are_matched_in_order_and_a_video_with_photos_exhaustively():
     b = [frame("b.mp4", 0.1 * i, i) for i in range(12)]
     numbered = [photo(f"{i:05d}.jpg") for i in range(200, 260, 5)]
     unordered = [photo(n) for n in ("kitchen.jpg", "sofa.jpg", "door.jpg", "window.jpg")]
+    many = [photo(f"{w}_{k}.jpg") for w in ("kitchen", "sofa", "door") for k in "abcd"]   # 12, in no order
     for recs, want in [(a + b, "sequential"), (numbered, "sequential"), (a + numbered, "exhaustive"),
-                       (a + unordered, "exhaustive"), (a[:5] + b[:5], "exhaustive")]:
+                       (a + unordered, "exhaustive"), (a[:5] + b[:5], "exhaustive"), (many, "retrieval"),
+                       (many[:10], "exhaustive")]:
         assign_takes(recs)
         assert choose_matcher(cfg, recs) == want
 

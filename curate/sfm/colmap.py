@@ -66,11 +66,11 @@ from pathlib import Path
 
 from curate.core.cameras import Cameras
 from curate.core.stage import begin_stage, finish_stage
-from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
+from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.continuity import drop_off_path, jumps_along
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
-from curate.sfm.matching import match, pair_counts
+from curate.sfm.matching import match, pair_counts, rematch_left_out
 from curate.sfm.model import cameras_from_reconstruction
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
@@ -93,6 +93,27 @@ def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
     pycolmap.patch_match_stereo(dense)
     pycolmap.stereo_fusion(dense / "fused.ply", dense)
     return {"status": "done", "path": "dense/fused.ply", "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def _second_round(cfg: SfmConfig, db: Path, images: Path, out: Path, names: list[str], models: dict,
+                  stats: dict) -> dict:
+    """Retrieval matching's second round: when the largest model holds under ``RETRIEVAL_REMATCH_BELOW`` of
+    the photos, those it left out are matched again with more of their most similar photos
+    (:func:`curate.sfm.matching.rematch_left_out`) and the capture is mapped again; the larger largest model
+    is kept. ``stats["retrieval_second_round"]`` says what it did."""
+    first = max(r.num_reg_images() for r in models.values())
+    if first >= RETRIEVAL_REMATCH_BELOW * len(names):
+        return models
+    held = {r.image(i).name for r in models.values() if r.num_reg_images() == first for i in r.reg_image_ids()}
+    info = rematch_left_out(cfg, db, [n for n in names if n not in held])
+    shutil.rmtree(out / "mapper", ignore_errors=True)
+    again = map_capture(cfg, db, images, out / "mapper", len(names), stats)
+    info.update(model_sizes_before=model_sizes(models), model_sizes_after=model_sizes(again) if again else [])
+    stats["retrieval_second_round"] = info
+    logger.warning("sfm: retrieval matching left %d of %d photos out of the model; matched again with their %d "
+                   "most similar photos (%d new verified pairs): models %s -> %s", info["photos"], len(names),
+                   info["num_images"], info["verified"], info["model_sizes_before"], info["model_sizes_after"])
+    return again if again and max(r.num_reg_images() for r in again.values()) > first else models
 
 
 def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
@@ -148,6 +169,8 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
                     stats["n_pairs_matched"], timings["match"])
         t = time.perf_counter()
         models = map_capture(cfg, db, images, out / "mapper", len(names), stats)
+        if matcher == "retrieval" and models:
+            models = _second_round(cfg, db, images, out, names, models, stats)
         timings["map"] = round(time.perf_counter() - t, 2)
     if not models:
         raise RuntimeError(f"sfm: COLMAP registered no images (see {out / 'colmap.log'})")

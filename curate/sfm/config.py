@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 
-MATCHERS = ("auto", "exhaustive", "sequential", "spatial")
-"""``SfmConfig.matcher`` choices. No vocabulary-tree matcher: a pre-trained tree is a download;
-``sequential`` finds loops with a tree trained on the capture itself (``loop_detection``)."""
+MATCHERS = ("auto", "exhaustive", "sequential", "spatial", "retrieval")
+"""``SfmConfig.matcher`` choices. The vocabulary trees (``sequential``'s loop detection, ``retrieval``) are
+trained on the capture itself: COLMAP's published trees are downloads."""
 CAMERA_MODES = ("auto", "single", "per_image")
 """``SfmConfig.camera_mode`` choices."""
 ON_SPLIT = ("largest", "each", "stop")
@@ -18,6 +18,9 @@ TRIANGULATE = ("auto", "off")
 """``SfmConfig.triangulate`` choices."""
 MIN_PART = 10
 """``on_split = 'each'``: the fewest registered photos a part needs to be curated on its own."""
+RETRIEVAL_REMATCH_BELOW = 0.9
+"""Retrieval matching: a model holding under this share of the photos sends the photos it left out to a
+second round of retrieval (``SfmConfig.retrieval_rematch_num_images``) and the capture is mapped again."""
 TAKE_MIN_FRACTION = 0.1
 """A take (a video, or the photos of one folder) of a capture of several takes with under this share of
 its frames in the model curate uses did not join the other takes: the SfM stage says so by name."""
@@ -80,8 +83,14 @@ class SfmConfig:
     matcher: str = "auto"             # which photo pairs to match: exhaustive (all), sequential (each frame with
     #                                   the next ones, and loops), spatial (by GPS), or auto: exhaustive for a small
     #                                   set, else spatial with GPS, sequential for video frames or numbered
-    #                                   photos, exhaustive otherwise (never a vocabulary tree: it is a download)
+    #                                   photos, retrieval otherwise; retrieval: each photo with its most similar
+    #                                   photos (a vocabulary tree trained on the capture itself, not a download)
     exhaustive_max_images: int = 150  # 'auto': exhaustive up to this many photos
+    retrieval_num_images: int = 30    # retrieval: match each photo with its N most similar photos (pairs grow
+    #                                   as photos x N, where exhaustive grows as photos^2 / 2)
+    retrieval_rematch_num_images: int = 120  # retrieval: when the model leaves over 10% of the photos out, those
+    #                                   are matched again with their N most similar photos and the capture mapped
+    #                                   again (skull at N = 10: 28 of 66 photos after the first round)
     sequential_overlap: int = 15      # sequential: match each frame with the next N frames
     sequential_quadratic: bool = True  # sequential: also frames i + 2^k (helps closing loops without a vocab tree)
     loop_detection: bool = True       # sequential: find loops with a vocabulary tree trained on the capture itself
@@ -167,6 +176,8 @@ class SfmConfig:
                              "global_ba_above >= 0")
         if not self.direct_ba_max_fill >= 0:
             raise ValueError("SfmConfig.direct_ba_max_fill must be >= 0")
+        if self.retrieval_num_images < 1 or self.retrieval_rematch_num_images < 1:
+            raise ValueError("SfmConfig.retrieval_num_images and retrieval_rematch_num_images must be >= 1")
         if self.cross_take_period < 1 or self.cross_take_num_images < 1:
             raise ValueError("SfmConfig.cross_take_period and cross_take_num_images must be >= 1")
         if self.vocab_tree_descriptors < 256 * 40:

@@ -1,5 +1,5 @@
-"""Matching: the image pairs of a matcher (exhaustive, sequential with loop detection, spatial; with several
-takes, each take's frames with their most similar frames of the others) matched and verified, seeded.
+"""Matching: the image pairs of a matcher (exhaustive, sequential with loop detection, spatial, retrieval; with
+several takes, each take's frames with their most similar frames of the others) matched and verified, seeded.
 """
 
 from __future__ import annotations
@@ -27,13 +27,7 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
     takes (:func:`_match_across_takes`; ``stats["cross_take"]`` says how many pairs).
     """
     pycolmap = load_pycolmap()
-    mo = pycolmap.FeatureMatchingOptions()
-    mo.num_threads = cfg.num_threads
-    mo.guided_matching = cfg.guided_matching
-    vo = pycolmap.TwoViewGeometryOptions()
-    vo.ransac.random_seed = cfg.seed
-    vo.min_num_inliers = cfg.min_num_matches
-    dev = pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
+    mo, vo, dev = _options(cfg)
     if matcher == "exhaustive":
         pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
     elif matcher == "sequential":
@@ -56,6 +50,9 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
             info = _match_across_takes(cfg, db, takes, tree, mo, vo, dev)
             if stats is not None:
                 stats["cross_take"] = info
+    elif matcher == "retrieval":   # each photo with its most similar ones, by a tree trained on this capture
+        _retrieve(cfg, db, build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors),
+                  cfg.retrieval_num_images)
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
@@ -64,6 +61,50 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
                                device=dev)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
+
+
+def _options(cfg: SfmConfig):
+    """(matching, verification options, device) of every matcher: verification RANSAC seeded by ``cfg.seed``."""
+    pycolmap = load_pycolmap()
+    mo = pycolmap.FeatureMatchingOptions()
+    mo.num_threads = cfg.num_threads
+    mo.guided_matching = cfg.guided_matching
+    vo = pycolmap.TwoViewGeometryOptions()
+    vo.ransac.random_seed = cfg.seed
+    vo.min_num_inliers = cfg.min_num_matches
+    return mo, vo, pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
+
+
+def _retrieve(cfg: SfmConfig, db: Path, tree: Path, num_images: int, queries: Path | None = None) -> None:
+    """Match each photo (those listed in ``queries``, one name a line; all when None) with its ``num_images``
+    most similar photos by the vocabulary ``tree``."""
+    pycolmap = load_pycolmap()
+    mo, vo, dev = _options(cfg)
+    po = pycolmap.VocabTreePairingOptions()
+    po.vocab_tree_path = str(tree)
+    po.num_images = num_images
+    po.num_threads = cfg.num_threads
+    if queries is not None:
+        po.match_list_path = str(queries)
+    with stdout_to(db.parent / "colmap.log"):
+        pycolmap.match_vocabtree(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+
+
+def rematch_left_out(cfg: SfmConfig, db: Path, left_out: list[str]) -> dict:
+    """Retrieval's second round: the photos ``left_out`` of the first model, each matched with its
+    ``cfg.retrieval_rematch_num_images`` most similar photos (the first round's tree). Returns {"photos",
+    "num_images", "verified" (new verified pairs), "unlisted" (names with spaces: COLMAP's list cannot name
+    them), "seconds"}."""
+    t0 = time.perf_counter()
+    listed = [n for n in left_out if not any(c.isspace() for c in n)]
+    before = pair_counts(db, cfg.min_num_matches)[1]
+    if listed:
+        path = db.parent / "retrieval_second_round.txt"
+        path.write_text("".join(n + "\n" for n in listed))
+        _retrieve(cfg, db, db.parent / "vocab_tree.bin", cfg.retrieval_rematch_num_images, path)
+    return {"photos": len(listed), "num_images": cfg.retrieval_rematch_num_images,
+            "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(left_out) - len(listed),
+            "seconds": round(time.perf_counter() - t0, 2)}
 
 
 def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], tree: Path, mo, vo, dev) -> dict:

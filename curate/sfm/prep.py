@@ -205,8 +205,8 @@ def takes_not_joined(takes: list[dict], min_fraction: float) -> list[dict]:
 def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     """'auto': exhaustive up to ``exhaustive_max_images``; beyond: spatial with GPS on most photos,
     sequential for video frames (one video or several: each take is matched along itself, and with
-    the other takes by :func:`cross_take_pairs`) and numbered photos, else exhaustive (slow but
-    complete: a video with photos)."""
+    the other takes by :func:`cross_take_pairs`) and numbered photos, exhaustive for a video with
+    photos, else retrieval (photos in no order: each with its ``retrieval_num_images`` most similar)."""
     if cfg.matcher != "auto":
         return cfg.matcher
     n = len(kept)
@@ -220,8 +220,10 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     # (docs/sfm.md, "Several takes of one place"), where exhaustive matching kept 30 of 38.
     if all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]):
         return "sequential"
-    logger.warning("sfm: %d unordered photos without GPS: exhaustive matching (quadratic time)", n)
-    return "exhaustive"
+    if any(r.extra.get("video") for r in kept):
+        logger.warning("sfm: %d frames and photos: exhaustive matching (quadratic time)", n)
+        return "exhaustive"
+    return "retrieval"
 
 
 def choose_camera_mode(cfg: SfmConfig, kept: list[PhotoRecord]) -> bool:
