@@ -218,3 +218,17 @@ def test_the_progress_line_names_each_running_folders_stage(tmp_path):
         assert stage_in_progress(run) == nxt
     (run / "run.json").write_text(json.dumps({"config": {"run_evaluation": True}}))
     assert stage_in_progress(run) == "evaluate"
+
+
+def test_the_progress_line_ticks_while_ray_tasks_block_their_threads():
+    """Issue 50: with --executor ray the folders' threads block on their tasks, so the progress line's
+    stages are refreshed by a ticker of their own (as the local executor's wait does), and stop with it."""
+    import time as _t
+    from curate.batch.runner import ticking
+    got = []
+    with ticking(lambda kind, it, row: got.append(kind), period=0.02):
+        _t.sleep(0.2)
+    n = len(got)
+    assert n >= 3 and set(got) == {"tick"}
+    _t.sleep(0.1)
+    assert len(got) == n                       # none after the block

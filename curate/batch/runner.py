@@ -51,6 +51,7 @@ import re
 import threading
 import time
 import traceback
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
@@ -312,6 +313,24 @@ def _run_local(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, eve
             p.join()
 
 
+@contextmanager
+def ticking(event: Callable, period: float = 5.0):
+    """``event("tick", None, None)`` every ``period`` seconds from a thread of its own while the block runs
+    (the progress line's stages, while the folders' Ray tasks block their threads); none after it."""
+    stop = threading.Event()
+
+    def tick() -> None:
+        while not stop.wait(period):
+            event("tick", None, None)
+    t = threading.Thread(target=tick, name="curate-batch-tick", daemon=True)
+    t.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        t.join()
+
+
 def _run_ray(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, event: Callable,
              address: str | None, num_cpus: int | None) -> None:
     from concurrent.futures import ThreadPoolExecutor
@@ -340,7 +359,7 @@ def _run_ray(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, event
                 _write_row(it, row, keys[it.name])
             event("done", it, row)
 
-        with ThreadPoolExecutor(min(jobs, len(items)) or 1) as ex:
+        with ticking(event), ThreadPoolExecutor(min(jobs, len(items)) or 1) as ex:
             list(ex.map(one, items))
     finally:
         ray.shutdown()
