@@ -209,3 +209,35 @@ def test_a_saved_run_of_an_earlier_curate_keeps_its_export_mode():
     cfg = config_from_dict(RunConfig, upgrade_config({"budget": "12", "export_mode": "copy"}, "0.3.0"))
     assert cfg.export.mode == "copy" and cfg.export.undistort == "auto" and cfg.budget == "12"
     assert config_from_dict(RunConfig, upgrade_config({}, "0.3.0")).export.mode == "hardlink"
+
+
+# ---------------------------------------------------------------------- one style of field documentation
+def _option_dataclasses() -> list[type]:
+    """The option dataclasses: RunConfig, SfmConfig and the base config of every command, with every dataclass
+    held by their fields' defaults (recursively)."""
+    from curate.config import RunConfig
+    from curate.sfm.config import SfmConfig
+
+    todo = [RunConfig(), SfmConfig(), *(cli._base_for(cmd) for cmd in cli.COMMANDS)]
+    seen: list[type] = []
+    while todo:
+        cfg = todo.pop()
+        if type(cfg) in seen:
+            continue
+        seen.append(type(cfg))
+        todo += [v for f in dataclasses.fields(cfg) for v in [getattr(cfg, f.name)]
+                 if dataclasses.is_dataclass(v) and not isinstance(v, type)]
+    return seen
+
+
+def test_every_option_field_has_an_attribute_docstring():
+    """Issue 51: one style of field documentation. The help of every field of every option dataclass is the
+    string right after it (its first paragraph is the flag's --help); a trailing # comment is not read."""
+    from curate.core.options import field_docs
+    classes = _option_dataclasses()
+    names = {c.__name__ for c in classes}
+    assert {"RunConfig", "SfmConfig", "VideoConfig", "EvalConfig", "FieldConfig", "SelectConfig", "EnergyConfig",
+            "OccupancyConfig", "RefineConfig", "ExportConfig", "SuggestConfig", "SimulateConfig"} <= names
+    missing = [f"{c.__qualname__}.{f.name}" for c in classes for f in dataclasses.fields(c)
+               if not field_docs(c).get(f.name)]
+    assert not missing, f"fields without an attribute docstring: {missing}"

@@ -1,9 +1,9 @@
 """Command-line options read from the config dataclasses: each default and help text is declared once.
 
 A config dataclass documents each field with an attribute docstring (a string right after
-the field) or, for the older ones, a trailing ``#`` comment. The docstring's first paragraph
-is the flag's ``--help`` text, written for a user (no code names); a later paragraph, after
-a blank line, is a note for developers that ``--help`` leaves out. :class:`Opt` names a flag
+the field; a ``#`` comment is not read). The docstring's first paragraph is the flag's
+``--help`` text, written for a user (no code names); a later paragraph, after a blank line,
+is a note for developers that ``--help`` leaves out. :class:`Opt` names a flag
 and the dotted path of the field it sets (``"evaluate.iters"``); :func:`add_options` adds it
 to an argparse parser with the field's default and help, and :func:`apply_options` writes
 the flags the user gave (and only those) into a config, so a saved run's options stay the
@@ -69,32 +69,17 @@ def _user_part(doc: str) -> str:
 @lru_cache(maxsize=None)
 def field_docs(cls: type) -> dict[str, str]:
     """{field name: its help} of a dataclass: the first paragraph of the attribute docstring
-    after the field, else the trailing ``#`` comment on its line and on comment-only lines below it."""
+    after the field (a field without one is left out)."""
     try:
         src = textwrap.dedent(inspect.getsource(cls))
     except (OSError, TypeError):  # pragma: no cover - no source (frozen app)
         return {}
-    tree = ast.parse(src)
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    lines = src.splitlines()
+    body = ast.parse(src).body[0].body  # type: ignore[attr-defined]
     out: dict[str, str] = {}
-    for i, node in enumerate(body):
-        if not isinstance(node, ast.AnnAssign) or not isinstance(node.target, ast.Name):
-            continue
-        name = node.target.id
-        nxt = body[i + 1] if i + 1 < len(body) else None
-        if isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant) and isinstance(nxt.value.value, str):
-            out[name] = _user_part(nxt.value.value)
-            continue
-        line = lines[node.end_lineno - 1]
-        if "#" in line:
-            parts = [line.split("#", 1)[1]]
-            for more in lines[node.end_lineno:]:
-                s = more.strip()
-                if not s.startswith("#") or s.startswith("# ---"):
-                    break
-                parts.append(s[1:])
-            out[name] = _clean(" ".join(parts))
+    for node, nxt in zip(body, body[1:]):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant) and isinstance(nxt.value.value, str)):
+            out[node.target.id] = _user_part(nxt.value.value)
     return out
 
 

@@ -64,97 +64,128 @@ class SfmConfig:
     """Options of the SfM stage. Every field but ``num_threads`` and ``progress`` is part of the stage key."""
 
     # --- ingest
-    max_image_size: int = 1600        # longer side, in pixels, of the working copies SfM reads
-    recursive: bool = False           # also take photos from sub-folders
+    max_image_size: int = 1600
+    """Longer side, in pixels, of the working copies SfM reads."""
+    recursive: bool = False
+    """Also take photos from sub-folders."""
     # --- quality (curate.sfm.quality)
-    drop_duplicates: bool = True      # drop near-identical photos (perceptual hash distance <= dup_max_distance)
-    dup_max_distance: int = 4         # of 256 hash bits; consecutive video frames differ by >= ~12
-    drop_blurry: bool = False         # drop blurry photos (sharpness far under the pool's median) instead of only
-    #                                   flagging them
-    blur_fraction: float = 0.3        # blurry threshold, relative to the pool's median sharpness
+    drop_duplicates: bool = True
+    """Drop near-identical photos (perceptual hash distance <= dup_max_distance)."""
+    dup_max_distance: int = 4
+    """Photos whose perceptual hashes differ in at most this many of their 256 bits are near-identical; consecutive
+    video frames differ by >= ~12."""
+    drop_blurry: bool = False
+    """Drop blurry photos (sharpness far under the pool's median) instead of only flagging them."""
+    blur_fraction: float = 0.3
+    """Blurry threshold, relative to the pool's median sharpness."""
     # --- features
-    camera_mode: str = "auto"         # one camera for all photos (single) or one per photo (per_image); auto:
-    #                                   single when every photo comes from one camera model at one size
-    camera_model: str = "SIMPLE_RADIAL"  # COLMAP model (f, cx, cy, k). RADIAL / OPENCV over-fit small object
-    #                                   rings: templering at 480 px registers 4 of 47 with RADIAL, 46 with SIMPLE_RADIAL
-    max_num_features: int = 8192      # SIFT features per image
-    sift_peak_threshold: float = 0.02 / 3  # SIFT's peak threshold (COLMAP's default); lower finds more features
+    camera_mode: str = "auto"
+    """One camera for all photos (single) or one per photo (per_image); auto: single when every photo comes from one
+    camera model at one size."""
+    camera_model: str = "SIMPLE_RADIAL"
+    """COLMAP model (f, cx, cy, k). RADIAL / OPENCV over-fit small object rings: templering at 480 px registers 4 of
+    47 with RADIAL, 46 with SIMPLE_RADIAL."""
+    max_num_features: int = 8192
+    """SIFT features per image."""
+    sift_peak_threshold: float = 0.02 / 3
+    """SIFT's peak threshold (COLMAP's default); lower finds more features."""
     # --- matching
-    matcher: str = "auto"             # which photo pairs to match: exhaustive (all), sequential (each frame with
-    #                                   the next ones, and loops), spatial (by GPS), or auto: exhaustive for a small
-    #                                   set, else spatial with GPS, sequential for video frames or numbered
-    #                                   photos, retrieval otherwise; retrieval: each photo with its most similar
-    #                                   photos (a vocabulary tree trained on the capture itself, not a download)
-    exhaustive_max_images: int = 150  # 'auto': exhaustive up to this many photos
-    retrieval_num_images: int = 30    # retrieval: match each photo with its N most similar photos (pairs grow
-    #                                   as photos x N, where exhaustive grows as photos^2 / 2)
-    retrieval_rematch_num_images: int = 120  # retrieval: when the model leaves over 10% of the photos out, those
-    #                                   are matched again with their N most similar photos and the capture mapped
-    #                                   again (skull at N = 10: 28 of 66 photos after the first round)
-    sequential_overlap: int = 15      # sequential: match each frame with the next N frames
-    sequential_quadratic: bool = True  # sequential: also frames i + 2^k (helps closing loops without a vocab tree)
-    loop_detection: bool = True       # sequential: find loops with a vocabulary tree trained on the capture itself
-    #                                   (office: without it the walk splits into 6 models at fast turns)
-    loop_detection_period: int = 10   # sequential loop detection: query every N-th frame
-    loop_detection_num_images: int = 30  # ... against its N most similar frames
-    vocab_tree_descriptors: int = 100_000  # loop detection's vocabulary tree: trained on at most this many of the
-    #                                   capture's descriptors (one word per ~40): its training time stays fixed
-    cross_take_matching: bool = True  # sequential, with two or more takes (videos; the photos of a folder): also
-    #                                   match frames with the most similar frames of the other takes (vocabulary
-    #                                   tree trained on the capture), so a second pass joins the first
-    cross_take_period: int = 2        # cross-take matching: query every N-th frame of each take
-    cross_take_num_images: int = 5    # ... against its N most similar frames of each other take
-    spatial_neighbors: int = 50       # spatial (GPS): neighbours per image
-    guided_matching: bool = False     # COLMAP's guided matching (more matches, slower)
+    matcher: str = "auto"
+    """Which photo pairs to match: exhaustive (all), sequential (each frame with the next ones, and loops), spatial
+    (by GPS), or auto: exhaustive for a small set, else spatial with GPS, sequential for video frames or numbered
+    photos, retrieval otherwise; retrieval: each photo with its most similar photos (a vocabulary tree trained on the
+    capture itself, not a download)."""
+    exhaustive_max_images: int = 150
+    """'auto': exhaustive up to this many photos."""
+    retrieval_num_images: int = 30
+    """Retrieval: match each photo with its N most similar photos (pairs grow as photos x N, where exhaustive grows
+    as photos^2 / 2)."""
+    retrieval_rematch_num_images: int = 120
+    """Retrieval: when the model leaves over 10% of the photos out, those are matched again with their N most similar
+    photos and the capture mapped again (skull at N = 10: 28 of 66 photos after the first round)."""
+    sequential_overlap: int = 15
+    """Sequential: match each frame with the next N frames."""
+    sequential_quadratic: bool = True
+    """Sequential: also frames i + 2^k (helps closing loops without a vocab tree)."""
+    loop_detection: bool = True
+    """Sequential: find loops with a vocabulary tree trained on the capture itself (office: without it the walk
+    splits into 6 models at fast turns)."""
+    loop_detection_period: int = 10
+    """Sequential loop detection: query every N-th frame."""
+    loop_detection_num_images: int = 30
+    """Sequential loop detection: each queried frame is matched against its N most similar frames."""
+    vocab_tree_descriptors: int = 100_000
+    """Loop detection's vocabulary tree: trained on at most this many of the capture's descriptors (one word per
+    ~40): its training time stays fixed."""
+    cross_take_matching: bool = True
+    """Sequential, with two or more takes (videos; the photos of a folder): also match frames with the most similar
+    frames of the other takes (vocabulary tree trained on the capture), so a second pass joins the first."""
+    cross_take_period: int = 2
+    """Cross-take matching: query every N-th frame of each take."""
+    cross_take_num_images: int = 5
+    """Cross-take matching: each queried frame is matched against its N most similar frames of each other take."""
+    spatial_neighbors: int = 50
+    """Spatial (GPS): neighbours per image."""
+    guided_matching: bool = False
+    """COLMAP's guided matching (more matches, slower)."""
     # --- mapping
-    mapper: str = "auto"              # how matches become cameras: incremental (COLMAP's), global (COLMAP's
-    #                                   global mapper, formerly GLOMAP), or auto: incremental, then global on the
-    #                                   same matches when the incremental model leaves photos out, the global
-    #                                   model kept where it agrees with the incremental parts and holds more
-    #                                   photos than their largest, by at least 5% of the photos
-    global_ba_above: int = 300        # pools of more photos than this: the incremental mapper adjusts the whole
-    #                                   model less often (global_ba_growth, global_ba_refinements), the cost that
-    #                                   grows fastest with the pool; smaller pools keep COLMAP's schedule
-    global_ba_growth: float = 1.5     # ... a global bundle adjustment each time the model grows by this factor
-    #                                   (COLMAP: 1.1)
-    global_ba_refinements: int = 1    # ... each refined (adjust, retriangulate, filter) at most this many times
-    #                                   (COLMAP: 5)
-    direct_ba_max_fill: float = 270.0  # pools past 1,000 photos: a global bundle adjustment of more than 1,000
-    #                                   photos solves directly (sparse Cholesky) while the factor's fill stays
-    #                                   under this many nonzeros per photo (a walk that covers new ground), else
-    #                                   iteratively, Ceres' choice past 1,000 (a room seen round and round);
-    #                                   0: Ceres' choice always (docs/sfm.md, "Which solver ...")
-    min_registered_fraction: float = 0.95  # 'auto': the share of the kept photos the incremental model must hold
-    min_global_gain: float = 0.05     # 'auto': the global model (the less accurate of the two on real walks) replaces
-    #                                   the incremental ones only when it holds at least this share of the photos
-    #                                   more than their largest (three takes, one foreign: 2 photos more for 12
-    #                                   frames over 5 deg; docs/sfm.md)
-    max_part_disagreement_deg: float = 3.0  # 'auto': the global model replaces the incremental parts only when it
-    #                                   agrees with each within this many degrees (orientation difference, on
-    #                                   90% of the part's photos)
-    min_num_matches: int = 15         # minimum verified matches for an image pair to count
-    init_min_num_inliers: int = 200   # verified inliers of the mapper's initial pair (COLMAP: 100; it halves
-    #                                   this, twice at most, when no pair qualifies). office: a 124-inlier planar
-    #                                   initial pair got a wrong relative pose, a kink that bent the walk by 17 deg
-    seed: int = 0                     # random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary
-    #                                   tree's training sample: same photos and config, same matches and model
+    mapper: str = "auto"
+    """How matches become cameras: incremental (COLMAP's), global (COLMAP's global mapper, formerly GLOMAP), or auto:
+    incremental, then global on the same matches when the incremental model leaves photos out, the global model kept
+    where it agrees with the incremental parts and holds more photos than their largest, by at least 5% of the
+    photos."""
+    global_ba_above: int = 300
+    """Pools of more photos than this: the incremental mapper adjusts the whole model less often (global_ba_growth,
+    global_ba_refinements), the cost that grows fastest with the pool; smaller pools keep COLMAP's schedule."""
+    global_ba_growth: float = 1.5
+    """Pools past global_ba_above: a global bundle adjustment each time the model grows by this factor (COLMAP: 1.1)."""
+    global_ba_refinements: int = 1
+    """Pools past global_ba_above: each global bundle adjustment refined (adjust, retriangulate, filter) at most this
+    many times (COLMAP: 5)."""
+    direct_ba_max_fill: float = 270.0
+    """Pools past 1,000 photos: a global bundle adjustment of more than 1,000 photos solves directly (sparse
+    Cholesky) while the factor's fill stays under this many nonzeros per photo (a walk that covers new ground), else
+    iteratively, Ceres' choice past 1,000 (a room seen round and round); 0: Ceres' choice always (docs/sfm.md, "Which
+    solver ...")."""
+    min_registered_fraction: float = 0.95
+    """'auto': the share of the kept photos the incremental model must hold."""
+    min_global_gain: float = 0.05
+    """'auto': the global model (the less accurate of the two on real walks) replaces the incremental ones only when
+    it holds at least this share of the photos more than their largest (three takes, one foreign: 2 photos more for
+    12 frames over 5 deg; docs/sfm.md)."""
+    max_part_disagreement_deg: float = 3.0
+    """'auto': the global model replaces the incremental parts only when it agrees with each within this many degrees
+    (orientation difference, on 90% of the part's photos)."""
+    min_num_matches: int = 15
+    """Minimum verified matches for an image pair to count."""
+    init_min_num_inliers: int = 200
+    """Verified inliers of the mapper's initial pair (COLMAP: 100; it halves this, twice at most, when no pair
+    qualifies). office: a 124-inlier planar initial pair got a wrong relative pose, a kink that bent the walk by 17
+    deg."""
+    seed: int = 0
+    """Random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary tree's training sample: same photos
+    and config, same matches and model."""
     video: VideoConfig = field(default_factory=VideoConfig)
     """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""
     # --- outputs
-    dense: str = "auto"               # 'auto': dense point cloud when pycolmap has CUDA; 'off'
+    dense: str = "auto"
+    """'auto': dense point cloud when pycolmap has CUDA; 'off': none."""
     triangulate: str = "auto"
     """Known poses (--poses) that come without 3D points (a transforms.json, a cameras.json, a COLMAP model
     without points): auto triangulates points from the photos with the poses held fixed (SIFT features and
     matches as SfM makes them, at the working size of --max-size), so the run and the export's sparse/0
     carry the point cloud 3DGS starts from; off imports the poses alone, without points."""
-    on_split: str = "largest"         # when SfM leaves kept photos out of its largest model (the capture split):
-    #                                   'largest' curates the largest part with a loud warning; 'each' also curates
-    #                                   every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
-    #                                   size; each part is its own scene, in its own frame); 'stop' stops
-    normalize_percentile: float = 1.0  # scene box: points' [p, 100 - p] percentiles plus camera centres
+    on_split: str = "largest"
+    """When SfM leaves kept photos out of its largest model (the capture split): 'largest' curates the largest part
+    with a loud warning; 'each' also curates every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
+    size; each part is its own scene, in its own frame); 'stop' stops."""
+    normalize_percentile: float = 1.0
+    """Scene box: points' [p, 100 - p] percentiles plus camera centres."""
     # --- execution (not in the stage key)
-    num_threads: int = -1             # COLMAP threads (-1: all cores); ingest uses max(1, this) or 2
-    progress: bool = True             # tqdm bars on the terminal
+    num_threads: int = -1
+    """COLMAP threads (-1: all cores); ingest uses max(1, this) or 2."""
+    progress: bool = True
+    """tqdm bars on the terminal."""
 
     def __post_init__(self) -> None:
         choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT,
