@@ -623,7 +623,7 @@ def test_photos_in_no_order_past_the_exhaustive_limit_are_matched_by_retrieval_a
     assert e["rotation_deg_median"] < 1.0, e
 
 
-class _Model:
+class _NamedModel:
     """A stand-in for a pycolmap.Reconstruction: the names of its registered images."""
 
     def __init__(self, names):
@@ -648,16 +648,16 @@ def test_retrieval_maps_again_only_when_the_model_leaves_photos_out_and_keeps_th
     asked = []
     monkeypatch.setattr(colmap, "rematch_left_out", lambda cfg, db, left: asked.append(left) or {
         "photos": len(left), "num_images": 120, "verified": 7})
-    again = {"m": {0: _Model(names[:19])}}
+    again = {"m": {0: _NamedModel(names[:19])}}
     monkeypatch.setattr(colmap, "map_capture", lambda *a, **k: again["m"])
-    whole = {0: _Model(names[:18]), 1: _Model(names[18:])}
+    whole = {0: _NamedModel(names[:18]), 1: _NamedModel(names[18:])}
     stats: dict = {}
     assert colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, whole, stats) is whole
     assert asked == [] and "retrieval_second_round" not in stats
-    split = {0: _Model(names[:12]), 1: _Model(names[12:])}
+    split = {0: _NamedModel(names[:12]), 1: _NamedModel(names[12:])}
     got = colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, split, stats)
     assert asked == [names[12:]] and got is again["m"]
     assert stats["retrieval_second_round"]["model_sizes_before"] == [12, 8]
     assert stats["retrieval_second_round"]["model_sizes_after"] == [19]
-    again["m"] = {0: _Model(names[:10])}                                 # mapped again, worse: the first is kept
+    again["m"] = {0: _NamedModel(names[:10])}                                 # mapped again, worse: the first is kept
     assert colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, split, {}) is split
