@@ -9,9 +9,10 @@ working copies) -> quality (``curate.sfm.quality``: sharpness, near-duplicates; 
 config) -> SIFT extraction (:mod:`curate.sfm.features`; one shared camera when every photo comes
 from the same camera model at the same size, else one camera per photo) -> matching
 (:mod:`curate.sfm.matching`: exhaustive for small pools, sequential for ordered frames, spatial with
-GPS; loop detection with a vocabulary tree trained on the capture itself, never a download, so it
-works offline; with several videos, each video's frames are also matched with their most similar
-frames of the other videos; a video with photos is matched exhaustively) -> mapping
+GPS, retrieval for photos in no order, with a second round for the photos its model leaves out; loop
+detection with a vocabulary tree trained on the capture itself, never a download, so it works offline;
+with several videos, each video's frames are also matched with their most similar frames of the other
+videos; a video with photos is matched exhaustively) -> mapping
 (:func:`curate.sfm.reconstruction.map_capture`: incremental, initial pair with >=
 ``init_min_num_inliers`` verified inliers; when its largest model leaves more than 5% of the photos
 out, COLMAP's global mapper on the same matches, kept where it agrees with the incremental parts and
