@@ -51,8 +51,11 @@ def _after_pycolmap(body: list[str], first: str = "") -> str:
 def test_pycolmaps_own_handler_does_not_replace_curates(tmp_path, sig, word, code):
     """pycolmap's import installs glog's failure handler (a native stack dump on SIGTERM): after curate's
     loader, the signal ends the process with curate's one line."""
-    p = subprocess.Popen([sys.executable, "-c", _after_pycolmap(["time.sleep(60)"])], env=_env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # started as from a terminal: SIGHUP not ignored, whatever the test runner was started with (under nohup
+    # the child would inherit SIGHUP ignored, which curate keeps: the next test)
+    prog = _after_pycolmap(["time.sleep(60)"], first="signal.signal(signal.SIGHUP, signal.SIG_DFL)")
+    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
     assert p.stdout.readline().strip() == "ready"
     p.send_signal(sig)
     out, err = p.communicate(timeout=30)
