@@ -207,17 +207,18 @@ def test_a_summary_without_evaluation_shows_no_psnr_columns(tmp_path):
 def test_the_progress_line_names_each_running_folders_stage(tmp_path):
     """Issue 50: for ten minutes the only progress was 'folders 0/2'."""
     from curate.batch.runner import stage_in_progress
+    from curate.config import RunConfig
+    quick, evaluated = RunConfig(run_evaluation=False), RunConfig()
     run = tmp_path / "kitchen"
-    assert stage_in_progress(run) == "starting"
+    assert stage_in_progress(run, quick) == "starting"
     run.mkdir()
     (run / "run.json").write_text(json.dumps({"config": {"run_evaluation": False}}))
-    assert stage_in_progress(run) == "sfm"
+    assert stage_in_progress(run, quick) == "sfm"
     for st, nxt in (("sfm", "occupancy"), ("occupancy", "select"), ("select", "export"), ("export", "report")):
         (run / st).mkdir()
         (run / st / "stage.json").write_text("{}")
-        assert stage_in_progress(run) == nxt
-    (run / "run.json").write_text(json.dumps({"config": {"run_evaluation": True}}))
-    assert stage_in_progress(run) == "evaluate"
+        assert stage_in_progress(run, quick) == nxt
+    assert stage_in_progress(run, evaluated) == "evaluate"
 
 
 def test_the_progress_line_ticks_while_ray_tasks_block_their_threads():

@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from curate.batch.log import folder_log
-from curate.batch.summary import make_row, write_summary_html
+from curate.batch.summary import failed_stage, make_row, write_summary_html
 from curate.report.html_parts import fmt_num
 
 log = logging.getLogger(__name__)
@@ -260,21 +260,12 @@ def _ray_task(item: Folder, cfg, force: bool, phase: str, gpus: float, key: str)
     return run_folder(item, cfg, force, executor=ex, phase=phase, key=key)
 
 
-def stage_in_progress(run_dir: str | Path) -> str:
-    """The stage a folder's run is at: the first of ``curate run``'s stages without a finished record (or 'report'
-    once they all have one); 'starting' before the run folder holds anything."""
-    from curate.core.stage import STAGES
+def stage_in_progress(run_dir: str | Path, cfg) -> str:
+    """The stage a folder's run (with options ``cfg``) is at: 'starting' before its run folder holds its options,
+    then the first stage without a finished record (:func:`curate.batch.summary.failed_stage`, which a failed
+    folder's row names)."""
     d = Path(run_dir)
-    try:
-        evaluated = json.loads((d / "run.json").read_text())["config"].get("run_evaluation", True)
-    except (OSError, ValueError, KeyError, TypeError):
-        return "starting"
-    for st in STAGES[:-1]:
-        if st == "budget" or (st == "evaluate" and not evaluated):
-            continue                   # budget: only with --budget auto on an evaluated run
-        if not (d / st / "stage.json").is_file() and not (st == "evaluate" and (d / st / "summary.json").is_file()):
-            return st
-    return "report"
+    return failed_stage(d, cfg) if (d / "run.json").is_file() else "starting"
 
 
 # ------------------------------------------------------------------ executors
@@ -442,7 +433,8 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
                dynamic_ncols=True)
 
     def postfix():
-        now = [f"{it.name}: {stage_in_progress(it.run_dir)}" for it in items if rows[it.name].get("status") == "running"]
+        now = [f"{it.name}: {stage_in_progress(it.run_dir, run_cfg)}" for it in items
+               if rows[it.name].get("status") == "running"]
         bar.set_postfix_str(f"ok {counts['ok']}, failed {counts['failed']}"
                             + (f"; {', '.join(now)}" if now else f", running {counts['running']}"))
 

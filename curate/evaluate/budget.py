@@ -35,17 +35,14 @@ FOLDS = 2
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
     check on. False while the run has no poses to tell the kind of capture by."""
-    from curate.core.budget import AUTO, DEFAULT, parse_budget
+    from curate.core.budget import AUTO, parse_budget
     from curate.select.stage import budget_of_run
     if not (cfg.run_evaluation and cfg.budget_check):
         return False
-    b = parse_budget(cfg.budget)
-    if b == DEFAULT:
-        try:
-            b = parse_budget(budget_of_run(cfg.budget, run_dir)[0])
-        except (FileNotFoundError, ValueError):
-            return False
-    return b == AUTO
+    try:
+        return parse_budget(budget_of_run(cfg.budget, run_dir)[0]) == AUTO
+    except (FileNotFoundError, ValueError):        # default, and no poses yet to tell the kind of capture by
+        return False
 
 
 def key_for(cfg: "RunConfig", run_dir: Path) -> str:

@@ -102,10 +102,11 @@ def _second_round(cfg: SfmConfig, db: Path, images: Path, out: Path, names: list
     the photos, those it left out are matched again with more of their most similar photos
     (:func:`curate.sfm.matching.rematch_left_out`) and the capture is mapped again; the larger largest model
     is kept. ``stats["retrieval_second_round"]`` says what it did."""
-    first = max(r.num_reg_images() for r in models.values())
+    largest = max(models.values(), key=lambda r: r.num_reg_images())
+    first = largest.num_reg_images()
     if first >= RETRIEVAL_REMATCH_BELOW * len(names):
         return models
-    held = {r.image(i).name for r in models.values() if r.num_reg_images() == first for i in r.reg_image_ids()}
+    held = {largest.image(i).name for i in largest.reg_image_ids()}
     info = rematch_left_out(cfg, db, [n for n in names if n not in held])
     shutil.rmtree(out / "mapper", ignore_errors=True)
     again = map_capture(cfg, db, images, out / "mapper", len(names), stats)

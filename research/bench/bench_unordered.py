@@ -21,17 +21,9 @@ import hashlib
 import json
 import os
 import shutil
-import time
 from pathlib import Path
 
-
-def _clock() -> tuple[float, float]:
-    return time.perf_counter(), time.process_time()
-
-
-def _since(t0) -> dict:
-    w, c = _clock()
-    return {"wall_s": round(w - t0[0], 1), "cpu_s": round(c - t0[1], 1)}
+from research.bench.bench_mapping import _clock, _since
 
 
 def hashed_pool(work: Path, frames: Path, n: int) -> tuple[Path, dict[str, str]]:
