@@ -256,3 +256,17 @@ def test_the_camera_map_labels_the_axes_it_plots():
         svg = camera_map(cams.centres[:, [a, b]], cams.view_dirs[:, [a, b]], [0], "t", axis_labels=("xyz"[a], "xyz"[b]))
         labels = text_of(svg).split()
         assert "xyz"[a] in labels and "xyz"[b] in labels and "xyz"[k] not in labels
+
+
+@pytest.mark.parametrize("given, says", [
+    ("auto", "how many: <code>--budget auto</code>, 0.5 dB)"),
+    ("default: auto (an object capture)", "how many: <code>--budget default</code>, auto for an object capture, 0.5 dB)")])
+def test_the_first_screen_names_the_budget_the_user_gave(tmp_path, given, says):
+    """The default budget on an object capture is auto's advice: the verdict's first line names the budget as the
+    user gave it (`--budget default`, and what it meant), not a flag they never typed."""
+    from types import SimpleNamespace
+    from curate.report.run_report import _verdict
+    sel = {"chosen": [0, 1, 2], "method": "energy", "budget_text": given,
+           "budget_auto": {"tolerance_db": 0.5, "budget": 3, "pool": 5, "kind": "object"}}
+    html = _verdict(SimpleNamespace(rep={"selection": sel, "n_registered": 5}, sel=sel, dir=tmp_path))
+    assert says in html

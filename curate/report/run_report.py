@@ -171,9 +171,11 @@ def _verdict(run: _Run) -> str:
     s = run.sel
     how = method_name(s.get("method"))
     exp = read_json(run.dir / "export" / "export.json") or {}
+    given = s.get("budget_text") or "auto"        # "default: auto (an object capture)" when the default chose auto
     lines = [f"<p><b>{esc(v['exported'].split(' (')[0])}</b>, by {esc(how)}"
-             + (f" (how many: <code>--budget auto</code>, {esc(s['budget_auto'].get('tolerance_db', ''))} dB)"
-                if s.get("budget_auto") else "")
+             + (f" (how many: <code>--budget {esc(given.split(':')[0])}</code>"
+                + (f", auto for {esc(given.split('(', 1)[1].rstrip(')'))}" if given.startswith("default") else "")
+                + f", {esc(s['budget_auto'].get('tolerance_db', ''))} dB)" if s.get("budget_auto") else "")
              + (f", exported to <code>{esc(run.dir / 'export')}</code> "
                 f"({esc(exp.get('n_images', '?'))} photos for COLMAP / 3DGS, nerfstudio and Instant-NGP)." if exp
                 else ".") + "</p>"]
