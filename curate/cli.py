@@ -392,20 +392,10 @@ def cmd_select(args) -> int:
     return _select_posed(args)
 
 
-def check_pool_budget(text: str, budget: int, n: int, source: str) -> None:
-    """CliError unless ``budget`` (the budget ``text`` resolved) leaves a choice among the ``n`` cameras of ``source``."""
-    if budget > n:
-        raise CliError(f"budget {text} is more than the {n} cameras of {source}")
-    if budget == n:
-        raise CliError(f"budget {text} is all {n} cameras of {source}: nothing to choose; give a smaller budget")
-    if budget < 2:
-        raise CliError(f"budget {text} is {budget} of the {n} cameras of {source}: choose at least 2")
-
-
 @_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))
 def _select_posed(args) -> int:
     """``curate select POSES --out OUT``."""
-    from curate.core.budget import AUTO, parse_budget, resolve_budget
+    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
     from curate.select.select import select
@@ -434,7 +424,10 @@ def _select_posed(args) -> int:
             print(auto.note)
     else:
         budget = resolve_budget(parse_budget(text), len(cams))
-        check_pool_budget(said, budget, len(cams), args.input)
+        try:
+            check_fits(said, budget, len(cams), f"cameras of {args.input}")
+        except ValueError as e:
+            raise CliError(str(e))
     sel = select(cams, grid, budget, cfg.select, progress=not args.json, index=index)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -476,26 +469,21 @@ def _config_dict(cfg) -> dict:
 @_claims("input", must_exist=True)
 def _select_run_folder(args) -> int:
     """``curate select RUN``: the select stage of a run folder, its saved options overridden by the flags given."""
-    from curate.select import stage
     bad = [o.flag for o in given(args, GRID)]
     if bad:
         raise CliError(f"{' and '.join(bad)} belong to the occupancy stage of a run folder: "
                        f"`curate occupancy {args.input} {bad[0]} ...` first")
     if args.out is not None:
         raise CliError("--out is for a pose file; a run folder's selection goes to RUN/select/")
-    return _stage(args, stage.run, Path(args.input), "select")
-
-
-NEEDS = {"occupancy": ("sfm",), "select": ("sfm", "occupancy"), "evaluate": ("sfm", "occupancy", "select"),
-         "export": ("sfm", "select"), "report": ("sfm", "occupancy", "select")}
-"""The stages each stage command reads: they must have finished in the run folder."""
+    return _stage(args, Path(args.input))
 
 
 def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
     """CliError naming the curate command to run when a stage ``command`` reads has not finished."""
     import shlex
-    from curate.core.stage import read_stage
-    missing = [s for s in NEEDS.get(command, ()) if read_stage(run_dir / s) is None]
+    from curate.core.graph import BY_NAME
+    from curate.core.stage import finished_record
+    missing = [s for s in BY_NAME[command].needs if finished_record(run_dir, s) is None]
     if not missing:
         return
     q = shlex.quote
@@ -509,21 +497,23 @@ def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
                    f"(or `{whole}` to finish the whole run)")
 
 
-def _stage(args, fn, run_dir: Path, name: str | None = None) -> int:
-    """Run one stage of a run folder with its saved options (overridden by the flags given, which are
-    saved); then redo the cheap stages after it and the report, and name the evaluation when it is
-    now out of date (:func:`curate.pipeline.refresh_after`)."""
+def _stage(args, run_dir: Path) -> int:
+    """Run the stage ``args.command`` of a run folder with its saved options (overridden by the flags given,
+    which are saved); then redo the cheap stages computed from it and the report, and name the evaluation
+    when it is now out of date (:func:`curate.pipeline.refresh_after`)."""
+    from curate.core.graph import BY_NAME, RunContext
     from curate.pipeline import refresh_after, save_run_config
     base, rec = saved_config(run_dir)
     _check_needs(args.command, run_dir, rec)
     cfg = run_config(args, base)
     if cfg != base:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
+    ctx = RunContext(cfg, run_dir, args.force, rec.get("photos"), rec.get("poses"))
     try:
-        res = fn(cfg, run_dir, args.force)
+        res = BY_NAME[args.command].run(ctx)
         print(res.line(), flush=True)
-        if name is not None:
-            refresh_after(cfg, run_dir, name, rec.get("photos"))
+        if args.command != "report":
+            refresh_after(ctx, args.command)
     except (FileNotFoundError, ValueError, RuntimeError) as e:
         raise CliError(str(e))
     return 0
@@ -532,29 +522,17 @@ def _stage(args, fn, run_dir: Path, name: str | None = None) -> int:
 @_claims("run", must_exist=True)
 def cmd_stage(args) -> int:
     """occupancy / evaluate / export / report on an existing run folder."""
-    run_dir = Path(args.run)
-    if args.command == "occupancy":
-        from curate.occupancy.stage import run as fn
-    elif args.command == "evaluate":
-        from curate.evaluate.stage import run as fn
-    elif args.command == "export":
-        from curate.export.stage import run as fn
-    else:
-        from curate.report.stage import run as report
-        _, rec = saved_config(run_dir)
-        fn = lambda cfg, d, force: report(cfg, d, rec.get("photos"))  # noqa: E731
-        return _stage(args, fn, run_dir)
-    return _stage(args, fn, run_dir, args.command)
+    return _stage(args, Path(args.run))
 
 
 @_claims("out", ("photos", "poses"), writes=("sfm",))
 def cmd_sfm(args) -> int:
-    from curate.sfm import stage
+    from curate.core.graph import BY_NAME, RunContext
     cfg = run_config(args)
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
     try:
-        res = stage.run(cfg, Path(args.out), args.force, photos=args.photos, poses=args.poses)
+        res = BY_NAME["sfm"].run(RunContext(cfg, Path(args.out), args.force, args.photos, args.poses))
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
     st = json.loads((res.path / "stage.json").read_text()).get("stats", {})

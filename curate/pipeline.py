@@ -1,13 +1,10 @@
 """``curate run``: photos -> SfM -> occupancy -> selection -> evaluation -> export -> report.
 
-This module only sequences the stages. Each stage is a plain function
-``run(cfg, run_dir, force) -> StageResult`` in its own package (:mod:`curate.sfm.stage`,
-:mod:`curate.occupancy.stage`, :mod:`curate.select.stage`, :mod:`curate.evaluate.stage`,
-:mod:`curate.export.stage`, :mod:`curate.report.stage`) that writes its own folder of the run
-with a ``stage.json`` record last, and says whether it ran or was skipped. A stage's key
-hashes its resolved config with the keys of the stages it reads, so a re-run skips a stage
-whose inputs and options did not change and redoes everything downstream of a change.
-The run-folder contract is in ``docs/architecture.md``.
+This module only sequences the stages of :data:`curate.core.graph.STAGES` (the graph, declared once). Each stage
+is a plain function ``run(ctx: RunContext) -> StageResult`` in its own package that writes its own folder of
+the run with a ``stage.json`` record last, and says whether it ran or was skipped. A stage's key hashes its
+resolved config with the keys of the stages it reads, so a re-run skips a stage whose inputs and options did
+not change and redoes everything downstream of a change. The run-folder contract is in ``docs/architecture.md``.
 """
 
 from __future__ import annotations
@@ -17,6 +14,7 @@ import time
 from pathlib import Path
 
 from curate.config import RunConfig
+from curate.core.graph import BY_NAME, RUN_WRITES, STAGES, RunContext, redone_after
 from curate.core.stage import StageResult
 
 log = logging.getLogger(__name__)
@@ -33,28 +31,17 @@ def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> N
                                                    "poses": absolute(poses), "versions": versions()})
 
 
-STARTS = {"sfm": "photos to cameras", "occupancy": "where the scene is",
-          "budget": "measuring how many photos this capture needs", "select": "choosing photos",
-          "evaluate": "training on the subsets", "export": "writing the export", "report": "writing the report"}
-"""What a stage's start line says (on a terminal; its end line replaces it)."""
-
-
 def _start(name: str) -> None:
     """On a terminal, a line saying which stage runs now (the stage's own line replaces it)."""
     import sys
     if sys.stdout.isatty():
-        print(f"{name:10s} {STARTS.get(name, '')} ...", flush=True)
+        print(f"{name:10s} {BY_NAME[name].start} ...", flush=True)
 
 
 def _done(res: StageResult, results: list[StageResult]) -> StageResult:
     results.append(res)
     print(res.line(), flush=True)
     return res
-
-
-RUN_WRITES = ("run.json", "report.json", "report.html", "sfm", "occupancy", "budget", "select", "evaluate", "export",
-              "parts")
-"""Top-level entries of a run folder that ``run`` writes (refused where an adopted folder has them)."""
 
 
 def check_same_capture(run_dir: Path, photos, poses) -> None:
@@ -132,17 +119,11 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
         run(pcfg, None, sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
 
 
-CHEAP_AFTER = {"occupancy": ("select", "export"), "select": ("export",), "evaluate": (), "export": ()}
-"""The stages a stage command redoes after its own (seconds: the run folder stays consistent); the
-evaluation (minutes of training) is never redone this way, only said to be out of date."""
-
-
 def check_budget(budget: str, run_dir: Path) -> None:
     """ValueError unless ``budget`` leaves something to choose among the run's registered photos
     (checked before the occupancy stage, which may train)."""
     import json
-    from curate.core.budget import AUTO, parse_budget, resolve_budget
-    from curate.occupancy.stage import check_budget_fits
+    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
     from curate.select.stage import budget_of_run
     n = len(json.loads((Path(run_dir) / "sfm" / "cameras.json").read_text())["cameras"])
     text, said = budget_of_run(budget, run_dir)
@@ -151,25 +132,20 @@ def check_budget(budget: str, run_dir: Path) -> None:
         if n < 3:
             raise ValueError(f"budget {said}: {n} registered photos leave nothing to choose")
     else:
-        check_budget_fits(said, resolve_budget(b, n), n)
+        check_fits(said, resolve_budget(b, n), n)
 
 
-def refresh_after(cfg: RunConfig, run_dir: Path, stage: str, photos: str | None = None) -> list[StageResult]:
-    """After ``stage`` ran on its own (``curate select RUN``, ...): redo the cheap stages after it
-    (:data:`CHEAP_AFTER`) and the report, printing a line for each, and a line naming the evaluation
-    when it is now out of date (with the command that refreshes it). Returns the stages' results."""
+def refresh_after(ctx: RunContext, stage: str) -> list[StageResult]:
+    """After ``stage`` ran on its own (``curate select RUN``, ...): redo the cheap stages computed from it
+    (:func:`curate.core.graph.redone_after`) and the report, printing a line for each, and a line naming the
+    evaluation when it is now out of date (with the command that refreshes it). Returns the stages' results."""
     from curate.core.stage import refresh_command, stale_stages
-    from curate.export import stage as export
-    from curate.report import stage as report
-    from curate.select import stage as select
-    run_dir = Path(run_dir)
-    fns = {"select": select.run, "export": export.run}
-    results = [_done(fns[s](cfg, run_dir, False), []) for s in CHEAP_AFTER.get(stage, ())]
-    stale = stale_stages(run_dir)
+    results = [_done(BY_NAME[s].run(ctx), []) for s in redone_after(stage) if s != "report"]
+    stale = stale_stages(ctx.run_dir)
     if "evaluate" in stale:
-        print(f"{'evaluate':10s} out of date ({stale['evaluate']}): `{refresh_command(run_dir, stale, 'evaluate')}` "
-              "estimates the current selection", flush=True)
-    out = report.run(cfg, run_dir, photos)
+        print(f"{'evaluate':10s} out of date ({stale['evaluate']}): "
+              f"`{refresh_command(ctx.run_dir, stale, 'evaluate')}` estimates the current selection", flush=True)
+    out = BY_NAME["report"].run(ctx)
     print(out.line(), flush=True)
     return results + [out]
 
@@ -193,12 +169,6 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     transforms.json) the folder the poses' image paths are relative to. ``executor``:
     a ``concurrent.futures.Executor`` for the evaluation's trainings (None: local processes).
     """
-    from curate.evaluate import budget, stage as evaluate
-    from curate.export import stage as export
-    from curate.occupancy import stage as occupancy
-    from curate.report import stage as report
-    from curate.select import stage as select
-    from curate.sfm import stage as sfm
     t_start = time.perf_counter()
     run_dir = Path(run_dir)
     if photos is not None and run_dir.resolve().is_relative_to(Path(photos).resolve()):
@@ -207,35 +177,32 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     if not force:
         check_same_capture(run_dir, photos, poses)
     save_run_config(cfg, run_dir, photos, poses)
+    ctx = RunContext(cfg, run_dir, force, photos, poses, executor)
     results: list[StageResult] = []
-    _start("sfm")
-    last = _done(sfm.run(cfg, run_dir, force, photos=photos, poses=poses), results)
+    sfm, *rest, report = STAGES
+    _start(sfm.name)
+    last = _done(sfm.run(ctx), results)
     parts = split_parts(run_dir) if cfg.sfm.on_split == "each" and until is None else []
     if parts:  # the largest part takes its share of a count budget; the others follow the export
         from dataclasses import replace
-        total_budget = cfg.budget
-        cfg = replace(cfg, budget=part_budget(cfg.budget, parts[0]["n_registered"],
-                                              sum(p["n_registered"] for p in parts)))
-        print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {cfg.budget} -> {run_dir}", flush=True)
-    check_budget(cfg.budget, run_dir)   # before any training
-    steps = [("occupancy", occupancy.run)]
-    if budget.wanted(cfg, run_dir):   # budget auto (default on an object), evaluated: measured before choosing
-        steps.append(("budget", lambda c, d, f: budget.run(c, d, f, executor=executor)))
-    steps.append(("select", select.run))
-    if cfg.run_evaluation:
-        steps.append(("evaluate", lambda c, d, f: evaluate.run(c, d, f, executor=executor)))
-    steps.append(("export", export.run))
-    for name, fn in steps:
+        ctx.cfg = replace(cfg, budget=part_budget(cfg.budget, parts[0]["n_registered"],
+                                                  sum(p["n_registered"] for p in parts)))
+        print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {ctx.cfg.budget} -> {run_dir}",
+              flush=True)
+    check_budget(ctx.cfg.budget, run_dir)   # before any training
+    for stage in rest:
         if until is not None and last.name == until:
             return last.path
-        _start(name)
-        last = _done(fn(cfg, run_dir, force), results)
+        if not stage.applies(ctx.cfg, run_dir):
+            continue
+        _start(stage.name)
+        last = _done(stage.run(ctx), results)
     if until is not None and last.name == until:
         return last.path
     if parts:
-        _run_parts(replace(cfg, budget=total_budget), run_dir, parts, force, executor)
-    out = report.run(cfg, run_dir, str(photos) if photos else None, [r.timing() for r in results],
-                     time.perf_counter() - t_start)
+        _run_parts(cfg, run_dir, parts, force, executor)
+    ctx.timings, ctx.seconds = [r.timing() for r in results], time.perf_counter() - t_start
+    out = report.run(ctx)
     print(out.line(), flush=True)
     for r in results:
         if r.warning:

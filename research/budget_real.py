@@ -57,7 +57,7 @@ def measure(scene: str, run: Path, out: Path, ev, fractions, every: int, folds: 
     from curate.core.stats import holdout_split
     from curate.evaluate.units import Unit, eval_cameras, run_units
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid, run as occupancy
+    from curate.occupancy.stage import load_node_grid, occupancy
     from curate.select.auto_budget import pool_views
     from curate.select.select import SelectConfig, capture_kind, select
     from curate.select.spacing import spacing_curve

@@ -58,12 +58,12 @@ def evaluate(run: Path, side: int, iters: int, folds: int) -> dict:
     """The product's evaluation of ``run`` at (side, iters) over its first ``folds`` folds -> summary.json."""
     from curate.cli import saved_config
     from curate.core import runfolder
-    from curate.evaluate import stage
+    from curate.core.graph import BY_NAME, RunContext
     cfg, _ = saved_config(run)
     cfg = replace(cfg, evaluate=replace(cfg.evaluate, max_side=side, iters=iters, folds=folds,
                                         methods=("selection", "random", "fvs", "stride", "all"), random_seeds=1))
     with runfolder.claimed(run, writes=("evaluate",)):
-        res = stage.run(cfg, run)
+        res = BY_NAME["evaluate"].run(RunContext(cfg, run))
     print(res.line(), flush=True)
     return json.loads((run / "evaluate" / "summary.json").read_text())
 

@@ -300,7 +300,7 @@ def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = N
     from dataclasses import replace as _replace
     from curate.config import RunConfig
     from curate.core.stats import holdout_split
-    from curate.occupancy.stage import run as stage_occupancy
+    from curate.occupancy.stage import occupancy as stage_occupancy
     from curate.sfm.pose_import import import_poses
     from curate.sfm.io import load_sfm
     run = out / scene

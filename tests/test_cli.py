@@ -182,7 +182,7 @@ def test_a_mistyped_command_suggests_the_nearest_and_names_curates_help(capsys):
     assert "give a command" in _err(capsys)
 
 
-@pytest.mark.parametrize("budget, msg", [("500", "budget 500 is more than the 30 cameras of {p}"),
+@pytest.mark.parametrize("budget, msg", [("500", "budget 500 is more than all 30 cameras of {p}"),
                                          ("30", "budget 30 is all 30 cameras of {p}: nothing to choose"),
                                          ("100%", "budget 100% is all 30 cameras of {p}")])
 def test_select_on_a_pose_file_speaks_of_its_cameras_not_of_a_hold_out(pool_json, tmp_path, capsys, budget, msg):

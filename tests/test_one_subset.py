@@ -76,6 +76,9 @@ def test_a_report_never_shows_another_selections_evaluation(tmp_path, capsys):
     page = (run / "report.html").read_text()
     assert "earlier selection (12 photos" in page and "How the selection compares" not in page
     assert main(["evaluate", str(run)]) == 0
+    rec = json.loads((run / "evaluate" / "stage.json").read_text())   # recorded last, as every stage
+    summ = json.loads((run / "evaluate" / "summary.json").read_text())
+    assert rec["key"] == summ["key"] and rec["inputs"] == {"select": json.loads((run / "select" / "stage.json").read_text())["key"]}
     rep = _rep(run)
     assert rep["evaluation"]["status"] == "current" and rep["estimate"]["budget"] == round(8 * rep["estimate"]["n_pool"] / 160)
     assert rep["methods"]["selection"]["n_train"] == rep["estimate"]["budget"]

@@ -272,9 +272,10 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     cams, files = read_transforms(SAMPLE / "transforms.json")
     real = sfm_stage.run
 
-    def fake_sfm(cfg, run_dir, force=False, photos=None, poses=None):
-        if poses != "SPLIT":
-            return real(cfg, run_dir, force, photos=photos, poses=poses)
+    def fake_sfm(ctx):
+        if ctx.poses != "SPLIT":
+            return real(ctx)
+        from dataclasses import replace
         from curate.core.cameras import Cameras
         halves = (np.arange(0, 100), np.arange(100, len(cams)))
         models = tmp_path / "models"
@@ -284,8 +285,8 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
                           names=tuple(Path(files[i]).name for i in idx))
             (models / str(k)).mkdir(parents=True)
             reconstruction_from_cameras(sub).write(models / str(k))
-        res = real(cfg, run_dir, force, photos=SAMPLE / "images", poses=models / "0")
-        d = Path(run_dir) / "sfm"
+        res = real(replace(ctx, photos=SAMPLE / "images", poses=models / "0"))
+        d = ctx.run_dir / "sfm"
         (d / "images").mkdir(exist_ok=True)
         for i in halves[1]:
             shutil.copy(files[i], d / "images" / Path(files[i]).name)

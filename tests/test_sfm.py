@@ -497,24 +497,28 @@ def test_a_split_capture_is_said_loudly_and_can_stop(tmp_path):
     frame numbers) and the models' sizes; `--on-split stop` stops instead of curating half a room."""
     from dataclasses import replace as dc_replace
     from curate.config import RunConfig
-    from curate.sfm import stage
+    from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runfolder import claimed
     sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
     cfg = RunConfig()
     cfg = dc_replace(cfg, sfm=dc_replace(cfg.sfm, progress=False, triangulate="off"))
-    res = stage.run(cfg, tmp_path, photos=sample, poses=sample / "transforms.json")
+
+    def sfm(cfg):
+        with claimed(tmp_path, [sample]):
+            return BY_NAME["sfm"].run(RunContext(cfg, tmp_path, photos=sample, poses=sample / "transforms.json"))
+    res = sfm(cfg)
     assert res.ran and res.warning is None
     rec_path = tmp_path / "sfm" / "stage.json"
     rec = json.loads(rec_path.read_text())
     lost = [f"images/frame_{i:04d}.jpg" for i in range(80, 150)]
     rec["stats"].update({"model_sizes": [90, 70], "n_kept": 160, "n_registered": 90, "unregistered": lost})
     rec_path.write_text(json.dumps(rec))
-    res = stage.run(cfg, tmp_path, photos=sample, poses=sample / "transforms.json")
+    res = sfm(cfg)
     assert not res.ran
     assert "split into 2 models (90, 70 photos)" in res.warning and "90 of 160" in res.warning
     assert "frame_0080.jpg..images/frame_0149.jpg (70)" in res.warning
     with pytest.raises(ValueError, match="stopped: --on-split stop"):
-        stage.run(dc_replace(cfg, sfm=dc_replace(cfg.sfm, on_split="stop")), tmp_path, photos=sample,
-                  poses=sample / "transforms.json")
+        sfm(dc_replace(cfg, sfm=dc_replace(cfg.sfm, on_split="stop")))
 
 
 def test_part_agreement_on_reconstructions():

@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from curate.batch.log import folder_log
-from curate.batch.summary import failed_stage, make_row, write_summary_html
+from curate.batch.summary import make_row, write_summary_html
 from curate.report.html_parts import fmt_num
 
 log = logging.getLogger(__name__)
@@ -262,10 +262,11 @@ def _ray_task(item: Folder, cfg, force: bool, phase: str, gpus: float, key: str)
 
 def stage_in_progress(run_dir: str | Path, cfg) -> str:
     """The stage a folder's run (with options ``cfg``) is at: 'starting' before its run folder holds its options,
-    then the first stage without a finished record (:func:`curate.batch.summary.failed_stage`, which a failed
+    then the first stage without a finished record (:func:`curate.core.graph.first_unfinished`, which a failed
     folder's row names)."""
+    from curate.core.graph import first_unfinished
     d = Path(run_dir)
-    return failed_stage(d, cfg) if (d / "run.json").is_file() else "starting"
+    return first_unfinished(cfg, d) if (d / "run.json").is_file() else "starting"
 
 
 # ------------------------------------------------------------------ executors

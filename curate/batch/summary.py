@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.graph import first_unfinished
 from curate.report.html_parts import fmt_num
 
 if TYPE_CHECKING:
@@ -15,19 +16,6 @@ if TYPE_CHECKING:
 
 METHODS = ("selection", "random", "fvs", "all")
 """The evaluation units a summary row has a PSNR for (the selection, whatever its method)."""
-
-
-def failed_stage(run_dir: Path, cfg) -> str | None:
-    """The first stage of a run folder without a finished record."""
-    from curate.evaluate.budget import wanted
-    for s in ("sfm", "occupancy") + (("budget",) if wanted(cfg, run_dir) else ()) + ("select",):
-        if not (run_dir / s / "stage.json").is_file():
-            return s
-    if cfg.run_evaluation and not (run_dir / "evaluate" / "summary.json").is_file():
-        return "evaluate"
-    if not (run_dir / "export" / "stage.json").is_file():
-        return "export"
-    return "report"
 
 
 def make_row(item: Folder, status: str, reason: str = "", wall: float | None = None, cfg=None) -> dict:
@@ -53,7 +41,7 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
                    report=f"{item.name}/report.html" if (rd / "report.html").is_file() else None)
     elif status == "failed":
         if cfg is not None and rd.is_dir():
-            row["failed_stage"] = failed_stage(rd, cfg)
+            row["failed_stage"] = first_unfinished(cfg, rd)
         imgs = rd / "sfm" / "images.json"
         try:
             if imgs.is_file():

@@ -65,3 +65,15 @@ def resolve_budget(budget: int | float, n_pool: int) -> int:
     if isinstance(budget, float):
         return max(1, int(round(budget * n_pool)))
     return int(budget)
+
+
+def check_fits(said: str, n_budget: int, n_pool: int, what: str = "registered photos") -> None:
+    """ValueError unless the budget ``said`` (as the user gave it, resolved to ``n_budget``) leaves something
+    to choose from ``n_pool`` candidates (``what`` they are): at least 2, fewer than all of them. The one
+    check of a resolved budget (the pipeline, the select stage, ``curate select POSES``)."""
+    if n_budget > n_pool:
+        raise ValueError(f"budget {said} is more than all {n_pool} {what}: nothing to choose; give a smaller budget")
+    if n_budget == n_pool:
+        raise ValueError(f"budget {said} is all {n_pool} {what}: nothing to choose; give a smaller budget")
+    if n_budget < 2:
+        raise ValueError(f"budget {said} is {n_budget} of the {n_pool} {what}: choose at least 2")

@@ -22,15 +22,9 @@ import time
 from pathlib import Path
 from typing import Any, Iterable
 
+from curate.core.graph import BY_NAME, NAMES, READS
+
 STAGE_FILE = "stage.json"
-
-STAGES = ("sfm", "occupancy", "budget", "select", "evaluate", "export", "report")
-"""The stages of ``curate run``, in order; each but ``report`` writes ``RUN/<stage>/`` (``budget`` only with
-``--budget auto`` on an evaluated run)."""
-
-READS = {"occupancy": ("sfm",), "budget": ("occupancy",), "select": ("occupancy", "budget"), "evaluate": ("select",),
-         "export": ("select",)}
-"""The stages each stage's result is computed from (its record's ``inputs``: their keys when it ran)."""
 
 
 @dataclasses.dataclass
@@ -152,16 +146,21 @@ def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
     return False
 
 
-def current_key(run_dir: str | Path, stage: str) -> str | None:
-    """The key of ``stage``'s finished result in ``run_dir`` (None: not finished). The evaluation
-    has no stage record of its own: its key is the one its summary records."""
-    run_dir = Path(run_dir)
-    if stage == "evaluate":
+def finished_record(run_dir: str | Path, stage: str) -> dict | None:
+    """``stage``'s record in ``run_dir`` (None: not finished). An evaluation made by curate 0.3 or earlier
+    recorded only its ``summary.json`` (with the same ``key`` and ``inputs``): that stands for its record."""
+    rec = read_stage(Path(run_dir) / stage)
+    if rec is None and stage == "evaluate":
         try:
-            return json.loads((run_dir / "evaluate" / "summary.json").read_text()).get("key")
+            rec = json.loads((Path(run_dir) / "evaluate" / "summary.json").read_text())
         except (OSError, ValueError):
             return None
-    return (read_stage(run_dir / stage) or {}).get("key")
+    return rec if isinstance(rec, dict) else None
+
+
+def current_key(run_dir: str | Path, stage: str) -> str | None:
+    """The key of ``stage``'s finished result in ``run_dir`` (None: not finished)."""
+    return (finished_record(run_dir, stage) or {}).get("key")
 
 
 def inputs_of(run_dir: str | Path, stage: str) -> dict[str, str | None]:
@@ -171,22 +170,12 @@ def inputs_of(run_dir: str | Path, stage: str) -> dict[str, str | None]:
 
 def stale_stages(run_dir: str | Path) -> dict[str, str]:
     """{stage: why} for every finished stage of ``run_dir`` computed from inputs that have changed
-    since (a stage it reads was redone, or is itself stale), in :data:`STAGES` order. A record
+    since (a stage it reads was redone, or is itself stale), in the graph's order. A record
     without ``inputs`` (an earlier curate) counts as stale: nothing says what it was computed from."""
-    run_dir = Path(run_dir)
     out: dict[str, str] = {}
-    for stage in STAGES:
-        if stage not in READS:
+    for stage in NAMES:
+        if stage not in READS or (rec := finished_record(run_dir, stage)) is None:
             continue
-        if stage == "evaluate":
-            try:
-                rec = json.loads((run_dir / "evaluate" / "summary.json").read_text())
-            except (OSError, ValueError):
-                continue
-        else:
-            rec = read_stage(run_dir / stage)
-            if rec is None:
-                continue
         recorded = rec.get("inputs")
         if not isinstance(recorded, dict):
             out[stage] = "made by an earlier curate: its inputs are not recorded"
@@ -212,11 +201,11 @@ def stale_root(stale: dict[str, str], stage: str) -> str:
 
 def refresh_command(run_dir: str | Path, stale: dict[str, str], stage: str) -> str:
     """The command that makes ``stage`` of ``run_dir`` current again: the stage command of
-    :func:`stale_root` (a stage command redoes the cheap stages after it), then, for the evaluation,
-    which no stage command redoes, ``curate evaluate``."""
+    :func:`stale_root` (a stage command redoes the cheap stages computed from it), then, for a stage that
+    trains (the evaluation), which no other stage command redoes, its own command."""
     root = stale_root(stale, stage)
     return " && ".join([f"curate {root} {run_dir}"]
-                       + ([f"curate {stage} {run_dir}"] if stage == "evaluate" != root else []))
+                       + ([f"curate {stage} {run_dir}"] if stage != root and not BY_NAME[stage].cheap else []))
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:

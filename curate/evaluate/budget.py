@@ -27,6 +27,7 @@ from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 FOLDS = 2
 """Hold-out folds the learning curve is measured on."""
@@ -68,7 +69,7 @@ def measured_budget(cfg: "RunConfig", run_dir: Path) -> dict | None:
     return out if chk.get("budget") is not None or chk.get("high") is not None else None   # no curve: the law
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
+def run(ctx: "RunContext") -> StageResult:
     """Measure the learning curve of the selection's method on the first folds -> ``RUN/budget``."""
     import numpy as np
     from curate.core.stage import begin_stage, current_key, finish_stage, stage_key, write_json_atomic
@@ -84,7 +85,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     from curate.sfm.io import image_paths, load_sfm
 
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
+    cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
     d = run_dir / "budget"
     key = key_for(cfg, run_dir)
     if begin_stage(d, key, force):

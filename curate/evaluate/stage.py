@@ -12,7 +12,7 @@ held-out photos. The differences are paired per held-out photo and pooled over t
 Each training is a stage of its own (``RUN/evaluate/<unit>/stage.json``), so a killed evaluation resumes, and
 a later one with more time reuses them.
 
-``RUN/evaluate/summary.json`` (then ``stage.json``, last): ``key`` (the evaluation's options and the
+``RUN/evaluate/summary.json``, then ``stage.json`` (last, as every stage's): ``key`` (the evaluation's options and the
 selection it estimates), ``inputs`` ({"select": its key}: a later selection makes it out of date,
 :func:`curate.core.stage.stale_stages`), ``methods``, ``paired``, ``gap_closed``
 (:func:`curate.evaluate.folds.summarize`) and ``protocol`` (:func:`protocol`). How many photos ``--budget auto``
@@ -30,6 +30,7 @@ from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 STOPPED = {"decided": "every rival decided", "every photo": "every photo held out once",
            "folds asked": "the folds asked for done", "time": "the time given was spent"}
@@ -64,12 +65,17 @@ def protocol(cfg: "RunConfig", folds: list, exported: list[int], n_registered: i
             "holdout": sorted(c for f in folds for c in f.holdout)}
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> StageResult:
+def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
+    """The stage runs: the run is evaluated (not ``--no-evaluate``)."""
+    return cfg.run_evaluation
+
+
+def run(ctx: "RunContext") -> StageResult:
     """Train the folds' units until decided (finished units are reused) -> ``RUN/evaluate``.
 
-    ``executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
+    ``ctx.executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
-    from curate.core.stage import current_key, inputs_of, write_json_atomic
+    from curate.core.stage import current_key, finish_stage, inputs_of, write_json_atomic
     from curate.evaluate.folds import (ALL_FOLDS, decided, fold_order, in_capture_order, look_level, looks, plan_fold,
                                        planned_folds, summarize)
     from curate.evaluate.schedule import run_folds
@@ -80,7 +86,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
     from curate.sfm.io import image_paths, load_sfm
 
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
+    cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
     d = run_dir / "evaluate"
     ev = cfg.evaluate
     key = eval_key(cfg, run_dir)
@@ -122,6 +128,8 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False, executor=None) -> 
                "gap_closed": gap,
                "protocol": protocol(cfg, folds, exported, n, len(order), look_at, level, stopped, seconds)}
     write_json_atomic(d / "summary.json", summary)
+    finish_stage(d, key, {"evaluate": replace(ev, workers=0), "select": cfg.select}, t0,
+                 outputs={"summary": "summary.json"}, stopped=stopped, n_folds=len(folds))
     txt = ", ".join(f"{m} {v['psnr']:.2f}" for m, v in methods.items())
     views = sum(len(f.holdout) for f in folds)
     return StageResult("evaluate", d, True, seconds,

@@ -4,27 +4,26 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
-    from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 
 EXPORTED = {"hardlink": "hard-linked", "link": "linked", "copy": "copied"}
 """How the stage line says each export mode ("10 images (copied)")."""
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
+def run(ctx: "RunContext") -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
     from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, stage_key
     from curate.export.subset import check_unchanged, export_subset
     from curate.occupancy.stage import key_of
     from curate.select.stage import read_selection
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
+    cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
     d = run_dir / "export"
     key = stage_key({"export": cfg.export}, [key_of(run_dir / "select")])
     if force or not is_fresh(d, key):

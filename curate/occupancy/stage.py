@@ -23,6 +23,7 @@ from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 log = logging.getLogger(__name__)
 
@@ -59,16 +60,6 @@ def load_node_grid(run_dir: Path):
     return NodeGrid(z["box_min"], z["box_max"], int(z["res"]), z["nodes_mask"])
 
 
-def check_budget_fits(text: str, n_budget: int, n_pool: int, what: str = "registered photos") -> None:
-    """ValueError unless the budget ``text`` (resolved to ``n_budget``) leaves something to choose from
-    ``n_pool`` candidates (``what`` they are): at least 2, fewer than all of them."""
-    if n_budget < 2:
-        raise ValueError(f"budget {text} is {n_budget} photo(s) of {n_pool} {what}: choose at least 2")
-    if n_budget >= n_pool:
-        raise ValueError(f"budget {text} is {n_budget} photos, all {n_pool} {what} or more: nothing to choose; "
-                         "give a smaller budget")
-
-
 def train_settings(cfg: "RunConfig") -> dict:
     """The refining field's training settings (part of the stage key): its own iterations and image size
     (:class:`curate.occupancy.masks.RefineConfig`), the evaluation's field and training seed."""
@@ -94,7 +85,13 @@ def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
     return False, f"not needed: the energy's surface comes from the {n_points} sparse points"
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None) -> StageResult:
+def run(ctx: "RunContext") -> StageResult:
+    """The stage: :func:`occupancy` of the run folder, the field trained on every registered photo."""
+    return occupancy(ctx.cfg, ctx.run_dir, ctx.force)
+
+
+def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None
+              ) -> StageResult:
     """Field (when needed: :func:`needs_field`) and occupancy grid (points, refined, node band) ->
     ``RUN/occupancy``. ``train_on``: the cameras the field trains on (None: every registered one;
     the evaluation harness passes a hold-out fold's pool)."""

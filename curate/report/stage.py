@@ -8,10 +8,11 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from curate.core.stage import STAGES, StageResult
+from curate.core.graph import NAMES
+from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
-    from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 log = logging.getLogger(__name__)
 
@@ -20,7 +21,7 @@ def recorded_seconds(run_dir: Path) -> dict[str, float | None]:
     """Seconds each stage took when it actually ran (from the stage records; evaluate: all units summed)."""
     from curate.core.stage import read_stage
     out: dict[str, float | None] = {}
-    for s in STAGES:
+    for s in NAMES:
         if s == "report":
             continue
         if s == "evaluate":
@@ -50,20 +51,20 @@ def evaluation_status(run_dir: Path, stale: dict[str, str]) -> dict:
             "of": {"exported_budget": pr.get("exported_budget"), "method": pr.get("method")}}
 
 
-def run(cfg: "RunConfig", run_dir: Path, photos: str | None = None, timings: list[dict] | None = None,
-        wall: float | None = None) -> StageResult:
+def run(ctx: "RunContext") -> StageResult:
     """Write ``report.json`` and ``report.html``.
 
-    ``timings``: this invocation's stages (:meth:`StageResult.timing`); ``report.json``
+    ``ctx.timings``: this invocation's stages (:meth:`StageResult.timing`); ``report.json``
     ``stages`` adds ``compute_seconds``, the time each took when it actually ran;
-    ``wall_seconds``: this invocation (``curate report`` alone keeps the previous figure).
+    ``wall_seconds``: this invocation (``ctx.seconds``; ``curate report`` alone keeps the previous figure).
     """
     from curate.core.stage import config_dict, read_stage, stale_stages, versions, write_json_atomic
     from curate.report.verdict import verdict
     from curate.select.stage import read_selection
     from curate.sfm.io import load_sfm
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
+    cfg, run_dir, timings, wall = ctx.cfg, ctx.run_dir, ctx.timings, ctx.seconds
+    photos = None if ctx.photos is None else str(ctx.photos)
     sfm = load_sfm(run_dir)
     sel = read_selection(run_dir)
     photos_rec = sfm.records.get("photos", [])

@@ -34,7 +34,7 @@ from curate.core.stage import StageResult
 log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
-    from curate.config import RunConfig
+    from curate.core.graph import RunContext
     from curate.core.cameras import Cameras
     from curate.core.grid import NodeGrid
     from curate.select.select import Selection
@@ -98,18 +98,18 @@ def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
     return b, f"{DEFAULT}: {b} ({KIND_WORDS[kind]})"
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
+def run(ctx: "RunContext") -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
-    from curate.core.budget import AUTO, parse_budget, resolve_budget
+    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
     from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
-    from curate.occupancy.stage import check_budget_fits, key_of, load_node_grid
+    from curate.occupancy.stage import key_of, load_node_grid
     from curate.select.energy import energy_of_subset
     from curate.select.select import select
     from curate.select.visibility import build_pair_index
     from curate.sfm.io import load_sfm
 
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
+    cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
     d = run_dir / "select"
     text, said = budget_of_run(cfg.budget, run_dir)
     b = parse_budget(text)
@@ -128,7 +128,7 @@ def run(cfg: "RunConfig", run_dir: Path, force: bool = False) -> StageResult:
     pool = list(range(len(sfm.cameras)))
     if b != AUTO:
         budget = resolve_budget(b, len(pool))
-        check_budget_fits(said, budget, len(pool))
+        check_fits(said, budget, len(pool))
     grid = load_node_grid(run_dir)
     pc = sfm.cameras[pool]
     t_vis = time.perf_counter()

@@ -119,17 +119,17 @@ def _second_round(cfg: SfmConfig, db: Path, images: Path, out: Path, names: list
 
 
 def run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
-    """:func:`_run_sfm` in the claimed and locked run folder (:mod:`curate.core.runfolder`)."""
+    """:func:`sfm_in_claimed` in the run folder, claimed and locked here (:mod:`curate.core.runfolder`): for a
+    caller that runs SfM alone. Returns ``RUN/sfm``."""
     from curate.core.runfolder import claimed  # runsafe
     with claimed(run_dir, [photos]):
-        return _run_sfm(cfg, photos, run_dir, force)
+        return sfm_in_claimed(cfg, photos, run_dir, force)[0]
 
 
-def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> Path:
-    """Run the SfM stage on the photos of ``photos``; returns ``RUN/sfm`` (see the module docstring).
-
-    Skipped (returns at once) when ``RUN/sfm/stage.json`` has the same key: same config
-    (``num_threads`` and ``progress`` excluded) and same photo files (names and content).
+def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: bool = False) -> tuple[Path, bool]:
+    """Run the SfM stage on the photos of ``photos`` in a run folder its caller claimed; returns (``RUN/sfm``,
+    whether it ran). Skipped when ``RUN/sfm/stage.json`` has the same key: same config (``num_threads`` and
+    ``progress`` excluded) and same photo files (names and content).
     """
     pycolmap = load_pycolmap()
 
@@ -139,7 +139,7 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     key = input_key(cfg, photos)
     if begin_stage(out, key, force):
         logger.info("sfm: up to date (%s), skipped", out)
-        return out
+        return out, False
     started = time.perf_counter()
     timings: dict[str, float] = {}
     records, kept, t_ingest = prepare_photos(cfg, photos, out)
@@ -227,4 +227,4 @@ def _run_sfm(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, force: boo
     stats["dense"] = dense
     finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
                  seed=cfg.seed, mode="sfm", photos=str(photos), timings=timings, stats=stats)
-    return out
+    return out, True

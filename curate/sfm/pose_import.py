@@ -30,10 +30,11 @@ def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[
 
 def import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
                  force: bool = False) -> Path:
-    """:func:`_import_poses` in the claimed and locked run folder (:mod:`curate.core.runfolder`)."""
+    """:func:`import_in_claimed` in the run folder, claimed and locked here (:mod:`curate.core.runfolder`): for a
+    caller that imports poses alone. Returns ``RUN/sfm``."""
     from curate.core.runfolder import claimed  # runsafe
     with claimed(run_dir, [source, photos]):
-        return _import_poses(cfg, source, run_dir, photos, force)
+        return import_in_claimed(cfg, source, run_dir, photos, force)[0]
 
 
 ASPECT_TOL = 0.01
@@ -170,9 +171,10 @@ def _import_key(cfg: SfmConfig, source: Path, photos: Path | None, originals: li
                             "\n".join(f"{r['rel']}:{r['reason']}" for r in left)])
 
 
-def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
-                  force: bool = False) -> Path:
-    """Fill ``RUN/sfm`` from known poses instead of running SfM; returns ``RUN/sfm``.
+def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photos: str | Path | None = None,
+                      force: bool = False) -> tuple[Path, bool]:
+    """Fill ``RUN/sfm`` of a run folder its caller claimed from known poses instead of running SfM; returns
+    (``RUN/sfm``, whether it ran: False when its record had the same key).
 
     Args:
         source: a pose source (:func:`curate.sfm.poses.read_poses`: a transforms.json, a cameras.json, a
@@ -207,7 +209,7 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
     key = _import_key(cfg, source, photos, originals, left, triangulate)
     if begin_stage(out, key, force):
         logger.info("sfm import: up to date (%s), skipped", out)
-        return out
+        return out, False
     started = time.perf_counter()
     sparse = out / "sparse" / "0"
     stats: dict = {"n_poses": len(poses.cameras)}
@@ -242,4 +244,4 @@ def _import_poses(cfg: SfmConfig, source: str | Path, run_dir: str | Path, photo
     finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
                  mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)
     logger.info("sfm import: %d cameras, %d points from %s", len(cams), stats["n_points"], source)
-    return out
+    return out, True

@@ -1,7 +1,7 @@
 """The SfM stage as a run-folder stage: photos (or known poses) -> ``RUN/sfm``.
 
-:func:`run` has the shape of every stage (config, run folder, force -> :class:`StageResult`);
-the work is :func:`curate.sfm.colmap.run_sfm` (COLMAP) or :func:`curate.sfm.pose_import.import_poses`.
+:func:`run` has the shape of every stage (``run(ctx) -> StageResult``, :mod:`curate.core.graph`); the work is
+:func:`curate.sfm.colmap.sfm_in_claimed` (COLMAP) or :func:`curate.sfm.pose_import.import_in_claimed`.
 """
 
 from __future__ import annotations
@@ -16,14 +16,9 @@ from typing import TYPE_CHECKING
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
-    from curate.config import RunConfig
+    from curate.core.graph import RunContext
 
 log = logging.getLogger(__name__)
-
-
-def _record_stamp(d: Path):
-    p = d / "stage.json"
-    return (p.stat().st_mtime_ns, p.read_bytes()) if p.is_file() else None
 
 
 def _trailing(name: str):
@@ -182,26 +177,21 @@ def import_warning(run_dir: Path) -> str | None:
     return "; ".join(out) or None
 
 
-def run(cfg: "RunConfig", run_dir: Path, force: bool = False, photos: str | Path | None = None,
-        poses: str | Path | None = None) -> StageResult:
-    """SfM on ``photos`` or, with ``poses`` (a COLMAP model or transforms.json), an import.
-
-    The stage ran when its record changed; an unchanged re-run leaves it as it was.
-    """
+def run(ctx: "RunContext") -> StageResult:
+    """SfM on ``ctx.photos`` or, with ``ctx.poses`` (a COLMAP model or transforms.json), an import, in the run
+    folder its caller claimed (the command, or :func:`curate.pipeline.run`)."""
     from curate.core.stage import read_stage
-    from curate.sfm.colmap import run_sfm
-    from curate.sfm.pose_import import import_poses
+    from curate.sfm.colmap import sfm_in_claimed
+    from curate.sfm.pose_import import import_in_claimed
     t0 = time.perf_counter()
-    run_dir = Path(run_dir)
-    d = run_dir / "sfm"
-    before = _record_stamp(d)
+    cfg, run_dir, photos, poses = ctx.cfg, ctx.run_dir, ctx.photos, ctx.poses
     if poses:
-        import_poses(cfg.sfm, poses, run_dir, photos=photos, force=force)
+        d, ran = import_in_claimed(cfg.sfm, poses, run_dir, photos=photos, force=ctx.force)
     else:
         if photos is None:
             raise ValueError("give a photo folder, or --poses with a COLMAP model or transforms.json")
-        run_sfm(cfg.sfm, photos, run_dir, force=force)
-    ran = _record_stamp(d) != before
+        d, ran = sfm_in_claimed(cfg.sfm, photos, run_dir, force=ctx.force)
+    d = run_dir / "sfm"
     n = len(json.loads((d / "cameras.json").read_text())["cameras"])
     st = (read_stage(d) or {}).get("stats") or {}
     warn = split_warning(run_dir, each=cfg.sfm.on_split == "each")

@@ -24,7 +24,7 @@ def run_one(run: Path, out: Path, keep_saved: bool) -> float:
     """The product's evaluation of ``run``'s sibling in ``out``; returns its wall seconds."""
     from curate.cli import saved_config
     from curate.core import runfolder
-    from curate.evaluate import stage
+    from curate.core.graph import BY_NAME, RunContext
     from curate.evaluate.config import EvalConfig
     from research.eval_agreement import sibling
     sib = sibling(run, out)
@@ -35,7 +35,7 @@ def run_one(run: Path, out: Path, keep_saved: bool) -> float:
                                             random_seeds=d.random_seeds, folds=d.folds, minutes=d.minutes))
     t0 = time.perf_counter()
     with runfolder.claimed(sib, writes=("evaluate",)):
-        print(stage.run(cfg, sib).line(), flush=True)
+        print(BY_NAME["evaluate"].run(RunContext(cfg, sib)).line(), flush=True)
     return time.perf_counter() - t0
 
 
