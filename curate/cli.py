@@ -192,7 +192,8 @@ def _words(text: str) -> tuple[str, ...]:
 BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto|default"),
           Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
 BUDGET_CHECK = [Opt("--no-budget-check", "budget_check", const=False,
-                    help="with --budget auto: skip the two extra trainings that measure how many photos this capture needs")]
+                    help="with --budget auto: skip the two extra trainings that measure how many photos this "
+                         "capture needs")]
 METHOD = [Opt("--method", "select.method", choices=METHODS, help=method_help()),
           Opt("--path-weights", "select.medoids.path_weights"),
           Opt("--seed", "select.seed", parse=int)]
@@ -333,7 +334,8 @@ def saved_config(run_dir: Path):
         raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
     try:
         rec = json.loads(p.read_text())
-        return config_from_dict(RunConfig, upgrade_config(rec["config"], (rec.get("versions") or {}).get("curate"))), rec
+        return config_from_dict(RunConfig, upgrade_config(rec["config"],
+                                                          (rec.get("versions") or {}).get("curate"))), rec
     except (ValueError, KeyError, TypeError) as e:
         raise CliError(f"{p}: not a run record of this curate version ({e})")
 
@@ -491,7 +493,8 @@ def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
                      for k in ("photos", "poses") if (v := rec.get(k)))
     whole = f"curate run{inputs or ' PHOTOS'} --out {q(str(run_dir))}"
     first = missing[0]
-    cmd = f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm" else f"curate {first} {q(str(run_dir))}"
+    cmd = (f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm"
+           else f"curate {first} {q(str(run_dir))}")
     what = {"sfm": "SfM", "occupancy": "the occupancy stage", "select": "the selection"}[first]
     raise CliError(f"{run_dir}: {what} has not finished there; run `{cmd}` first "
                    f"(or `{whole}` to finish the whole run)")
@@ -762,7 +765,8 @@ def _add_command(name: str, s: argparse.ArgumentParser) -> None:
                        help="a text file listing folders, one a line (relative to the file)")
         s.add_argument("--out", required=True, metavar="RUNS", help="the batch folder: one run folder per photo folder")
         s.add_argument("--executor", default="local", choices=["local", "ray"],
-                       help="local: a process per folder (default); ray: Ray tasks, trainings in parallel on the cluster")
+                       help="local: a process per folder (default); ray: Ray tasks, trainings in parallel "
+                            "on the cluster")
         s.add_argument("--ray-address", default=None, metavar="ADDRESS",
                        help="with --executor ray: 'auto' or HOST:PORT of a running cluster (default: a local instance)")
         s.add_argument("--jobs", type=int, default=0, metavar="N",

@@ -14,7 +14,7 @@ from curate.core.budget import parse_budget
 from curate.evaluate.config import EvalConfig
 from curate.export.config import ExportConfig
 from curate.occupancy.config import OccupancyConfig, RefineConfig
-from curate.select.select import SelectConfig
+from curate.select.config import SelectConfig
 from curate.sfm.config import SfmConfig
 
 @dataclass

@@ -447,7 +447,8 @@ def hostile_dir(parent: Path) -> Path:
 
 # ------------------------------------------------------------------ flags
 FLAG_RUN = [   # appended to a fast pose-import `curate run` (the last occurrence of a flag wins)
-    ("budget-neg", ["--budget", "-1"], E), ("budget-zero", ["--budget", "0"], E), ("budget-nan", ["--budget", "nan"], E),
+    ("budget-neg", ["--budget", "-1"], E), ("budget-zero", ["--budget", "0"], E),
+    ("budget-nan", ["--budget", "nan"], E),
     ("budget-inf", ["--budget", "inf"], E), ("budget-1e309", ["--budget", "1e309"], E),
     ("budget-text", ["--budget", "abc"], E), ("budget-empty", ["--budget", ""], E),
     ("budget-huge-int", ["--budget", "9" * 30], A), ("budget-pct-neg", ["--budget", "-5%"], E),
@@ -571,7 +572,8 @@ def _sfm_run(mutate):
         cap = c.cap()
         (cap / "transforms.json").unlink()
         got = mutate(c, cap)
-        return ["run", got if isinstance(got, Path) else cap / "images", "--no-evaluate", "--budget", "4", "--out", c.out()]
+        return ["run", got if isinstance(got, Path) else cap / "images", "--no-evaluate", "--budget", "4",
+                "--out", c.out()]
     return build
 
 
@@ -648,10 +650,12 @@ def _emptied(c, cap):
 PHOTOS = [  # (name, builder, expect)
     ("photos-zero-byte-named", _pose_run(lambda c, cap: add_frame(cap, "zero.jpg", write(b""))), A),
     ("photos-zero-byte-unnamed", _pose_run(lambda c, cap: (cap / "images" / "zero.jpg").write_bytes(b"")), O),
-    ("photos-truncated-jpeg-named", _pose_run(lambda c, cap: add_frame(cap, "trunc.jpg", write(jpeg_bytes(5)[:900]))), A),
+    ("photos-truncated-jpeg-named",
+     _pose_run(lambda c, cap: add_frame(cap, "trunc.jpg", write(jpeg_bytes(5)[:900]))), A),
     ("photos-truncated-png-named", _pose_run(lambda c, cap: add_frame(cap, "trunc.png", lambda p: (
         img((320, 240), "PNG")(p), p.write_bytes(p.read_bytes()[:200])))), A),
-    ("photos-text-as-jpg-named", _pose_run(lambda c, cap: add_frame(cap, "text.jpg", write(b"hello, not a jpeg\n"))), A),
+    ("photos-text-as-jpg-named",
+     _pose_run(lambda c, cap: add_frame(cap, "text.jpg", write(b"hello, not a jpeg\n"))), A),
     ("photos-1x1-named", _pose_run(lambda c, cap: add_frame(cap, "px.jpg", img((1, 1)))), A),
     ("photos-big-frame-named", _pose_run(lambda c, cap: add_frame(cap, "big.jpg", img((640, 480)))), A),
     ("photos-dir-as-jpg-named", _pose_run(lambda c, cap: add_frame(cap, "x.jpg", lambda p: p.mkdir())), A),
@@ -676,10 +680,13 @@ PHOTOS = [  # (name, builder, expect)
     ("photos-missing-folder", _pose_run(lambda c, cap: c.dir / "no_such_folder"), E),
     ("photos-photos-is-a-file", _pose_run(lambda c, cap: cap / "images" / "frame_0000.jpg"), A),
     ("photos-sfm-junk-files", _sfm_run(_junk_all), A),
-    ("photos-sfm-hostile-names", _sfm_run(lambda c, cap: (rename_frames_plain(cap, XSS[1] + "{}.jpg"), _hostile_folder(c, cap))[1]), O),
+    ("photos-sfm-hostile-names",
+     _sfm_run(lambda c, cap: (rename_frames_plain(cap, XSS[1] + "{}.jpg"), _hostile_folder(c, cap))[1]), O),
     ("photos-sfm-unicode-newline-names", _sfm_run(lambda c, cap: rename_frames_plain(cap, "ü 😀\n{}.jpg")), A),
-    ("photos-sfm-all-identical", _sfm_run(lambda c, cap: [p.write_bytes(jpeg_bytes(0)) for p in (cap / "images").iterdir()] and None), A),
-    ("photos-sfm-two-frames", _sfm_run(lambda c, cap: [p.unlink() for p in sorted((cap / "images").iterdir())[2:]] and None), A),
+    ("photos-sfm-all-identical",
+     _sfm_run(lambda c, cap: [p.write_bytes(jpeg_bytes(0)) for p in (cap / "images").iterdir()] and None), A),
+    ("photos-sfm-two-frames",
+     _sfm_run(lambda c, cap: [p.unlink() for p in sorted((cap / "images").iterdir())[2:]] and None), A),
     ("photos-sfm-empty-folder", _sfm_run(_emptied), E),
     ("photos-sfm-missing-folder", _sfm_run(lambda c, cap: c.dir / "nope"), E),
 ]
@@ -737,9 +744,11 @@ POSE_DICT = [  # (name, mutation of the parsed transforms.json, expect)
     ("pose-3x3-matrix", _frames(lambda f: _mat(f, lambda m: [r[:3] for r in m[:3]])), E),
     ("pose-3x4-matrix", _frames(lambda f: _mat(f, lambda m: m[:3])), A),
     ("pose-singular-rotation", _frames(lambda f: _mat(f, lambda m: [[0, 0, 0, r[3]] for r in m[:3]] + [m[3]])), E),
-    ("pose-sheared-rotation-one", _first(lambda f: _mat(f, lambda m: [[r[0], r[1] + 0.8 * r[0], r[2], r[3]] for r in m[:3]] + [m[3]])), A),
+    ("pose-sheared-rotation-one",
+     _first(lambda f: _mat(f, lambda m: [[r[0], r[1] + 0.8 * r[0], r[2], r[3]] for r in m[:3]] + [m[3]])), A),
     ("pose-scale-1e12", _frames(lambda f: _mat(f, lambda m: [r[:3] + [r[3] * 1e12] for r in m[:3]] + [m[3]])), A),
-    ("pose-rotation-scaled-1e12", _frames(lambda f: _mat(f, lambda m: [[x * 1e12 for x in r[:3]] + [r[3]] for r in m[:3]] + [m[3]])), A),
+    ("pose-rotation-scaled-1e12",
+     _frames(lambda f: _mat(f, lambda m: [[x * 1e12 for x in r[:3]] + [r[3]] for r in m[:3]] + [m[3]])), A),
     ("pose-duplicate-frames", lambda d: {**d, "frames": d["frames"] + d["frames"]}, A),
     ("pose-missing-file-path-one", _first(_drop("file_path")), A),
     ("pose-missing-file-path-all", _frames(_drop("file_path")), E),
@@ -838,7 +847,8 @@ COLMAP = [
     ("colmap-images-header-only", lambda m: (m / "images.txt").write_text("# nothing\n"), E),
     ("colmap-empty-folder", lambda m: [p.unlink() for p in m.iterdir()] and None, E),
     ("colmap-binary-garbage", lambda m: ([p.unlink() for p in m.iterdir()],
-                                         [(m / f).write_bytes(os.urandom(64)) for f in ("cameras.bin", "images.bin", "points3D.bin")]), E),
+                                         [(m / f).write_bytes(os.urandom(64))
+                                          for f in ("cameras.bin", "images.bin", "points3D.bin")]), E),
 ]
 
 
@@ -878,7 +888,8 @@ def _corrupt(path, how, cmd, extra=()):
         run = c.finished()
         p = run / path
         data = p.read_bytes()
-        p.write_bytes({"garbage": b"\x00{not json" + os.urandom(32), "truncate": data[: len(data) // 2], "empty": b""}[how])
+        p.write_bytes({"garbage": b"\x00{not json" + os.urandom(32), "truncate": data[: len(data) // 2],
+                       "empty": b""}[how])
         return [cmd, run, *{"suggest": SUGGEST_FAST}.get(cmd, []), *extra]
     return build
 
@@ -962,7 +973,8 @@ def _concurrent(c: Ctx):
     cap = c.cap(n=40)
     (cap / "transforms.json").unlink()
     run = c.out()
-    cmd = ["nice", "-n", "10", PY, "-m", "curate", "run", str(cap / "images"), "--no-evaluate", "--budget", "8", "--out", str(run)]
+    cmd = ["nice", "-n", "10", PY, "-m", "curate", "run", str(cap / "images"), "--no-evaluate", "--budget", "8",
+           "--out", str(run)]
     env = dict(os.environ, TMPDIR=str(c.tmp), **({"PYTHONPATH": SRC[0]} if SRC else {}))
     bg = subprocess.Popen(cmd, cwd=c.dir, env=env, stdout=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, start_new_session=True)
@@ -1050,7 +1062,8 @@ def _only_zero_mp4(c: Ctx):
 
 VIDEOS = [
     ("video-zero-byte", _video(_vfile("clip.mp4", b"")), E),
-    ("video-truncated-office", _video(_vfile("office.mp4", OFFICE_MP4.read_bytes()[:20_000] if OFFICE_MP4.exists() else b"")), A),
+    ("video-truncated-office",
+     _video(_vfile("office.mp4", OFFICE_MP4.read_bytes()[:20_000] if OFFICE_MP4.exists() else b"")), A),
     ("video-text-as-mp4", _video(_vfile("clip.mp4", b"this is not a video\n" * 10)), E),
     ("video-folder-only-zero-mp4", _video(_only_zero_mp4), E),
     ("video-short-valid", _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4")), O),
@@ -1058,7 +1071,8 @@ VIDEOS = [
     ("video-one-frame", _video(_vfile("one.mp4", src=lambda c: c.base / "one.mp4")), A),
     ("video-max-frames-1", _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4"), ["--max-frames", "1"]), E),
     ("video-max-frames-0", _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4"), ["--max-frames", "0"]), E),
-    ("video-max-frames-neg", _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4"), ["--max-frames", "-5"]), E),
+    ("video-max-frames-neg",
+     _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4"), ["--max-frames", "-5"]), E),
     ("video-and-photos-mixed", _video(_mixed), A),
     ("video-with-foreign-poses", _video(_vfile("walk.mp4", src=lambda c: c.base / "walk30.mp4"), poses=True), A),
     ("video-hostile-name", _video(_vfile(XSS[1] + ".mp4", src=lambda c: c.base / "walk30.mp4")), A),
@@ -1075,7 +1089,8 @@ def _signal(signum, delay, poses=True):
         c.signal, c.exact = (signum, delay), poses
         run, _ = c.out(), c.out("ref")
         if poses:
-            return ["run", cap / "images", "--poses", cap / "transforms.json", "--no-evaluate", "--budget", "8", "--out", run]
+            return ["run", cap / "images", "--poses", cap / "transforms.json", "--no-evaluate", "--budget", "8",
+                    "--out", run]
         (cap / "transforms.json").unlink()
         return ["run", cap / "images", "--no-evaluate", "--budget", "8", "--out", run]
     return build
@@ -1150,7 +1165,8 @@ def main(argv=None) -> int:
             print(("PASS " if r["ok"] else "FAIL ") + r["case"] + ("" if r["ok"] else f"  {r['violations']}"),
                   file=sys.stderr, flush=True)
     order = {c.name: i for i, c in enumerate(all_cases())}
-    path.write_text("".join(json.dumps(r) + "\n" for r in sorted(kept.values(), key=lambda r: order.get(r["case"], 1e9))))
+    path.write_text("".join(json.dumps(r) + "\n"
+                            for r in sorted(kept.values(), key=lambda r: order.get(r["case"], 1e9))))
     fam: dict[str, dict] = {}
     for r in results:
         f = fam.setdefault(r["family"], {"cases": 0, "passed": 0, "failed": 0})

@@ -2,7 +2,8 @@
 error and the time of each global refinement, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
 
     python3 -m research.ba_schedule RUN TRUTH KIND [OPTION=VALUE ...]
-    python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...] [OPTION=VALUE ...]
+    python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...]
+        [OPTION=VALUE ...]
 
 Without ``--curate``: COLMAP's schedule of global adjustments, or OPTION=VALUE overrides of
 pycolmap.IncrementalPipelineOptions (dotted for nested options: ``mapper.ba_global_ignore_redundant_points3D=1``).
@@ -10,10 +11,11 @@ With ``--curate``: curate's own mapping (``map_incremental``, as ``curate sfm`` 
 FIELD=VALUE overrides, and OPTION=VALUE (names that are no SfmConfig field) set on top (past 1,000 photos
 curate's loop, :mod:`curate.sfm.mapping`, choosing each global adjustment's solver by the fill:
 ``direct_ba_max_fill=0`` keeps Ceres' choice, COLMAP's own); with ``--direct-ba N`` that loop maps with
-every global adjustment factored directly up to N photos (COLMAP: 1,000, then iterative). ``--first N`` maps only the first N photos in name order (a shorter capture from the same
+every global adjustment factored directly up to N photos (COLMAP: 1,000, then iterative). ``--first N`` maps
+only the first N photos in name order (a shorter capture from the same
 matches). KIND: ``video`` (TRUTH a ground-truth folder such as ../shared/data/office, RUN from its
-video), ``walk``, ``hall``, ``hall_back`` or ``grid`` (TRUTH a folder research.bench.bench_mapping rendered of that capture, with
-truth.npy) or ``takes``
+video), ``walk``, ``hall``, ``hall_back`` or ``grid`` (TRUTH a folder research.bench.bench_mapping rendered of
+that capture, with truth.npy) or ``takes``
 (TRUTH ``CASE.truth.json:OFFICE``, a case of research.takes and the office folder).
 
 ``global_refinements``: [registered frames, seconds] of each global refinement; for curate's loop

@@ -63,8 +63,8 @@ def pool_of(run: Path, pool: list[int]):
     """(pool cameras, kind, c, a, depths) of a run folder's ``pool``, as ``--budget auto`` sees it."""
     from curate.occupancy.stage import load_node_grid
     from curate.select.auto_budget import pool_views
-    from curate.select.energy import EnergyConfig
-    from curate.select.select import capture_kind
+    from curate.select.config import EnergyConfig
+    from curate.select.methods import capture_kind
     from curate.select.visibility import build_pair_index
     from curate.sfm.io import load_sfm
     pc = load_sfm(run).cameras[pool]

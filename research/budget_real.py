@@ -59,7 +59,9 @@ def measure(scene: str, run: Path, out: Path, ev, fractions, every: int, folds: 
     from curate.field.train import default_box
     from curate.occupancy.stage import load_node_grid, occupancy
     from curate.select.auto_budget import pool_views
-    from curate.select.select import SelectConfig, capture_kind, select
+    from curate.select.config import SelectConfig
+    from curate.select.methods import capture_kind
+    from curate.select.select import select
     from curate.select.spacing import spacing_curve
     from curate.select.visibility import build_pair_index
     from curate.sfm.io import image_paths, load_sfm
@@ -108,7 +110,8 @@ def measure(scene: str, run: Path, out: Path, ev, fractions, every: int, folds: 
                             "psnr": [v["psnr"] for v in res[u.key]["per_view"]]})
             rec["folds"].append({"fold": fold, "pool": pool, "holdout": hold, "curve": rho.tolist(),
                                  "all": all_pv, "points": pts, "seconds": round(time.perf_counter() - t, 1)})
-            print(json.dumps({"scene": scene, "fold": fold, "n_pool": len(pool), "all": round(float(np.mean(all_pv)), 3),
+            print(json.dumps({"scene": scene, "fold": fold, "n_pool": len(pool),
+                              "all": round(float(np.mean(all_pv)), 3),
                               "loss": {p["k"]: round(float(np.mean(all_pv) - np.mean(p["psnr"])), 3) for p in pts}}),
                   flush=True)
     (work / "curve.json").write_text(json.dumps(rec))
@@ -133,7 +136,7 @@ def main(argv=None) -> None:
     ev = EvalConfig(iters=args.iters, max_side=args.max_side, workers=args.workers)
     for scene in [s for s in args.scenes.split(",") if s]:
         run = scene_run(scene, args.out, runs)
-        from curate.select.select import capture_kind
+        from curate.select.methods import capture_kind
         from curate.sfm.io import load_sfm
         walk = capture_kind(load_sfm(run).cameras)[0] == "walk"
         every = 14 if walk else 7

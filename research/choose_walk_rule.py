@@ -61,7 +61,8 @@ def main(argv=None) -> int:
     rivals = [r for r in args.rivals.split(",") if r]
     scores = [score(runs, c, rivals) for c in args.candidates.split(",") if c]
     ranked = rank(scores)
-    print("| rank | candidate | scenes | kind cells | cells behind a rival | worst difference (cell) | mean vs `auto` |")
+    print("| rank | candidate | scenes | kind cells | cells behind a rival | worst difference (cell) "
+          "| mean vs `auto` |")
     print("|---|---|---|---|---|---|---|")
     for i, s in enumerate(ranked, 1):
         print(f"| {i} | `{s['candidate']}` | {s['scenes']} | {s['cells']} | {s['cells_behind']}"

@@ -312,7 +312,8 @@ def map_rounds(cfg, db: Path, images: Path, out: Path, n_images: int, stats: dic
             r += 1
             continue
         best = max(found.values(), key=lambda m: m.num_reg_images())
-        info["rounds"].append({"n_registered": int(best.num_reg_images()), "seconds": round(time.perf_counter() - t, 2)})
+        info["rounds"].append({"n_registered": int(best.num_reg_images()),
+                               "seconds": round(time.perf_counter() - t, 2)})
         break
     info["map_seconds"] = round(time.perf_counter() - t0, 2)
     if final_ba and r > 0:

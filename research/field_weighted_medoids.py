@@ -65,11 +65,12 @@ def main(argv=None) -> int:
     from research.harness import train_key, unit_key       # the harness's unit names and keys
     from curate.evaluate.units import EvalConfig, Unit, eval_cameras, train_unit
     from curate.field.model import RadianceField
-    from curate.select.medoids import MedoidsConfig, embed, medoids_select, path_weights, view_depths, view_distance
+    from curate.select.config import MedoidsConfig
+    from curate.select.medoids import embed, medoids_select, path_weights, view_depths, view_distance
     from curate.field.metrics import render_image
     from curate.occupancy.stage import load_node_grid
     from curate.sfm.io import image_paths, load_sfm
-    from curate.select.select import SelectConfig
+    from curate.select.config import SelectConfig
     from curate.core.stats import holdout_split, paired_difference
     from curate.field.train import default_box, load_image
     from curate.select.visibility import build_pair_index

@@ -66,7 +66,8 @@ def main(argv=None) -> int:
         folds[f"f{fo:02d}"] = fold
     (a.out / "folds.json").write_text(json.dumps(folds))
     print(json.dumps({"photos": len(out_cams), "points": len(sfm.points),
-                      "folds": {k: {s: len(v) for s, v in d.items() if isinstance(v, list)} for k, d in folds.items()}}))
+                      "folds": {k: {s: len(v) for s, v in d.items() if isinstance(v, list)}
+                                for k, d in folds.items()}}))
     return 0
 
 

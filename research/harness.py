@@ -332,8 +332,8 @@ def _variants():
     from research.coverage import CoverageConfig
     from research.medoids_variants import MedoidsVariantConfig as M
     from research.variants import Variant
-    from curate.select.medoids import MedoidsConfig
-    from curate.select.select import SelectConfig
+    from curate.select.config import MedoidsConfig
+    from curate.select.config import SelectConfig
     return {"medoids_p2": Variant("medoids", medoids=M(power=2.0)),
             "medoids_p05": Variant("medoids", medoids=M(power=0.5)),
             "medoids_e25": Variant("medoids", medoids=M(energy_share=0.25)),
@@ -574,7 +574,8 @@ def run_fold(h: Bench, scene: str, run: Path, sfm, paths, grid, measures: PairMe
     a real scene), for :func:`report_folds`."""
     from curate.core.budget import parse_budget, resolve_budget
     from curate.evaluate.units import Unit, eval_cameras, run_units
-    from curate.select.select import SelectConfig, select
+    from curate.select.config import SelectConfig
+    from curate.select.select import select
     from research.variants import Variant, select_variant
     from curate.core.stage import read_stage
     from curate.core.stats import holdout_split
@@ -721,7 +722,7 @@ def parse_blocks(spec: str) -> tuple[int, int, int] | None:
 def write_psnr_plot(series: dict, out: Path) -> Path:
     """SVG of held-out PSNR against the budget, one chart per scene (stacked), under ``out``.
     ``series``: scene -> method -> [(budget, PSNR)]. Returns its path."""
-    from curate.report.charts import line_chart
+    from curate.html.charts import line_chart
     svg = []
     for scene, ser in series.items():
         s = {m: ([x for x, _ in sorted(v)], [y for _, y in sorted(v)]) for m, v in ser.items()}
@@ -746,7 +747,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="office,fox,templering",
                     help="office, fox, templering, skull (real captures), room (a synthetic walk, "
                     "rendered by the harness, with test views off the path too) and walk-<kind>[-<layout>] "
-                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; walk-blur, walk-fast; "
+                    "(hand-held walks of curate.simulate.walks, e.g. walk-corridor, walk-turn-kitchen; "
+                    "walk-blur, walk-fast; "
                     "-s<seed> at the end: another trajectory of the same kind, e.g. walk-loop-office-s2)")
     ap.add_argument("--budgets", default="10%,17%,30%", help="counts or pool fractions, comma separated")
     ap.add_argument("--train-seeds", type=int, default=2, help="trainings per subset of the selection methods")
@@ -797,7 +799,7 @@ def main(argv=None) -> int:
     import logging
     logging.basicConfig(level=logging.WARNING)
     from curate.evaluate.units import EvalConfig
-    from curate.select.select import SelectConfig
+    from curate.select.config import SelectConfig
 
     VARIANTS = _variants()
     out = Path(args.out)

@@ -56,7 +56,8 @@ def main(argv=None) -> int:
                                 path_weights, view_depths, view_distance)
     from curate.occupancy.stage import load_node_grid
     from curate.sfm.io import load_sfm
-    from curate.select.select import SelectConfig, select
+    from curate.select.config import SelectConfig
+    from curate.select.select import select
     from curate.core.stats import holdout_split
     from curate.select.visibility import build_pair_index
 
@@ -102,8 +103,8 @@ def main(argv=None) -> int:
         out[m]["adjacent_per_fold"] = [round(x, 3) for x in v["adjacent"]]
         print(f"{m:10s} {out[m]['adjacent']:9.3f} {out[m]['adjacent_pool']:7.3f} {out[m]['view']:7.3f}   "
               + " ".join(f"{x:.2f}" for x in v["adjacent"]))
-    print(json.dumps({"run": str(run), "budget": args.budget, "every": args.every, "folds": list(folds), "order_share": round(share, 4),
-                      "methods": out}))
+    print(json.dumps({"run": str(run), "budget": args.budget, "every": args.every, "folds": list(folds),
+                      "order_share": round(share, 4), "methods": out}))
     return 0
 
 

@@ -117,7 +117,7 @@ def main(argv=None) -> None:
         models = map_capture(cfg, Path(shutil.copy2(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
                                stats)
         g = stats.get("mappers_tried", {}).get("global", {})
-        seams = []                              # per incremental part: the global model's points it shares with the rest
+        seams = []          # per incremental part: the global model's points it shares with the rest
         for part in sorted(inc.values(), key=lambda r: -r.num_reg_images()):
             names = {part.image(i).name for i in part.reg_image_ids()}
             inside = {im.image_id for im in gbest.images.values() if im.has_pose and im.name in names}

@@ -5,7 +5,8 @@ registrations of a finished run's matches, one JSON line (docs/sfm.md, "Mapping 
 
 POOL: the first POOL photos (name order) of RUN's matches form the pool; the mapping stops after
 REGISTRATIONS photos. The mapping is curate.sfm.mapping (COLMAP's pipeline as a loop of pycolmap's
-steps) under curate's options for a pool of that size (SfmConfig FIELD=VALUE overrides), each step of ``pycolmap.IncrementalMapper`` timed.
+steps) under curate's options for a pool of that size (SfmConfig FIELD=VALUE overrides), each step of
+``pycolmap.IncrementalMapper`` timed.
 """
 from __future__ import annotations
 

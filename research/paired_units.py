@@ -79,7 +79,8 @@ def main(argv=None) -> int:
         d = r["diff"]
         per = ", ".join(f"{f['fold']}: {f['diff']:+.2f}" for f in r["folds"])
         print(f"| {r['budget']} | {len(r['folds'])} ({r['views']}) | {r['a']:.2f} | {r['b']:.2f} | "
-              f"{d['mean']:+.2f} ({d['lo']:+.2f} to {d['hi']:+.2f}) | {r['folds_ahead']} of {len(r['folds'])} | {per} |")
+              f"{d['mean']:+.2f} ({d['lo']:+.2f} to {d['hi']:+.2f}) | {r['folds_ahead']} of {len(r['folds'])} "
+              f"| {per} |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -21,7 +21,7 @@ import numpy as np
 
 def kept_records(run: Path) -> list:
     """The kept PhotoRecords of a run's SfM stage, as ``curate sfm`` held them (``RUN/sfm/images.json``)."""
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     kept = []
     for r in json.loads((run / "sfm" / "images.json").read_text())["photos"]:
         if r.get("status") == "kept":

@@ -29,8 +29,9 @@ def _run(run: Path, gt) -> dict:
     st = json.loads((run / "sfm" / "stage.json").read_text())
     s = st["stats"]
     k = (st.get("config") or {}).get("retrieval_num_images") if s["matcher"] == "retrieval" else None
-    out = {"matcher": s["matcher"], **({"retrieval_num_images": k} if k else {}), "n_kept": s["n_kept"], "registered": s["n_registered"],
-           "pairs_with_geometry": s.get("n_pairs_matched"), "match_s": st["timings"]["match"]}
+    out = {"matcher": s["matcher"], **({"retrieval_num_images": k} if k else {}), "n_kept": s["n_kept"],
+           "registered": s["n_registered"], "pairs_with_geometry": s.get("n_pairs_matched"),
+           "match_s": st["timings"]["match"]}
     if "retrieval_second_round" in s:
         r2 = s["retrieval_second_round"]
         out["second_round"] = {k: r2[k] for k in ("photos", "num_images", "verified", "model_sizes_before",

@@ -12,8 +12,8 @@ The deficient capture is rendered (:data:`SIZE`, 5 frames a second) and made a r
 PHOTOS --no-evaluate`` makes it after SfM: its known poses imported, with stand-ins for its SfM points
 (:func:`sfm_points`: random pixels back-projected with the renderer's depth, 1 cm of noise), from which the
 occupancy stage builds the occupancy as for a real capture. ``curate suggest --add K`` is run on it with its
-defaults and places K poses. Then the same field (:class:`curate.field.model.FieldConfig` defaults, ``--iters`` iterations, one seed,
-one box: the capture's :func:`curate.field.train.default_box`) is trained on
+defaults and places K poses. Then the same field (:class:`curate.field.model.FieldConfig` defaults, ``--iters``
+iterations, one seed, one box: the capture's :func:`curate.field.train.default_box`) is trained on
 
 * ``base``: the deficient capture alone;
 * ``suggest``: the capture + the K suggested poses (rendered);

@@ -86,7 +86,8 @@ def orbit_capture(world, seed: int, n: int = 48, radius: float = 1.3, rise: floa
     from research import suggest_eval as se
     rng = np.random.default_rng(seed)
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    c = world.poi + np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, rise)], 1) + rng.normal(0, 0.05, (n, 3))
+    c = (world.poi + np.stack([radius * np.cos(a), radius * np.sin(a), np.full(n, rise)], 1)
+         + rng.normal(0, 0.05, (n, 3)))
     c = c[~world.occupied(c)]
     w, h = se.SIZE
     f = 0.5 * w / np.tan(np.radians(60) / 2)

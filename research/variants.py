@@ -11,7 +11,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from curate.select.select import Selection, SelectConfig
+from curate.select.config import SelectConfig
+from curate.select.select import Selection
 from research.coverage import CoverageConfig
 from research.medoids_variants import MedoidsVariantConfig
 

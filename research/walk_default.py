@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     from curate.core.stage import current_key, stage_key
     from curate.core.stats import folds_paired, holdout_split
     from curate.evaluate.folds import FOLD_SEED, Fold, eval_budget, fold_order
-    from curate.select.select import resolve_method
+    from curate.select.methods import resolve_method
     from curate.select.stage import read_selection
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import Unit, eval_cameras

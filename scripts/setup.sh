@@ -59,7 +59,7 @@ fi
 WANT="$(sha256sum pyproject.toml | cut -c1-16)"
 HAVE="$(cat .venv/.curate-setup 2>/dev/null || true)"
 # up to date: the same pyproject.toml, and every extra asked for already there (Ray, once installed, stays)
-if "$PY" -c "import curate, pytest, hypothesis" 2>/dev/null && "$PY" -m pip check -q >/dev/null 2>&1 \
+if "$PY" -c "import curate, pytest, hypothesis, ruff" 2>/dev/null && "$PY" -m pip check -q >/dev/null 2>&1 \
    && [ "${HAVE%% *}" = "$WANT" ] && { [ "$EXTRAS" = "test" ] || "$PY" -c "import ray" 2>/dev/null; }; then
   step "curate and its test tools already installed"
 else

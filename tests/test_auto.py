@@ -8,7 +8,9 @@ import pytest
 
 from curate.core.cameras import Cameras, look_at
 from curate.core.grid import NodeGrid
-from curate.select.select import SelectConfig, capture_kind, select
+from curate.select.config import SelectConfig
+from curate.select.methods import capture_kind
+from curate.select.select import select
 from conftest import random_pool, shared_data
 
 

@@ -126,7 +126,8 @@ COMMANDS = {
     "score": lambda p, out: ["score", str(p), "--res", "8"],
     "select": lambda p, out: ["select", str(p), "--budget", "4", "--res", "8", "--out", str(out)],
     "sfm": lambda p, out: ["sfm", "--poses", str(p), "--out", str(out)],
-    "run": lambda p, out: ["run", "--poses", str(p), "--out", str(out), "--budget", "4", "--iters", "2", "--folds", "2"],
+    "run": lambda p, out: ["run", "--poses", str(p), "--out", str(out), "--budget", "4", "--iters", "2",
+                           "--folds", "2"],
 }
 
 
@@ -166,7 +167,8 @@ OPTIONS = [
     (["--gamma", "nan"], "gamma"), (["--box=0,0,0,1,1"], "six numbers"), (["--box=0,0,0,inf,1,1"], "finite"),
     (["--box=0,0,0,nan,1,1"], "finite"), (["--box=1,0,0,0,1,1"], "max"), (["--bins", "0x10"], "--bins"),
     (["--bins", "ax3"], "--bins"), (["--res", "0"], "res"), (["--device", "gpu9"], "--device"),
-    (["--device", "cuda"], "--device"), (["--method", "best"], "--method"), (["--export-mode", "move"], "--export-mode"), (["--bins", "99999999999x2"], "--bins"),
+    (["--device", "cuda"], "--device"), (["--method", "best"], "--method"),
+    (["--export-mode", "move"], "--export-mode"), (["--bins", "99999999999x2"], "--bins"),
     (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "--max-size"),
     (["--budget", "-5%"], "--budget"), (["--sift-peak-threshold", "-1"], "--sift-peak-threshold"),
     (["--sift-peak-threshold", "2"], "--sift-peak-threshold"), (["--eval-minutes", "-1"], "--eval-minutes"),
@@ -194,7 +196,8 @@ def test_folders_given_wrong(good, tmp_path, capsys):
     empty.mkdir()
     cases = [
         (["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(f)], "a file"),
-        (["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(users)], "did not create"),
+        (["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(users)],
+         "did not create"),
         (["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(good / "images" / "r")],
          "inside the photo folder"),
         (["run", str(good / "images"), "--poses", str(good / "transforms.json"), "--out", str(good)], "inside the run"),
@@ -253,7 +256,7 @@ def test_the_field_decodes_16_bit_grey_and_exif_rotation_like_ingest(tmp_path):
     white; an EXIF-rotated JPEG is upright."""
     from PIL import Image
     from curate.field.train import load_image
-    from curate.sfm.ingest import read_image
+    from curate.core.images import read_image
     a = np.full((30, 40), 32768, np.uint16)
     Image.fromarray(a).save(tmp_path / "grey16.tif")
     got = load_image(tmp_path / "grey16.tif", 40, 30)
@@ -334,7 +337,8 @@ def test_a_disk_too_full_for_colmaps_database_is_a_one_line_error_before_it(tmp_
     assert cli.main(["sfm", str(photos), "--out", str(tmp_path / "run")]) == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert last.startswith("curate sfm: error: not enough free space") and "MB are free" in last
-    assert not (tmp_path / "run" / "sfm" / "stage.json").exists() and not (tmp_path / "run" / "sfm" / "database.db").exists()
+    assert (not (tmp_path / "run" / "sfm" / "stage.json").exists()
+            and not (tmp_path / "run" / "sfm" / "database.db").exists())
     assert tree_hash(photos) == before
 
 

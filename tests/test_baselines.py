@@ -2,11 +2,12 @@
 
 import numpy as np
 
-from curate.select.baselines import (farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset, random_subset,
-                              stride_subset)
+from curate.select.baselines import (farthest_view, fibonacci_hemisphere, hemisphere_cameras, hemisphere_subset,
+                                     random_subset, stride_subset)
 from curate.core.cameras import Cameras, look_at
 from curate.core.grid import NodeGrid
-from curate.select.select import SelectConfig, select
+from curate.select.config import SelectConfig
+from curate.select.select import select
 from conftest import random_pool
 
 
@@ -57,7 +58,8 @@ def test_hemisphere_subset_picks_spread_views():
 def test_select_dispatch_fills_energy_for_every_method():
     cams = random_pool(40, seed=9)
     grid = NodeGrid([-1, -1, -1], [1, 1, 1], 6)
-    results = {m: select(cams, grid, 8, SelectConfig(method=m, seed=3)) for m in ("energy", "random", "fvs", "stride", "medoids", "path")}
+    results = {m: select(cams, grid, 8, SelectConfig(method=m, seed=3))
+               for m in ("energy", "random", "fvs", "stride", "medoids", "path")}
     for m, sel in results.items():
         assert len(sel.chosen) == 8 and len(sel.energy) == 8 and np.all(np.isfinite(sel.energy)), m
     # Greedy maximises the energy step by step: its first pick beats any other single camera,

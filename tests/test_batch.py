@@ -16,8 +16,8 @@ from curate.batch.runner import find_poses, plan, read_list
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8", "--folds", "2", "--refine-iters", "40",
-        "--refine-size", "32"]
+FAST = ["--iters", "10", "--eval-size", "48", "--random-seeds", "2", "--res", "16", "--budget", "8", "--folds", "2",
+        "--refine-iters", "40", "--refine-size", "32"]
 
 
 def make_pool(dst: Path, frames: range) -> Path:
@@ -176,8 +176,9 @@ def test_batch_budget_auto_chooses_per_folder(folders, tmp_path):
     out = tmp_path / "runs_auto"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     res = subprocess.run([sys.executable, "-m", "curate", "batch", *map(str, folders), "--out", str(out),
-                          "--budget", "auto", "--budget-tolerance", "1", "--no-evaluate", "--res", "16", "--iters", "10",
-                          "--executor", "local", "--jobs", "1"], env=env, capture_output=True, text=True, timeout=900)
+                          "--budget", "auto", "--budget-tolerance", "1", "--no-evaluate", "--res", "16",
+                          "--iters", "10", "--executor", "local", "--jobs", "1"],
+                         env=env, capture_output=True, text=True, timeout=900)
     assert res.returncode == 1, res.stdout + res.stderr      # the broken folder fails, the others go on
     rows = {r["name"]: r for r in json.loads((out / "summary.json").read_text())["rows"]}
     assert rows["broken"]["status"] == "failed"

@@ -123,10 +123,12 @@ def test_transforms_camera_angle_x_and_image_size_from_file(tmp_path):
     gl = np.eye(4)
     gl[:3, 3] = [0, 0, 4]  # OpenGL camera at +4 z looking down -z: towards the origin
     (tmp_path / "transforms.json").write_text(json.dumps(
-        {"camera_angle_x": 2 * math.atan(0.5), "frames": [{"file_path": "./train/r_0", "transform_matrix": gl.tolist()}]}))
+        {"camera_angle_x": 2 * math.atan(0.5),
+         "frames": [{"file_path": "./train/r_0", "transform_matrix": gl.tolist()}]}))
     cams, files = read_transforms(tmp_path / "transforms.json")
     # tan(angle/2) = 0.5 -> fx = 0.5 * w / 0.5 = w.
-    assert cams.width[0] == 200 and cams.height[0] == 100 and np.isclose(cams.fx[0], 200) and np.isclose(cams.fy[0], 200)
+    assert (cams.width[0] == 200 and cams.height[0] == 100 and np.isclose(cams.fx[0], 200)
+            and np.isclose(cams.fy[0], 200))
     assert np.isclose(cams.cx[0], 100) and np.isclose(cams.cy[0], 50)
     assert np.allclose(cams.view_dirs[0], [0, 0, -1])
     assert files[0].endswith("r_0.png")

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.select.energy import EnergyConfig, compute_energy
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy
 from curate.core.grid import NodeGrid
 from curate.core.transforms_json import write_transforms
 from conftest import random_pool, shared_data
@@ -166,7 +167,8 @@ def test_a_mistyped_flag_names_the_commands_help_and_the_nearest_flag(capsys):
     assert err.endswith("(see curate select --help)")
     err = _err(capsys, "run", "--itres", "3", "--budjet", "4", "--out", "o")
     assert "--itres (did you mean --iters" in err and "--budjet (did you mean --budget?)" in err
-    assert _err(capsys, "report", "RUN", "--colour").endswith("unrecognized argument --colour (see curate report --help)")
+    assert _err(capsys, "report", "RUN", "--colour").endswith(
+        "unrecognized argument --colour (see curate report --help)")
     assert "unexpected argument extra" in _err(capsys, "run", "photos", "extra", "--out", "o")
     # an abbreviation argparse accepts is not a typo; an ambiguous one is argparse's message
     assert "ambiguous option: --bud" in _err(capsys, "run", "--bud", "3", "--out", "o")

@@ -96,7 +96,7 @@ def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_pat
     from curate.core.cameras import Cameras, look_at
     from curate.sfm.continuity import drop_off_path
     from curate.sfm.model import reconstruction_from_cameras
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     from curate.sfm.stage import split_warning
     t, c = walk(60)
     c[20:24] += [2.0, 2.0, 0.0]
@@ -160,7 +160,7 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     from curate.core.cameras import Cameras, look_at
     from curate.sfm.continuity import drop_off_path, jumps_along
     from curate.sfm.model import reconstruction_from_cameras
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     from curate.sfm.stage import path_warning
     t, c = walk(60)
     c[30:] += [3.0, 0.0, 0.0]
@@ -208,7 +208,7 @@ def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_n
     from curate.core.cameras import Cameras, look_at
     from curate.sfm.continuity import drop_off_path, jumps_along
     from curate.sfm.model import reconstruction_from_cameras
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     from curate.sfm.stage import path_warning
     t, c = walk(60)
     c[30:] += [3.0, 0.0, 0.0]

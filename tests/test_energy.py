@@ -7,7 +7,8 @@ import pytest
 
 from curate.select.bins import DirectionBins
 from curate.core.cameras import Cameras, look_at
-from curate.select.energy import EnergyConfig, compute_energy, energy_reference, total_variation
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy, energy_reference, total_variation
 from curate.core.grid import NodeGrid, box_from_cameras
 from curate.select.visibility import FrustumVisibility, build_pair_index, frustum_visible_reference
 from conftest import random_pool

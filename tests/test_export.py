@@ -213,7 +213,8 @@ def test_a_file_the_user_changed_in_the_export_is_never_removed(import_run, firs
     for mode in ("link", "copy"):
         with pytest.raises(ValueError, match=f"{img.name} was changed since curate exported it"):
             export_subset(run, list(cams.names[:3]), out, mode=mode)
-        assert img.read_bytes() == b"edited by the user" and sorted(p.name for p in (out / "images").iterdir()) == listing
+        assert (img.read_bytes() == b"edited by the user"
+                and sorted(p.name for p in (out / "images").iterdir()) == listing)
     img.unlink()                                                           # the user moved it out
     export_subset(run, list(cams.names[:3]), out, mode="copy")
     tj = out / "transforms.json"

@@ -155,7 +155,8 @@ def test_errors_for_degenerate_inputs(sphere_scene):
     cams, imgs = sphere_scene
     with pytest.raises(ValueError, match="at least 2"):
         train_field(_tiny_cfg(), cams[:1], imgs[:1], iters=5)
-    same = Cameras(look_at(np.zeros((3, 3)) + 2.0, np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0.]])), 20, 20, 12, 12, 24, 24)
+    same = Cameras(look_at(np.zeros((3, 3)) + 2.0, np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0.]])),
+                   20, 20, 12, 12, 24, 24)
     with pytest.raises(ValueError, match="one point"):
         train_field(_tiny_cfg(), same, imgs[:3], iters=5)
     with pytest.raises(ValueError, match="images for"):

@@ -5,7 +5,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from curate.core.cameras import Cameras
-from curate.select.energy import EnergyConfig, compute_energy, energy_of_subset
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy, energy_of_subset
 from curate.core.grid import NodeGrid
 from curate.select.greedy import GreedyState, bruteforce_scores, greedy_select, greedy_select_bruteforce, trace_energy
 from curate.select.visibility import build_pair_index

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from curate.select.energy import EnergyConfig, compute_energy
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy
 from curate.core.grid import NodeGrid
 from curate.select.select import score_cameras
 from curate.select.visibility import build_pair_index

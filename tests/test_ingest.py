@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from curate.sfm.ingest import find_images, ingest, read_image, working_name
+from curate.core.images import read_image
+from curate.sfm.ingest import find_images, ingest, working_name
 from curate.sfm.quality import assess, hamming, phash, sharpness
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from curate.core.cameras import Cameras, look_at
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.core.grid import NodeGrid
-from curate.select.medoids import MedoidsConfig, medoids_select, view_depths
-from curate.select.select import SelectConfig, Selection, select
+from curate.select.config import MedoidsConfig
+from curate.select.medoids import medoids_select, view_depths
+from curate.select.config import SelectConfig
+from curate.select.select import Selection, select
 from curate.core.stage import config_from_dict
 from curate.select.visibility import build_pair_index
 from conftest import random_pool
@@ -81,7 +83,8 @@ def test_voronoi_local_optimum_and_cost(seed, initial, depth):
     assert np.all(np.diff(cost) <= 1e-12 * max(1.0, cost[0]))
     assert np.isclose(cost[-1], final, rtol=1e-10, atol=0)
     # the iteration is worth something: no worse than the greedy farthest-point start alone
-    start, _ = medoids_select(cams, budget, MedoidsConfig(depth=depth, max_iters=0, path_weights=False), initial, nodes, idx)
+    start, _ = medoids_select(cams, budget, MedoidsConfig(depth=depth, max_iters=0, path_weights=False),
+                              initial, nodes, idx)
     assert final <= mean_min(D, list(initial) + start, power) + 1e-12
 
 

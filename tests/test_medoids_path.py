@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from curate.core.cameras import Cameras, look_at
-from curate.select.medoids import PATH_CAP, MedoidsConfig, embed, medoids_select, path_weights
+from curate.select.config import MedoidsConfig
+from curate.select.medoids import PATH_CAP, embed, medoids_select, path_weights
 
 
 def walk(x, y=None, yaw=None):
@@ -78,9 +79,11 @@ def test_shuffled_photos_are_not_a_path():
     from curate.select.medoids import PathOrderWarning
     with pytest.warns(PathOrderWarning, match="capture order"):
         got, _ = medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=True))
-    assert got == medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=False))[0]    # falls back to plain medoids
+    # falls back to plain medoids
+    assert got == medoids_select(cams, 6, MedoidsConfig(depth=1.0, path_weights=False))[0]
     from curate.core.grid import NodeGrid
-    from curate.select.select import SelectConfig, select
+    from curate.select.config import SelectConfig
+    from curate.select.select import select
     sel = select(cams, NodeGrid([-1, 0, -1], [11, 2, 1], 6), 6,
                  SelectConfig("medoids", medoids=MedoidsConfig(depth=1.0, path_weights=True)))
     assert sel.chosen == got and "path weights ignored" in sel.to_dict()["note"]   # said in selection.json
@@ -157,7 +160,8 @@ def test_cli_path_weights_flag(tmp_path):
         cfg = json.loads((out / "selection.json").read_text())["config"]["medoids"]
         assert cfg["path_weights"] is (flag == "--path-weights")
     from curate.core.grid import NodeGrid
-    from curate.select.select import SelectConfig, select
+    from curate.select.config import SelectConfig
+    from curate.select.select import select
     grid = NodeGrid([-1, 0.5, -1], [11, 2, 1], 8)
     for flag, on in (("--path-weights", True), ("--no-path-weights", False)):
         ref = select(walk(x), grid, 5, SelectConfig("medoids", medoids=MedoidsConfig(path_weights=on))).chosen

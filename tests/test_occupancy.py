@@ -98,7 +98,7 @@ def test_refine_occupancy_modes():
 
 def test_prior_mask_limits_field_cells():
     from curate.field.model import FieldConfig, RadianceField
-    from curate.occupancy.masks import prior_mask
+    from curate.field.model import prior_mask
     f = RadianceField(FieldConfig(res_schedule=(33,)), [-1] * 3, [1] * 3)
     m = np.zeros((8, 8, 8), bool)
     m[:4] = True  # x < 0 half occupied

@@ -14,8 +14,8 @@ from curate.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "data_samples" / "room_walk"
-TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12", "--triangulate", "off",
-        "--folds", "2", "--refine-iters", "40", "--refine-size", "32"]
+TINY = ["--iters", "15", "--eval-size", "32", "--random-seeds", "1", "--workers", "1", "--res", "12",
+        "--triangulate", "off", "--folds", "2", "--refine-iters", "40", "--refine-size", "32"]
 
 
 def _run(out: Path, *extra: str) -> list[str]:
@@ -78,9 +78,11 @@ def test_a_report_never_shows_another_selections_evaluation(tmp_path, capsys):
     assert main(["evaluate", str(run)]) == 0
     rec = json.loads((run / "evaluate" / "stage.json").read_text())   # recorded last, as every stage
     summ = json.loads((run / "evaluate" / "summary.json").read_text())
-    assert rec["key"] == summ["key"] and rec["inputs"] == {"select": json.loads((run / "select" / "stage.json").read_text())["key"]}
+    assert rec["key"] == summ["key"] and rec["inputs"] == {
+        "select": json.loads((run / "select" / "stage.json").read_text())["key"]}
     rep = _rep(run)
-    assert rep["evaluation"]["status"] == "current" and rep["estimate"]["budget"] == round(8 * rep["estimate"]["n_pool"] / 160)
+    assert (rep["evaluation"]["status"] == "current"
+            and rep["estimate"]["budget"] == round(8 * rep["estimate"]["n_pool"] / 160))
     assert rep["methods"]["selection"]["n_train"] == rep["estimate"]["budget"]
 
 
@@ -164,7 +166,8 @@ def test_the_verdict_names_every_rival_with_its_interval_what_it_decides_and_the
     assert "ahead of random subsets of the same size (+1.77 dB, 95% interval +0.52 to +3.02)" in v["quality"]
     assert "not told apart from farthest-view sampling (FVS) (+1.06 dB, 95% interval -0.28 to +2.40)" in v["quality"]
     assert "level with every n-th frame, within 0.3 dB (+0.05 dB" in v["quality"]
-    assert "67% of the gap" in v["quality"] and "55 of the 261" in v["quality"] and "6 of 14 hold-out folds" in v["quality"]
+    assert ("67% of the gap" in v["quality"] and "55 of the 261" in v["quality"]
+            and "6 of 14 hold-out folds" in v["quality"])
     assert "`curate evaluate RUN --eval-minutes 30`" in v["quality"]          # how to narrow it: more time
     assert v["short"] == ("ahead of random +1.77 dB [+0.52, +3.02]; not told apart from FVS +1.06 dB [-0.28, +2.40]; "
                           "level with every n-th frame +0.05 dB [-0.20, +0.25]; gap closed 67%; 6 of 14 folds")
@@ -192,7 +195,8 @@ def test_the_budget_advice_says_what_was_measured_and_exported_beside_the_law_an
                 "measured": {"budget": 90, "low": 75, "high": 110, "tolerance_db": 0.5}}
     rep = {"n_candidates": 160, "selection": {"chosen": list(range(90)), "budget_auto": measured}}
     hm = verdict(rep)["how_many"]
-    assert "measured on this capture, about 90 (75 to 110) photos come within 0.5 dB of all of them; 90 were exported" in hm
+    assert ("measured on this capture, about 90 (75 to 110) photos come within 0.5 dB of all of them; "
+            "90 were exported") in hm
     assert "predicted 60 (48 to 62)" in hm
 
 

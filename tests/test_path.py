@@ -11,7 +11,8 @@ from curate.core.grid import NodeGrid
 from curate.select.baselines import stride_subset
 from curate.select.medoids import embed, path_steps, view_depths
 from curate.select.path import arc_length, path_select, snap, targets
-from curate.select.select import SelectConfig, select
+from curate.select.config import SelectConfig
+from curate.select.select import select
 from curate.select.visibility import build_pair_index
 from conftest import random_pool
 
@@ -128,7 +129,8 @@ def test_select_runs_path_on_a_path_and_falls_back_to_medoids_with_a_note():
     walk = line_walk(np.full(99, 0.1))
     index = build_pair_index(walk, grid.nodes(), SelectConfig().energy.bins)
     sel = select(walk, grid, 10, SelectConfig("path"), index=index)
-    assert sel.method == "path" and sel.chosen == path_select(walk, 10, nodes=grid.nodes(), index=index) and not sel.note
+    assert (sel.method == "path" and sel.chosen == path_select(walk, 10, nodes=grid.nodes(), index=index)
+            and not sel.note)
     assert len(sel.energy) == 10 and np.all(np.isfinite(sel.energy))
     pool = random_pool(60, seed=2)                                 # photos in no order
     fb = select(pool, grid, 8, SelectConfig("path"))

@@ -55,7 +55,8 @@ def test_run_killed_during_training_resumes_without_redoing_finished_stages(tmp_
     assert not (run / "report.json").exists()
     assert not (run / "evaluate" / "f00_random_s0" / "stage.json").exists()
     before = _mtimes(run)
-    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json", "evaluate/f00_selection/stage.json"} <= set(before)
+    assert {"sfm/stage.json", "occupancy/stage.json", "select/stage.json",
+            "evaluate/f00_selection/stage.json"} <= set(before)
 
     res = subprocess.run(_cmd(run), env=_env(), capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -301,9 +302,10 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
 
     monkeypatch.setattr(sfm_stage, "run", fake_sfm)
     from curate.config import RunConfig
-    from curate.select.select import SelectConfig
+    from curate.select.config import SelectConfig
     from curate.sfm.config import SfmConfig
-    cfg = RunConfig(budget=budget, run_evaluation=False, sfm=SfmConfig(on_split="each", progress=False, triangulate="off"),
+    cfg = RunConfig(budget=budget, run_evaluation=False,
+                    sfm=SfmConfig(on_split="each", progress=False, triangulate="off"),
                     select=SelectConfig(method="medoids"))
     out = tmp_path / "run"
     pipeline.run(cfg, None, out, poses="SPLIT")
@@ -311,7 +313,8 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
     main_sel = json.loads((out / "select" / "selection.json").read_text())
     part_sel = json.loads((out / "parts" / "1" / "select" / "selection.json").read_text())
     if budget == "16":
-        assert len(main_sel["chosen"]) == round(16 * 100 / len(cams)) and len(part_sel["chosen"]) == round(16 * n1 / len(cams))
+        assert (len(main_sel["chosen"]) == round(16 * 100 / len(cams))
+                and len(part_sel["chosen"]) == round(16 * n1 / len(cams)))
     else:
         for sel, n_part in ((main_sel, 100), (part_sel, n1)):     # each from its own part, not the capture
             auto = sel["budget_auto"]

@@ -7,8 +7,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 from PIL import Image
 
-from curate.report.charts import bar_chart, camera_map, line_chart, text_of
-from curate.report.plots import colormap, jpeg_data_uri, png_data_uri
+from curate.html.charts import bar_chart, camera_map, line_chart, text_of
+from curate.html.plots import colormap, jpeg_data_uri, png_data_uri
 
 
 def test_charts_are_inline_svg_holding_their_data():
@@ -25,7 +25,8 @@ def test_bar_values_sit_above_their_error_bars_and_a_cut_axis_is_said():
     ET.fromstring(s)
     t = text_of(s)
     assert "25.10" in t and "24.80" in t and "n/a" in t and "nan" not in t.lower()
-    assert "starts at" in t                                                # bars near 25 dB: the axis is cut, and says so
+    # bars near 25 dB: the axis is cut, and says so
+    assert "starts at" in t
     assert "starts at" not in text_of(bar_chart(["a", "b"], [2.0, 1.0]))  # far apart: from 0, nothing to say
 
 
@@ -36,7 +37,7 @@ def test_camera_map_legend_shows_each_mark_as_drawn():
     assert all(w in text_of(s) for w in ("pool", "chosen", "held out"))
     # held-out views are hollow squares, in the map and in its legend alike
     from matplotlib.colors import to_rgba
-    from curate.report.charts import camera_map_figure
+    from curate.html.charts import camera_map_figure
     fig, ax = camera_map_figure(np.zeros((4, 2)) + [[0, 0], [1, 0], [0, 1], [1, 1]], np.ones((4, 2)), [1], "c",
                                 extra_xy=[[0.5, 0.5]])
     leg = {t.get_text(): h for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)}

@@ -262,7 +262,8 @@ def test_points_warning_says_why():
     from curate.export.stage import points_warning
     assert points_warning({"n_points3D": 500}) is None
     off = points_warning({"n_points3D": 0}, {"mode": "import", "stats": {"triangulation": {"status": "off"}}})
-    assert off.startswith("the export has no 3D points: 3DGS needs an initial point cloud") and "--triangulate auto" in off
+    assert (off.startswith("the export has no 3D points: 3DGS needs an initial point cloud")
+            and "--triangulate auto" in off)
     few = points_warning({"n_points3D": 12, "n_points3D_source": 900}, {"mode": "sfm", "stats": {}})
     assert few.startswith("the export has only 12 3D points") and "larger budget" in few
 

@@ -5,7 +5,8 @@ import pytest
 
 from curate.select.energy import compute_energy
 from curate.core.grid import NodeGrid
-from curate.simulate.progressive import CameraSpec, ProgressiveConfig, progressive_placement, random_cameras, scene_oracle
+from curate.simulate.progressive import (CameraSpec, ProgressiveConfig, progressive_placement, random_cameras,
+                                         scene_oracle)
 from curate.simulate.synthetic import make_scene
 
 

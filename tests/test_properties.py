@@ -3,7 +3,8 @@
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from curate.select.energy import EnergyConfig, compute_energy
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy
 from curate.core.grid import NodeGrid
 from conftest import random_pool
 

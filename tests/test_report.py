@@ -29,7 +29,8 @@ def make_run(root: Path, evaluated: bool = True) -> Path:
     for nm in names:
         Image.fromarray(rng.integers(0, 255, (48, 64, 3), np.uint8)).save(run / "sfm" / "images" / nm)
     (run / "sfm" / "images.json").write_text(json.dumps({"photos": [
-        {"original": f"/photos/{nm}", "rel": nm, "working": nm, "status": "kept", "registered": True} for nm in names]}))
+        {"original": f"/photos/{nm}", "rel": nm, "working": nm, "status": "kept", "registered": True}
+        for nm in names]}))
     hold, chosen = [0, 5], [3, 7, 1]
     sel = {"method": "energy", "budget": 3, "holdout_every": 0, "holdout": [], "pool": list(range(n)), "chosen": chosen,
            "chosen_names": [names[i] for i in chosen], "energy": [10.5, 17.25, 20.125], "angular": [0.5, 1.25, 2.125],
@@ -96,7 +97,8 @@ def test_report_with_evaluation(tmp_path):
     # 3 thumbnails + 2 held-out views x (gt + selection, random, fvs, all) + 2 floor plans
     assert len(srcs) == 3 + 2 * 5 + 2
     assert all(s.startswith("data:image/") for s in srcs)
-    assert "http://" not in re.sub(r"http://www\.w3\.org/[\w/.]+", "", page) and "https://" not in page  # namespaces only
+    # namespaces only
+    assert "http://" not in re.sub(r"http://www\.w3\.org/[\w/.]+", "", page) and "https://" not in page
     assert page.count("<svg") >= 6  # bars, 2 colour bars, 2 floor plans, camera map, energy curves
     assert "Not available" not in page  # no section failed
 
@@ -247,8 +249,8 @@ def test_an_out_of_date_evaluation_is_never_shown_as_this_selections(tmp_path):
 
 def test_the_camera_map_labels_the_axes_it_plots():
     """The top-down map's axis labels are the world axes it draws (z up: x right, y up; y up: z, x)."""
-    from curate.report.charts import camera_map, text_of
-    from curate.report.plots import top_down_axes
+    from curate.html.charts import camera_map, text_of
+    from curate.html.plots import top_down_axes
     c = np.array([[0.0, 0, 1], [1, 0, 1], [0, 1, 1]])
     for up, target in ((2, np.array([0.5, 0.5, 0.0])), (1, np.array([0.5, 2.0, 0.5]))):
         cams = Cameras(look_at(c if up == 2 else c[:, [0, 2, 1]], np.zeros((3, 3)) + target), 50, 50, 32, 24, 64, 48)
@@ -260,7 +262,8 @@ def test_the_camera_map_labels_the_axes_it_plots():
 
 @pytest.mark.parametrize("given, says", [
     ("auto", "how many: <code>--budget auto</code>, 0.5 dB)"),
-    ("default: auto (an object capture)", "how many: <code>--budget default</code>, auto for an object capture, 0.5 dB)")])
+    ("default: auto (an object capture)",
+     "how many: <code>--budget default</code>, auto for an object capture, 0.5 dB)")])
 def test_the_first_screen_names_the_budget_the_user_gave(tmp_path, given, says):
     """The default budget on an object capture is auto's advice: the verdict's first line names the budget as the
     user gave it (`--budget default`, and what it meant), not a flag they never typed."""

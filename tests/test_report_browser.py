@@ -17,16 +17,19 @@ pytestmark = pytest.mark.slow
 
 PROBE = """<script>
 window.__errs = [];
-window.addEventListener('error', e => window.__errs.push(String(e.message || (e.target && (e.target.src || e.target.href)))), true);
+window.addEventListener('error', e => window.__errs.push(String(e.message || \
+(e.target && (e.target.src || e.target.href)))), true);
 const __ce = console.error; console.error = (...a) => { window.__errs.push(a.join(' ')); __ce(...a); };
 window.addEventListener('load', () => {
   const imgs = [...document.images];
   const bad = imgs.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.alt || i.src.slice(0, 40));
-  const wide = [...document.body.querySelectorAll('*')].filter(e => e.getBoundingClientRect().right > window.innerWidth + 1
+  const wide = [...document.body.querySelectorAll('*')].filter(e => e.getBoundingClientRect().right > \
+window.innerWidth + 1
       && !e.closest('.scroll')).map(e => e.tagName + '.' + e.className);
   const row = document.querySelector('table.renders tr:nth-child(2)');
   const cols = row ? [...row.querySelectorAll('td')].map(td => {
-      const im = td.querySelector('img'); return [td.getBoundingClientRect().width, im ? im.getBoundingClientRect().width : 0]; }) : [];
+      const im = td.querySelector('img'); \
+return [td.getBoundingClientRect().width, im ? im.getBoundingClientRect().width : 0]; }) : [];
   const r = {scroll: document.documentElement.scrollWidth, inner: window.innerWidth, images: imgs.length,
              bad: bad, errors: window.__errs, wide: wide.slice(0, 5), render_cols: cols};
   document.body.setAttribute('data-check', JSON.stringify(r));

@@ -47,7 +47,8 @@ def tree_hash(root: Path) -> dict[str, str]:
 
 
 def project(dst: Path, n: int = 30) -> Path:
-    """A small posed capture: the first ``n`` photos of the sample walk in ``dst/images`` and ``dst/transforms.json``."""
+    """A small posed capture: the first ``n`` photos of the sample walk in ``dst/images`` and
+    ``dst/transforms.json``."""
     tj = json.loads((SAMPLE / "transforms.json").read_text())
     tj["frames"] = tj["frames"][:n]
     (dst / "images").mkdir(parents=True)
@@ -387,7 +388,8 @@ def test_a_worker_whose_run_lost_the_lock_does_not_write_its_unit(tmp_path):
         cams = eval_cameras(sfm.cameras, ev.max_side)
         paths = image_paths(r, list(sfm.cameras.names), sfm.records)
         old = rf.held_token(r)
-        args = (str(r), Unit("selection", "selection", None, [1, 2, 3]), ev, cams, paths, [0, 6], default_box(sfm.cameras))
+        args = (str(r), Unit("selection", "selection", None, [1, 2, 3]), ev, cams, paths, [0, 6],
+                default_box(sfm.cameras))
         m = train_unit(*args, "key1", None, old)  # the holder's own worker writes
         assert (r / "evaluate" / "selection" / "stage.json").is_file() and m["n_train"] == 3
     with rf.claimed(run):  # another run took the folder

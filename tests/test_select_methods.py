@@ -11,7 +11,8 @@ import pytest
 from curate.core.grid import NodeGrid
 from curate.select import methods
 from curate.select.methods import REGISTRY, Method, get_method, method_help, method_label
-from curate.select.select import Selection, SelectConfig, select
+from curate.select.config import SelectConfig
+from curate.select.select import Selection, select
 from conftest import random_pool
 
 

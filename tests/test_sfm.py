@@ -47,7 +47,8 @@ def test_umeyama_recovers_similarity():
 def test_pose_errors_zero_for_similar_copy():
     ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     c = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full(12, 0.5)], 1)
-    ref = Cameras(look_at(c, np.zeros((12, 3))), 500, 500, 320, 240, 640, 480, names=tuple(f"{i}.jpg" for i in range(12)))
+    ref = Cameras(look_at(c, np.zeros((12, 3))), 500, 500, 320, 240, 640, 480,
+                  names=tuple(f"{i}.jpg" for i in range(12)))
     R = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])
     est = Cameras(ref.transformed(0.3, R, [5, 0, 0]).c2w, 500, 500, 320, 240, 640, 480,
                   names=tuple(f"images/{i}.png" for i in range(12)))
@@ -188,7 +189,8 @@ def test_a_global_model_must_gain_enough_photos_to_replace_the_incremental_one(m
 @pytest.mark.parametrize("dis, ties, alone, kept, n", [
     ([1.2, 2.9, 0.5], True, False, "global", 10),         # agrees with every part and ties them together: whole
     ([1.2, 2.9, 0.5], False, True, "incremental", 5),     # agrees, but nothing ties the smaller parts to the largest
-    ([1.2, 2.9, 14.0], True, True, "global", 8),          # bent the smallest part: it leaves, however its frames look alone
+    ([1.2, 2.9, 14.0], True, True, "global", 8),          # bent the smallest part: it leaves, however its frames
+                                                          # look alone
     ([14.0, 1.0, 1.0], True, True, "incremental", 5),     # bent the largest: what is left is no larger than it
     ([1.0, None, 1.0], True, False, "global", 7),         # a part too small to check, whose frames fail on their own
     ([1.0, None, 1.0], True, True, "global", 10),         # ... or pass on their own: kept (issue 36)
@@ -364,10 +366,10 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
 def test_curates_mapping_loop_maps_as_colmaps_pipeline_with_either_solver(fox_run, tmp_path, monkeypatch):
     """The fox's matches mapped by COLMAP's pipeline and by curate.sfm.mapping (COLMAP's steps in Python,
     each global adjustment's solver chosen by the fill), with Ceres' direct-solve limit lowered to 55
-    photos (above its dense-solve limit, 50) so that the choice is made: with a fill bar no model reaches (every adjustment direct, as
-    COLMAP solves a model of 67 photos) and with one every model passes (iterative past 55 photos), the
-    same photos registered in one model, at the same poses; ``map_incremental`` takes that path past the limit and
-    ``map_capture`` records each choice in the stage's stats."""
+    photos (above its dense-solve limit, 50) so that the choice is made: with a fill bar no model reaches (every
+    adjustment direct, as COLMAP solves a model of 67 photos) and with one every model passes (iterative past 55
+    photos), the same photos registered in one model, at the same poses; ``map_incremental`` takes that path past the
+    limit and ``map_capture`` records each choice in the stage's stats."""
     import shutil
 
     from curate.sfm import mapping

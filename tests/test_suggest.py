@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from curate.core.cameras import Cameras, look_at
-from curate.select.energy import EnergyConfig, compute_energy
+from curate.select.config import EnergyConfig
+from curate.select.energy import compute_energy
 from curate.suggest.candidates import Envelope, Feasibility, capture_envelope, make_cameras, up_vector
 from curate.suggest.freespace import cast_free_space, probe_directions, voxel_index
 from curate.suggest.guide import instruction, nearest_frames
@@ -226,7 +227,8 @@ def test_instruction_in_the_walkers_frame():
 
 
 def test_nearest_frame_weighs_where_it_stands_and_where_it_looks():
-    cap = Cameras.concat([_cam([0.0, 0, 0], [1.0, 0, 0]), _cam([0.3, 0, 0], [0.3, -1, 0]), _cam([3.0, 0, 0], [4, 0, 0])])
+    cap = Cameras.concat([_cam([0.0, 0, 0], [1.0, 0, 0]), _cam([0.3, 0, 0], [0.3, -1, 0]),
+                          _cam([3.0, 0, 0], [4, 0, 0])])
     s = _cam([0.4, 0.0, 0], [1.4, 0.1, 0])                      # stands by camera 1, looks like camera 0
     assert nearest_frames(cap, s, look_depth=2.0).tolist() == [0]
 

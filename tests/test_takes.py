@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
-from curate.sfm.ingest import PhotoRecord
+from curate.core.images import PhotoRecord
 from curate.sfm.prep import (assign_takes, choose_matcher, cross_take_pairs, take_counts, take_name, takes_not_joined,
                              takes_of)
 from curate.sfm.stage import split_warning, take_warning
@@ -65,10 +65,11 @@ def test_videos_are_matched_in_order_and_a_video_with_photos_exhaustively():
 def test_cross_take_pairs_link_each_query_to_the_other_takes_best():
     """Each query keeps its N most similar frames of each *other* take, however far down the ranking
     its own take pushes them; pairs within a take are never added; a pair found from both sides counts once."""
-    take_of = {**{f"a{i}": "A" for i in range(6)}, **{f"b{i}": "B" for i in range(6)}, **{f"c{i}": "C" for i in range(3)}}
-    ranked = [("a0", ["a0", "a1", "a2", "a3", "b4", "a4", "b1", "c2", "b2", "c0"]),   # own take first, as retrieval does
+    take_of = {**{f"a{i}": "A" for i in range(6)}, **{f"b{i}": "B" for i in range(6)},
+               **{f"c{i}": "C" for i in range(3)}}
+    ranked = [("a0", ["a0", "a1", "a2", "a3", "b4", "a4", "b1", "c2", "b2", "c0"]),  # own take first, as retrieval does
               ("b4", ["b4", "b3", "a0", "b5", "a5", "a1"]),
-              ("c0", ["c0", "c1", "c2"])]                                            # nothing of another take ranked
+              ("c0", ["c0", "c1", "c2"])]                                           # nothing of another take ranked
     pairs = cross_take_pairs(ranked, take_of, per_take=2)
     assert pairs == [("a0", "b1"), ("a0", "b4"), ("a0", "c0"), ("a0", "c2"), ("a5", "b4")]
     assert all(take_of[p] != take_of[q] for p, q in pairs)

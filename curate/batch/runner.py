@@ -58,7 +58,7 @@ from typing import Callable, Iterable
 
 from curate.batch.log import folder_log
 from curate.batch.summary import make_row, write_summary_html
-from curate.report.html_parts import fmt_num
+from curate.html.parts import fmt_num
 
 log = logging.getLogger(__name__)
 
@@ -281,7 +281,8 @@ def _run_local(items: list[Folder], cfg, force: bool, jobs: int, keys: dict, eve
             while pending and len(running) < jobs:
                 it = pending.pop(0)
                 (Path(it.run_dir) / "batch.json").unlink(missing_ok=True)
-                p = ctx.Process(target=_local_child, args=(it, cfg, force, keys[it.name], os.getpid()), name=f"curate-{it.name}")
+                p = ctx.Process(target=_local_child, args=(it, cfg, force, keys[it.name], os.getpid()),
+                                name=f"curate-{it.name}")
                 p.start()
                 running[p.sentinel] = (it, p, time.perf_counter())
                 event("start", it, None)
@@ -470,7 +471,8 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
                     said = (f"PSNR selection {fmt_num(p['selection'])} / random {fmt_num(p['random'])} / fvs "
                             f"{fmt_num(p['fvs'])} / all {fmt_num(p['all'])}"
                             if any(v is not None for v in p.values()) else "not evaluated")
-                    msg = f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, {said} ({row['wall_seconds']:.0f}s)"
+                    msg = (f"{it.name}: ok, {row['chosen']} of {row['registered']} chosen, "
+                           f"{said} ({row['wall_seconds']:.0f}s)")
                 else:
                     msg = f"{it.name}: FAILED in {row.get('failed_stage')}: {row['reason']}"
                 blog.write(f"{stamp} {msg}\n")

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from curate.core.graph import first_unfinished
-from curate.report.html_parts import fmt_num
+from curate.html.parts import fmt_num
 
 if TYPE_CHECKING:
     from curate.batch.runner import Folder
@@ -69,7 +69,8 @@ def write_summary_html(out: Path, summ: dict) -> Path:
         status = (f"<span class=ok>ok</span>{' (resumed)' if r.get('resumed') else ''}" if st == "ok" else
                   f"<span class=bad>failed</span> in {e(str(r.get('failed_stage')))}<br><small>{e(r['reason'])}</small>"
                   if st == "failed" else e(st))
-        rnd = fmt_num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}" if r.get("psnr_random_std") is not None else "")
+        rnd = fmt_num(p.get("random")) + (f" ± {r['psnr_random_std']:.2f}"
+                                          if r.get("psnr_random_std") is not None else "")
         dif = r.get("selection_minus_random")
         link = f'<a href="{e(r["report"])}">report</a>' if r.get("report") else ""
         wall = "—" if r.get("wall_seconds") is None else f"{r['wall_seconds']:.0f} s"

@@ -1,1 +1,2 @@
-"""The small core: cameras and their conversions, transforms.json, node grids, budgets, statistics, run-folder records, options, executors."""
+"""The small core: cameras and their conversions, transforms.json, node grids, budgets, statistics, run-folder records,
+options, executors."""

@@ -7,6 +7,13 @@ Light (no heavy imports): the CLI, the pipeline and the benchmark scripts share 
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from curate.config import RunConfig
+
 
 AUTO = "auto"
 """The budget chosen from the pool (``--budget auto``)."""
@@ -15,7 +22,7 @@ DEFAULT = "default"
 """The budget by the kind of capture (:func:`by_kind`), known once the cameras are posed."""
 
 DEFAULT_BY_KIND = {"walk": "15%", "object": AUTO}
-"""What ``default`` means for each kind of capture (``curate.select.select.capture_kind``): a walk-through
+"""What ``default`` means for each kind of capture (``curate.select.methods.capture_kind``): a walk-through
 keeps 15% of its frames; an object capture keeps what ``auto`` advises, most of a capture of 40-60
 photos (measured on the three real object sets: 34-48 of 40-57, docs/evaluation.md, "How many photos"),
 where 15% kept 10 of 65 skull photos."""
@@ -77,3 +84,30 @@ def check_fits(said: str, n_budget: int, n_pool: int, what: str = "registered ph
         raise ValueError(f"budget {said} is all {n_pool} {what}: nothing to choose; give a smaller budget")
     if n_budget < 2:
         raise ValueError(f"budget {said} is {n_budget} of the {n_pool} {what}: choose at least 2")
+
+
+MEASURED_FOLDS = 2
+"""Hold-out folds the budget stage measures the learning curve on (:mod:`curate.evaluate.budget`)."""
+
+
+def measured_key(cfg: "RunConfig", run_dir: str | Path) -> str:
+    """The budget stage's key: the tolerance, the selection's options, the trainings' settings and the scene."""
+    from curate.core.stage import current_key, stage_key
+    return stage_key({"tolerance": cfg.budget_tolerance, "select": cfg.select, "train": cfg.evaluate.training(),
+                      "holdout_every": cfg.evaluate.holdout_every, "folds": MEASURED_FOLDS},
+                     [current_key(run_dir, "occupancy") or "", current_key(run_dir, "sfm") or ""])
+
+
+def measured_budget(cfg: "RunConfig", run_dir: str | Path) -> dict | None:
+    """``RUN/budget/budget.json`` when the budget stage measured it for these options on this scene (its key is
+    :func:`measured_key`'s) and the curve gave a budget, else None: the select stage then uses the law."""
+    from curate.core.stage import read_stage
+    rec = read_stage(Path(run_dir) / "budget")
+    if not rec or rec.get("key") != measured_key(cfg, run_dir):
+        return None
+    try:
+        out = json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
+    except (OSError, ValueError):
+        return None
+    chk = out.get("check") or {}
+    return out if chk.get("budget") is not None or chk.get("high") is not None else None   # no curve: the law

@@ -157,6 +157,11 @@ class Cameras:
         return Cameras(self.c2w, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, w, h,
                        self.dist, self.names)
 
+    def at_most(self, max_side: int) -> "Cameras":
+        """The same cameras for images whose longer side is at most ``max_side`` (never upscaled): the size
+        the field trains and renders at."""
+        return self.scaled_images(np.minimum(1.0, max_side / np.maximum(self.width, self.height)))  # [N]
+
     def transformed(self, scale: float, R: np.ndarray | None = None, t: np.ndarray | None = None) -> "Cameras":
         """Apply the world similarity ``X' = scale * R @ X + t`` to every pose."""
         R = np.eye(3) if R is None else np.asarray(R, np.float64)
@@ -349,7 +354,8 @@ def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str) -> None
     arrays = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "width": width, "height": height}
     n = len(c2w)
     for i in range(n):
-        what = f"{source}: frame {i} ({labels[i]!r})" if labels is not None and i < len(labels) else f"{source}: frame {i}"
+        what = (f"{source}: frame {i} ({labels[i]!r})" if labels is not None and i < len(labels)
+                else f"{source}: frame {i}")
         m = c2w[i]
         if not np.all(np.isfinite(m)):
             raise ValueError(f"{what}: the pose holds NaN or infinite values")

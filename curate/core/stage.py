@@ -147,8 +147,8 @@ def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
 
 
 def finished_record(run_dir: str | Path, stage: str) -> dict | None:
-    """``stage``'s record in ``run_dir`` (None: not finished). An evaluation made by curate 0.3 or earlier
-    recorded only its ``summary.json`` (with the same ``key`` and ``inputs``): that stands for its record."""
+    """``stage``'s record in ``run_dir`` (None: not finished). An evaluation made by an earlier curate recorded
+    only its ``summary.json`` (with the same ``key`` and ``inputs``): that stands for its record."""
     rec = read_stage(Path(run_dir) / stage)
     if rec is None and stage == "evaluate":
         try:

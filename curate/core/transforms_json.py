@@ -102,14 +102,16 @@ def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple
                 f_y = float(get("fl_y")) if get("fl_y") is not None else f_x
             elif get("camera_angle_x") is not None:
                 f_x = 0.5 * w / math.tan(0.5 * float(get("camera_angle_x")))
-                f_y = 0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None else f_x
+                f_y = (0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None
+                       else f_x)
             else:
                 raise ValueError(f"{path}: frame {i} has neither fl_x nor camera_angle_x")
             try:
                 m = np.asarray(fr["transform_matrix"], np.float64)
                 w, h = float(w), float(h)
             except (TypeError, ValueError):
-                raise ValueError(f"{path}: frame {i} ({fp!r}) has a transform_matrix or size that is not numbers") from None
+                raise ValueError(f"{path}: frame {i} ({fp!r}) has a transform_matrix or size "
+                                 "that is not numbers") from None
             if m.shape == (3, 4):
                 m = np.vstack([m, [0, 0, 0, 1]])
             if m.shape != (4, 4):

@@ -7,9 +7,9 @@ two hold-out folds (:func:`curate.evaluate.folds.fold_order`), the selection's m
 and twice the law's advice, the same field as the evaluation's is trained on each and on all the photos left,
 and the losses against all photos, paired per held-out photo over the two folds, are fitted
 (:func:`curate.evaluate.check.fit_check`). The select stage then exports the measured budget
-(:func:`measured_budget`), and the evaluation estimates that export; the law's prediction is kept beside it.
-The trainings are evaluation units (``RUN/evaluate/f<offset>_curve_b<k>``, ``f<offset>_all``: the evaluation
-reuses the latter).
+(:func:`curate.core.budget.measured_budget`), and the evaluation estimates that export; the law's prediction is kept
+beside it. The trainings are evaluation units (``RUN/evaluate/f<offset>_curve_b<k>``, ``f<offset>_all``: the
+evaluation reuses the latter).
 
 ``RUN/budget/budget.json``: ``predicted`` (the law's :class:`curate.select.auto_budget.BudgetChoice`),
 ``check`` (:class:`curate.evaluate.check.BudgetCheck`, with ``n_pool``: the folds' pool size its points are
@@ -18,20 +18,16 @@ counted in), ``budget`` (what the selection exports).
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.budget import MEASURED_FOLDS, measured_key
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
     from curate.core.graph import RunContext
-
-FOLDS = 2
-"""Hold-out folds the learning curve is measured on."""
-
 
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
@@ -44,29 +40,6 @@ def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
         return parse_budget(budget_of_run(cfg.budget, run_dir)[0]) == AUTO
     except (FileNotFoundError, ValueError):        # default, and no poses yet to tell the kind of capture by
         return False
-
-
-def key_for(cfg: "RunConfig", run_dir: Path) -> str:
-    """The stage's key: the tolerance, the selection's options, the trainings' settings and the scene."""
-    from curate.core.stage import current_key, stage_key
-    return stage_key({"tolerance": cfg.budget_tolerance, "select": cfg.select, "train": cfg.evaluate.training(),
-                      "holdout_every": cfg.evaluate.holdout_every, "folds": FOLDS},
-                     [current_key(run_dir, "occupancy") or "", current_key(run_dir, "sfm") or ""])
-
-
-def measured_budget(cfg: "RunConfig", run_dir: Path) -> dict | None:
-    """``RUN/budget/budget.json`` when it was measured for these options on this scene (its key is
-    :func:`key_for`'s) and the curve gave a budget, else None: the select stage then uses the law."""
-    from curate.core.stage import read_stage
-    rec = read_stage(Path(run_dir) / "budget")
-    if not rec or rec.get("key") != key_for(cfg, run_dir):
-        return None
-    try:
-        out = json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
-    except (OSError, ValueError):
-        return None
-    chk = out.get("check") or {}
-    return out if chk.get("budget") is not None or chk.get("high") is not None else None   # no curve: the law
 
 
 def run(ctx: "RunContext") -> StageResult:
@@ -87,7 +60,7 @@ def run(ctx: "RunContext") -> StageResult:
     t0 = time.perf_counter()
     cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
     d = run_dir / "budget"
-    key = key_for(cfg, run_dir)
+    key = measured_key(cfg, run_dir)
     if begin_stage(d, key, force):
         return StageResult("budget", d, False, time.perf_counter() - t0)
     ev = cfg.evaluate
@@ -97,7 +70,7 @@ def run(ctx: "RunContext") -> StageResult:
     nodes = grid.nodes()
     index = build_pair_index(cams, nodes, cfg.select.energy.bins, device=cfg.select.device)
     law = choose_for_pool(cams, nodes, index, cfg.budget_tolerance)
-    order = fold_order(ev.holdout_every, len(cams))[:FOLDS]
+    order = fold_order(ev.holdout_every, len(cams))[:MEASURED_FOLDS]
     sfm_key = current_key(run_dir, "sfm") or ""
 
     def keyed(u, f):   # as the evaluation keys its units: a shared one ('all') is trained once

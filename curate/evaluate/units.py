@@ -59,8 +59,7 @@ class Unit:
 
 def eval_cameras(cams: Cameras, max_side: int) -> Cameras:
     """The cameras at evaluation size (longer side <= ``max_side``; never upscaled)."""
-    f = np.minimum(1.0, max_side / np.maximum(cams.width, cams.height))  # [N]
-    return cams.scaled_images(f)
+    return cams.at_most(max_side)
 
 
 def _stem(name: str) -> str:
@@ -107,7 +106,8 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
         from curate.field.model import RadianceField
         fld = RadianceField.load(field_path, device=cfg.field.resolve_device())
         meta = json.loads((Path(field_path).parent / "train.json").read_text())
-        st = TrainStats(iters=meta["iters"], train_seconds=meta["train_seconds"], stop_reason=meta.get("stop_reason", ""))
+        st = TrainStats(iters=meta["iters"], train_seconds=meta["train_seconds"],
+                        stop_reason=meta.get("stop_reason", ""))
         import shutil
         shutil.copy2(field_path, d / "field.pt")
     else:
@@ -177,7 +177,8 @@ def worker_start(parent_pid: int) -> None:
 
 
 def _unit_entry(args: tuple) -> dict:
-    """Process-pool entry point (spawned workers re-import curate); ``args``: :func:`train_unit`'s, then the log level."""
+    """Process-pool entry point (spawned workers re-import curate); ``args``: :func:`train_unit`'s, then the log
+    level."""
     logging.basicConfig(level=args[-1], format="%(levelname)s %(name)s: %(message)s")
     return train_unit(*args[:-1])
 

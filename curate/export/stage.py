@@ -1,4 +1,5 @@
-"""The export stage: the chosen subset in the formats NeRF tools read -> ``RUN/export`` (see :mod:`curate.export.subset`)."""
+"""The export stage: the chosen subset in the formats NeRF tools read -> ``RUN/export``
+(see :mod:`curate.export.subset`)."""
 
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ def run(ctx: "RunContext") -> StageResult:
                                                                "list": "images.txt", "images": "images/"},
                  model=model, warning=shown, export_warning=warn, connectivity=groups)
     return StageResult("export", d, True, time.perf_counter() - t0,
-                       f"{len(sel['chosen_names'])} images ({'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "
+                       f"{len(sel['chosen_names'])} images ("
+                       f"{'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "
                        f"{model['n_points3D']} points -> {d}",
                        warning=warn)
 

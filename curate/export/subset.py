@@ -250,7 +250,8 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     names = export_names(originals, rels)
     for root in _photo_roots(run_dir, originals):
         if out == root or root in out.parents:
-            raise ValueError(f"export folder {out} is inside the photo folder {root}: the photo folder is never written")
+            raise ValueError(f"export folder {out} is inside the photo folder {root}: "
+                             "the photo folder is never written")
     missing = [o for o in originals if not Path(o).is_file()]
     if missing:
         raise FileNotFoundError(f"{len(missing)} original photo(s) not found: {missing[:3]}")
@@ -334,7 +335,7 @@ def _undistort(out: Path, sub, names: list[str], rotated: list[bool], originals:
     for name, rot, orig in zip(names, rotated, originals):
         if rot:            # COLMAP reads the pixels as stored: an EXIF rotation is applied first
             from PIL import Image
-            from curate.sfm.ingest import read_image
+            from curate.core.images import read_image
             Image.fromarray(read_image(orig)[0]).save(src / name, quality=95)
         else:
             os.symlink(out / "images" / name, src / name)

@@ -39,6 +39,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from curate.core.grid import NodeGrid
 from curate.field.config import FieldConfig  # noqa: F401  (re-exported: the field's configuration)
 
 log = logging.getLogger(__name__)
@@ -271,7 +272,8 @@ class RadianceField(torch.nn.Module):
         bg = torch.sigmoid(self.bg) if bg_override is None else bg_override
         rgb = rgb + (1 - acc)[:, None].clamp(0, 1) * bg
         depth = (w * t).sum(1) + (1 - acc).clamp(0, 1) * t[:, -1]
-        return {"rgb": rgb, "depth": depth, "acc": acc, "sparsity": sparsity, "n_density": int(flat.numel()), "n_color": int(sel.numel())}
+        return {"rgb": rgb, "depth": depth, "acc": acc, "sparsity": sparsity, "n_density": int(flat.numel()),
+                "n_color": int(sel.numel())}
 
     # ------------------------------------------------------------------ training helpers
     @torch.no_grad()
@@ -334,3 +336,25 @@ class RadianceField(torch.nn.Module):
             f.upsample(r)
         f.load_state_dict(ck["state_dict"])
         return f.to(device)
+
+
+def prior_mask(field, grid: NodeGrid) -> torch.Tensor:
+    """The field's [res, res, res] cells allowed by an occupancy NodeGrid (world frame).
+
+    Cells of the field's inner box whose world position is on an unoccupied node of
+    ``grid`` (or outside ``grid``'s box, within the field's box) are False; cells of
+    the contracted outer region stay True.
+    """
+    r = field.res
+    c = field.node_contracted().cpu()  # [r, r, r, 3] contracted
+    inner = c.abs().amax(-1) <= 1
+    world = (c * field.half_size.cpu() + field.centre.cpu()).numpy().reshape(-1, 3)
+    m = grid.mask if grid.mask is not None else np.ones((grid.res,) * 3, bool)
+    g = grid.res
+    span = np.where(grid.box_max > grid.box_min, grid.box_max - grid.box_min, 1.0)
+    idx = np.round((world - grid.box_min) / span * (g - 1)).astype(np.int64)
+    ok = np.all((idx >= 0) & (idx < g), axis=1)
+    val = np.zeros(len(world), bool)
+    val[ok] = m[tuple(idx[ok].T)]
+    out = torch.from_numpy(val.reshape(r, r, r)) | ~inner
+    return out.to(field.occ.device)

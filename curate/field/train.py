@@ -22,7 +22,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from curate.core.cameras import Cameras
-from curate.field.model import FieldConfig, RadianceField
+from curate.field.model import FieldConfig, RadianceField, prior_mask
 from curate.core.grid import NodeGrid, box_from_cameras, focus_point
 from curate.field.metrics import camera_rays, psnr, render_image
 
@@ -33,7 +33,7 @@ def load_image(src, width: int, height: int) -> np.ndarray:
     """One image (path, or [H, W, 3] uint8 / float array) -> [height, width, 3] float32 in [0, 1]."""
     from PIL import Image
     if isinstance(src, (str, Path)):
-        from curate.sfm.ingest import decode_upright   # the one decoder: EXIF orientation, 16-bit, grey, CMYK
+        from curate.core.images import decode_upright   # the one decoder: EXIF orientation, 16-bit, grey, CMYK
         try:
             with Image.open(src) as im:
                 return decode_upright(im, (width, height)).astype(np.float32) / 255.0
@@ -212,7 +212,6 @@ def train_field(cfg: FieldConfig, cams: Cameras, images: Sequence, run_dir: str 
     else:
         lo, hi = box if box is not None else default_box(cams)
         fld = RadianceField(cfg, lo, hi).to(dev)
-    from curate.occupancy.masks import prior_mask
     if prior is not None and prior.mask is not None and not prior.mask.any():
         raise ValueError("the occupancy prior is empty: nothing to train")
     pm = prior_mask(fld, prior) if prior is not None else None

@@ -3,9 +3,8 @@ fields. Light to import (no torch): ``curate --help`` reads them."""
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
-
-import numpy as np
 
 
 @dataclass
@@ -33,7 +32,7 @@ class OccupancyConfig:
     """Fewer points (after cleaning) is a ValueError."""
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.res, (int, np.integer)) and 2 <= self.res <= 512):
+        if not (isinstance(self.res, numbers.Integral) and 2 <= self.res <= 512):
             raise ValueError(f"--res (nodes per axis) must be an integer in [2, 512], got {self.res!r}")
         if self.dilation < 0 or self.nb_neighbors < 1 or not (0 <= self.percentile < 50) or self.pad < 0:
             raise ValueError("occupancy: dilation >= 0, nb_neighbors >= 1, 0 <= percentile < 50 and pad >= 0")

@@ -135,25 +135,3 @@ def refine_occupancy(field, grid: NodeGrid, threshold: float | None = None,
     log.info("refined occupancy: field %d, prior %s, result %d nodes", f.sum(),
              "-" if prior is None else int(prior.sum()), m.sum())
     return grid.with_mask(m)
-
-
-def prior_mask(field, grid: NodeGrid) -> torch.Tensor:
-    """The field's [res, res, res] cells allowed by an occupancy NodeGrid (world frame).
-
-    Cells of the field's inner box whose world position is on an unoccupied node of
-    ``grid`` (or outside ``grid``'s box, within the field's box) are False; cells of
-    the contracted outer region stay True.
-    """
-    r = field.res
-    c = field.node_contracted().cpu()  # [r, r, r, 3] contracted
-    inner = c.abs().amax(-1) <= 1
-    world = (c * field.half_size.cpu() + field.centre.cpu()).numpy().reshape(-1, 3)
-    m = grid.mask if grid.mask is not None else np.ones((grid.res,) * 3, bool)
-    g = grid.res
-    span = np.where(grid.box_max > grid.box_min, grid.box_max - grid.box_min, 1.0)
-    idx = np.round((world - grid.box_min) / span * (g - 1)).astype(np.int64)
-    ok = np.all((idx >= 0) & (idx < g), axis=1)
-    val = np.zeros(len(world), bool)
-    val[ok] = m[tuple(idx[ok].T)]
-    out = torch.from_numpy(val.reshape(r, r, r)) | ~inner
-    return out.to(field.occ.device)

@@ -74,7 +74,7 @@ def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
     surface) when the sparse points are too few to give it (poses without points). Path spacing and
     view medoids read only a look-at depth from the occupancy (every node of the box without
     points); FVS, every n-th frame and random read the poses only."""
-    from curate.select.select import resolve_method
+    from curate.select.methods import resolve_method
     if cfg.refine.field == "always":
         return True, "--refine field always"
     method, _ = resolve_method(cams, cfg.select.method)
@@ -97,7 +97,6 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
     the evaluation harness passes a hold-out fold's pool)."""
     from curate.core.grid import NodeGrid
     from curate.core.stage import begin_stage, finish_stage, is_fresh, stage_key, write_json_atomic
-    from curate.evaluate.units import eval_cameras
     from curate.field.train import default_box, train_field
     from curate.occupancy.masks import occupancy_from_points, refine_occupancy
     from curate.sfm.io import image_paths, load_sfm
@@ -127,7 +126,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         log.info("occupancy: training a field (%s)", why)
         paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
         on = list(range(len(sfm.cameras))) if train_on is None else [int(i) for i in train_on]
-        cams = eval_cameras(sfm.cameras, cfg.refine.max_side)
+        cams = sfm.cameras.at_most(cfg.refine.max_side)
         fld, st = train_field(ev.field, cams[on], [paths[i] for i in on], d, time_budget_s=ev.time_budget_s,
                               iters=cfg.refine.iters, seed=ev.train_seed, box=box, progress_desc="occupancy (field)")
         write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds,

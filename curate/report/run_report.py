@@ -2,7 +2,7 @@
 
 ``write_html(run_dir)`` reads ``RUN/report.json`` and the files of the run folder (see
 ``docs/architecture.md`` for the contract) and writes ``RUN/report.html``: inline SVG charts
-(:mod:`curate.report.charts`) and data-URI images only, nothing fetched from the network, so the
+(:mod:`curate.html.charts`) and data-URI images only, nothing fetched from the network, so the
 file can be mailed or archived on its own.
 
 The first screen answers "what was chosen, and is it good?" in plain words: warnings a user must
@@ -28,9 +28,9 @@ from typing import Callable
 
 import numpy as np
 
-from curate.report import charts, plots
-from curate.report.html_parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
-from curate.report.plots import colorbar, floorplan, heatmap_svg, top_down_axes
+from curate.html import charts, plots
+from curate.html.parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
+from curate.html.plots import colorbar, floorplan, heatmap_svg, top_down_axes
 
 logger = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ def _load_rgb(path: str | Path, max_side: int) -> np.ndarray | None:
         try:
             from PIL import Image
 
-            from curate.sfm.ingest import read_image
+            from curate.core.images import read_image
             rgb, _ = read_image(p)
             im = Image.fromarray(rgb)
             im.thumbnail((max_side, max_side))
@@ -222,7 +222,8 @@ def _first_screen(run: _Run) -> str:
     sug = read_json(run.dir / "suggest" / "suggestions.json")
     if sug:
         out.append(f'<p>Going back to film more? <a href="suggest/suggest.html">Where to shoot next</a>: '
-                   f'{esc(sug.get("placed", "?"))} suggested camera poses, with how to reach each from your capture.</p>')
+                   f'{esc(sug.get("placed", "?"))} suggested camera poses, with how to reach each from your '
+                   'capture.</p>')
     elif (why := _unanswered(run.dir)):
         out.append(f'<p class="small">Going back to film more? <code>curate suggest</code> found nowhere to propose '
                    f"for this capture: {esc(why)}.</p>")

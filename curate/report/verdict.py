@@ -141,8 +141,9 @@ def verdict(rep: dict) -> dict:
             (f"; {est['n_folds']} of {est['planned_folds']} folds" if est.get("n_folds") else "")
     elif status == "out of date":
         of = ev.get("of") or {}
-        quality = (f"The evaluation in this run folder estimates an earlier selection ({of.get('exported_budget', '?')} "
-                   f"photos, {of.get('method', '?')}), not this one; `{ev.get('refresh')}` estimates this one.")
+        quality = ("The evaluation in this run folder estimates an earlier selection "
+                   f"({of.get('exported_budget', '?')} photos, {of.get('method', '?')}), not this one; "
+                   f"`{ev.get('refresh')}` estimates this one.")
         short_line = f"evaluation out of date (refresh: {ev.get('refresh')})"
     else:
         quality = ("Not evaluated: no field was trained to compare this selection with random subsets and FVS"
@@ -172,7 +173,8 @@ def how_many_said(auto: dict | None, k: int, legacy_check: dict | None = None) -
     chk = auto.get("measured")
     if chk and (chk.get("budget") is not None or chk.get("high") is not None):
         got = (f"about {chk['budget']} ({chk['low']} to {chk['high']}) photos come within {tol} of all of them"
-               if chk.get("budget") is not None else f"{chk.get('high')} or fewer photos come within {tol} of all of them")
+               if chk.get("budget") is not None
+               else f"{chk.get('high')} or fewer photos come within {tol} of all of them")
         return (f"How many: measured on this capture, {got}; {k} were exported. From the poses alone, the law "
                 f"fitted on other captures predicted {law}{rng} ({err}).")
     out = f"How many: --budget auto predicted {law}{rng} for {tol} from the poses alone"

@@ -7,7 +7,7 @@ views) predicts how much held-out PSNR a budget of k loses against every frame::
     loss(k) = alpha * rho(k) ** p        [dB],   (alpha, p) = LOSS_MODEL[kind]
 
 with ``kind`` the capture's kind (walk-through or object capture:
-:func:`curate.select.select.capture_kind`). The constants are calibrated on real captures by
+:func:`curate.select.methods.capture_kind`). The constants are calibrated on real captures by
 ``research/budget_real.py`` (the product's default selection and evaluation settings, learning
 curves at five or six budgets, two or three hold-out folds) and ``research/budget_real_fit.py``
 (docs/evidence/budget_real.json; docs/evaluation.md, "How many photos"): alpha per capture is
@@ -138,8 +138,8 @@ def choose_budget(c: np.ndarray, a: np.ndarray, depths: np.ndarray, tolerance_db
 def choose_for_pool(cams, nodes: np.ndarray | None, index, tolerance_db: float = 0.5) -> BudgetChoice:
     """:func:`choose_budget` for the pool ``cams`` with its selection nodes [N, 3] and their pair
     ``index`` (the look-at depths of view medoids: :func:`curate.select.medoids.view_depths`); the
-    capture's kind from its poses (:func:`curate.select.select.capture_kind`)."""
-    from curate.select.select import capture_kind
+    capture's kind from its poses (:func:`curate.select.methods.capture_kind`)."""
+    from curate.select.methods import capture_kind
     return choose_budget(*pool_views(cams, nodes, index), tolerance_db, capture_kind(cams)[0])
 
 

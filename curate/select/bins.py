@@ -20,23 +20,25 @@ depend on the signs or sizes of the noise left in x and y.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 BINNINGS = ("paper", "equal-area")
+"""How the direction bins are laid out (module docstring)."""
 
+MAX_BINS = 4096
+"""The most direction bins (theta x phi) a node's histogram may have: memory grows with nodes x bins."""
 
 VERTICAL_TOL = 1e-12
 """A direction whose horizontal part is at most this fraction of its largest component is vertical."""
 
 
-MAX_BINS = 4096
-"""The most direction bins (theta x phi) a node's histogram may have: memory grows with nodes x bins."""
-
-
 @dataclass(frozen=True)
 class DirectionBins:
-    """Polar direction binning.
+    """Polar direction binning (light: numpy is imported when bins are computed, so the selection's config can hold
+    one).
 
     Attributes:
         n_theta: bins along theta (angle from +z).
@@ -63,6 +65,7 @@ class DirectionBins:
 
     def shares(self) -> np.ndarray:
         """[B] the uniform distribution's mass in each bin (sums to 1)."""
+        import numpy as np
         if self.binning == "equal-area":
             return np.full(self.n_bins, 1.0 / self.n_bins)
         edges = np.cos(np.linspace(0.0, np.pi, self.n_theta + 1))
@@ -77,6 +80,7 @@ class DirectionBins:
         Returns:
             [P] int64 bin indices in [0, n_bins).
         """
+        import numpy as np
         d = np.asarray(dirs, np.float64).reshape(-1, 3)
         norm = np.sqrt(np.einsum("ij,ij->i", d, d))
         # Guard against overflow/underflow of the squared norm at extreme scales.

@@ -26,40 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from curate.select.bins import DirectionBins
 from curate.core.cameras import Cameras
 from curate.select.visibility import PairIndex, Visibility, build_pair_index, frustum_visible_reference
-
-
-@dataclass(frozen=True)
-class EnergyConfig:
-    """Parameters of the paper's energy."""
-
-    gamma: float = 0.05
-    """The paper's gamma: the exponent on how often each point is seen.
-
-    The exponent on the observation frequency O_f (authors' code: 0.05), in [0, ``GAMMA_MAX``]."""
-    n_theta: int = 5
-    """Direction bins along theta, the angle from the scene's +z axis (authors' code: 5)."""
-    n_phi: int = 10
-    """Direction bins along the azimuth phi = atan2(y, x) (authors' code: 10)."""
-    binning: str = "paper"
-    """"paper": uniform in theta, solid-angle shares; "equal-area": uniform in cos(theta)."""
-
-    def __post_init__(self) -> None:
-        if not (0 <= self.gamma <= GAMMA_MAX):
-            raise ValueError(f"--gamma must be in [0, {GAMMA_MAX:g}], got {self.gamma}")
-        DirectionBins(self.n_theta, self.n_phi, self.binning)  # validates
-
-    @property
-    def bins(self) -> DirectionBins:
-        return DirectionBins(self.n_theta, self.n_phi, self.binning)
-
-
-GAMMA_MAX = 20.0
-"""Largest ``EnergyConfig.gamma``. The greedy's exact incremental form works on view counts
-``n ** gamma`` (n up to the pool size), which must stay finite: 10^6 cameras ** 20 = 1e120. Beyond
-it the frequency term is 0 in practice anyway (a node seen by half the cameras scores 0.5 ** 20 = 1e-6)."""
+from curate.select.config import EnergyConfig, GAMMA_MAX  # noqa: F401  (their home: the config)
 
 
 @dataclass

@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from curate.select.energy import EnergyConfig, energy_of_subset, pow_gamma
+from curate.select.config import EnergyConfig
+from curate.select.energy import energy_of_subset, pow_gamma
 from curate.select.visibility import PairIndex, chunked_bincount
 
 log = logging.getLogger(__name__)

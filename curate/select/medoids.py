@@ -35,39 +35,12 @@ makes the mean one along the path: a weighted k-medoids, same algorithm.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
 from curate.select.baselines import farthest_point
 from curate.core.cameras import Cameras
-from curate.select.methods import PATH_WEIGHTS
-
-
-@dataclass(frozen=True)
-class MedoidsConfig:
-    """Method "medoids": k-medoids of the pool's views."""
-
-    depth: float | None = None
-    """Look-at depth D in world units for every camera (None: each camera's median depth of
-    the nodes it observes)."""
-    max_iters: int = 100
-    """Voronoi iterations at most (it usually stops in under 20)."""
-    path_weights: bool = PATH_WEIGHTS
-    """View medoids: weigh each photo by the stretch of the capture path it stands for, so a
-    stretch walked fast (or with dropped frames) counts as much as one where the walker
-    lingered; ignored, with a note, when the photos are not in capture order (name order).
-
-    Each view's weight is half the view distance to the previous plus to the next view in name
-    order (capture order for numbered video frames), capped at ``PATH_CAP`` times the median
-    step, mean 1: the mean is then taken along the path, not over the frames. Ignored (uniform
-    weights, a warning) when the views are not in path order (:func:`path_weights`)."""
-
-    def __post_init__(self) -> None:
-        if self.depth is not None and not (np.isfinite(self.depth) and self.depth > 0):
-            raise ValueError(f"depth must be finite and > 0, got {self.depth}")
-        if self.max_iters < 0:
-            raise ValueError(f"max_iters must be >= 0, got {self.max_iters}")
+from curate.select.config import MedoidsConfig  # noqa: F401  (their home: the config)
 
 
 def view_depths(cams: Cameras, nodes: np.ndarray | None, index=None) -> np.ndarray:

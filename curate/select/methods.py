@@ -25,7 +25,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import import_module
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:
+    from curate.core.cameras import Cameras
 
 
 @dataclass(frozen=True)
@@ -113,3 +116,49 @@ def method_help() -> str:
     for m in REGISTRY.values():
         lines.append(f"{m.key:<{width}}  {m.help}" + (" (default)" if m.key == DEFAULT_METHOD else ""))
     return "\n".join(lines)
+
+
+OBJECT_MAX_ANGLE_DEG = 20.0
+""":func:`capture_kind`: an object capture when the median camera looks within this angle of
+the point nearest all viewing axes (measured: object sets 0.6-7.2 deg, walks 55-56 deg)."""
+
+
+def capture_kind(cams: Cameras) -> tuple[str, float]:
+    """("object" | "walk", median angle in degrees) for a pool of cameras.
+
+    The point p nearest every viewing axis (least squares, ``sum_i (I - v_i v_i^T)(p - c_i) = 0``)
+    is where an object capture's cameras look; the angle between each camera's viewing
+    direction and the direction from its centre to p is then small for almost every camera.
+    On a walk-through the axes do not meet: the angles are large. Near-parallel axes
+    (a forward-facing capture with little convergence) count as a walk; a forward-facing
+    capture whose axes converge on the subject counts as an object capture. Fewer than 3 cameras, or axes all
+    parallel, count as a walk.
+    """
+    import numpy as np
+    if len(cams) < 3:
+        return "walk", 180.0
+    c, v = cams.centres, cams.view_dirs                       # [K, 3], [K, 3]
+    P = np.eye(3)[None] - v[:, :, None] * v[:, None, :]        # [K, 3, 3] projectors off each axis
+    A, b = P.sum(0), np.einsum("kij,kj->i", P, c)
+    if np.linalg.eigvalsh(A / len(c))[0] < 1e-3:               # (near) parallel axes: no meeting point
+        return "walk", 180.0
+    p = np.linalg.solve(A, b)
+    to = p - c
+    n = np.linalg.norm(to, axis=1)
+    cos = np.sum(to * v, axis=1) / np.maximum(n, 1e-300)
+    ang = float(np.median(np.degrees(np.arccos(np.clip(np.where(n > 0, cos, -1.0), -1.0, 1.0)))))
+    return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
+
+
+def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
+    """(method that runs, note) for ``method`` on ``cams``: "auto" becomes ``OBJECT_METHOD``
+    on an object capture and ``WALK_METHOD`` on a walk (:func:`capture_kind`), with a note
+    saying why; any other method runs as given, with no note."""
+    if method != "auto":
+        return method, ""
+    kind, ang = capture_kind(cams)
+    method = OBJECT_METHOD if kind == "object" else WALK_METHOD
+    why = ("the cameras look at one point (an object capture; their median angle to it {:.0f} deg)" if kind == "object"
+           else "the cameras do not look at one point (a walk-through; their median angle to the nearest common "
+                "point {:.0f} deg)").format(ang)
+    return method, f"auto: {why} -> {method}"

@@ -25,25 +25,12 @@ Memory [K] (the path-order test: [512, K]); time O(K log K).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 
 from curate.core.cameras import Cameras
 from curate.select.medoids import embed, path_steps, view_depths
-
-
-@dataclass(frozen=True)
-class PathConfig:
-    """Method "path": frames evenly spaced along the capture path."""
-
-    look_scale: float = 0.5
-    """Scale of every camera's look-at depth in the view distance along the path (1: view
-    medoids' distance; below 1 a turn of the head counts for less against a step)."""
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.look_scale) and self.look_scale > 0):
-            raise ValueError(f"look_scale must be finite and > 0, got {self.look_scale}")
+from curate.select.config import PathConfig  # noqa: F401  (their home: the config)
 
 
 def arc_length(c: np.ndarray, a: np.ndarray) -> np.ndarray | None:

@@ -13,41 +13,13 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 from curate.core.cameras import Cameras
-from curate.select.energy import EnergyConfig, EnergyTerms
 from curate.core.grid import NodeGrid
-from curate.select.medoids import MedoidsConfig
-from curate.select.path import PathConfig, path_select
-from curate.select.methods import (DEFAULT_METHOD, METHODS, OBJECT_METHOD, REGISTRY,  # noqa: F401  (METHODS re-exported)
-                                   WALK_METHOD, get_method)
+from curate.select.config import EnergyConfig, SelectConfig
+from curate.select.energy import EnergyTerms
+from curate.select.methods import get_method, resolve_method
+from curate.select.path import path_select
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class SelectConfig:
-    """How to choose a subset."""
-
-    method: str = DEFAULT_METHOD
-    """How to choose the photos: a key of :data:`curate.select.methods.REGISTRY`, where each method
-    has its label, its one line of ``--help`` and its function ("auto", the default, is resolved by
-    :func:`resolve_method`)."""
-    energy: EnergyConfig = field(default_factory=EnergyConfig)
-    """Energy parameters (method "energy", and the energy reported for every method)."""
-    seed: int = 0
-    """Seed of the random subsets (method random)."""
-    device: str | None = None
-    """Device that tests which cameras see which points, e.g. cpu or cuda:0 (default: CUDA when
-    available, else the CPU).
-
-    A torch device name; None picks one."""
-    medoids: MedoidsConfig = field(default_factory=MedoidsConfig)
-    """Method "medoids": its look-at depth and iterations."""
-    path: PathConfig = field(default_factory=PathConfig)
-    """Method "path": the scale of its look-at depths."""
-
-    def __post_init__(self) -> None:
-        if self.method not in REGISTRY:
-            raise ValueError(f"--method must be one of {', '.join(REGISTRY)}, got {self.method!r}")
 
 
 @dataclass
@@ -83,51 +55,6 @@ class Selection:
                 "angular": self.angular, "frequency": self.frequency, "seconds": self.seconds,
                 **({"objective": self.objective} if self.objective else {}),
                 **({"note": self.note} if self.note else {})}
-
-
-OBJECT_MAX_ANGLE_DEG = 20.0
-""":func:`capture_kind`: an object capture when the median camera looks within this angle of
-the point nearest all viewing axes (measured: object sets 0.6-7.2 deg, walks 55-56 deg)."""
-
-
-def capture_kind(cams: Cameras) -> tuple[str, float]:
-    """("object" | "walk", median angle in degrees) for a pool of cameras.
-
-    The point p nearest every viewing axis (least squares, ``sum_i (I - v_i v_i^T)(p - c_i) = 0``)
-    is where an object capture's cameras look; the angle between each camera's viewing
-    direction and the direction from its centre to p is then small for almost every camera.
-    On a walk-through the axes do not meet: the angles are large. Near-parallel axes
-    (a forward-facing capture with little convergence) count as a walk; a forward-facing
-    capture whose axes converge on the subject counts as an object capture. Fewer than 3 cameras, or axes all parallel, count as a walk.
-    """
-    import numpy as np
-    if len(cams) < 3:
-        return "walk", 180.0
-    c, v = cams.centres, cams.view_dirs                       # [K, 3], [K, 3]
-    P = np.eye(3)[None] - v[:, :, None] * v[:, None, :]        # [K, 3, 3] projectors off each axis
-    A, b = P.sum(0), np.einsum("kij,kj->i", P, c)
-    if np.linalg.eigvalsh(A / len(c))[0] < 1e-3:               # (near) parallel axes: no meeting point
-        return "walk", 180.0
-    p = np.linalg.solve(A, b)
-    to = p - c
-    n = np.linalg.norm(to, axis=1)
-    cos = np.sum(to * v, axis=1) / np.maximum(n, 1e-300)
-    ang = float(np.median(np.degrees(np.arccos(np.clip(np.where(n > 0, cos, -1.0), -1.0, 1.0)))))
-    return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
-
-
-def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
-    """(method that runs, note) for ``method`` on ``cams``: "auto" becomes ``OBJECT_METHOD``
-    on an object capture and ``WALK_METHOD`` on a walk (:func:`capture_kind`), with a note
-    saying why; any other method runs as given, with no note."""
-    if method != "auto":
-        return method, ""
-    kind, ang = capture_kind(cams)
-    method = OBJECT_METHOD if kind == "object" else WALK_METHOD
-    why = ("the cameras look at one point (an object capture; their median angle to it {:.0f} deg)" if kind == "object"
-           else "the cameras do not look at one point (a walk-through; their median angle to the nearest common "
-                "point {:.0f} deg)").format(ang)
-    return method, f"auto: {why} -> {method}"
 
 
 def select(cams: Cameras, grid: NodeGrid, budget: int, cfg: SelectConfig = SelectConfig(), initial=(),

@@ -21,7 +21,8 @@ from curate.select.baselines import farthest_point
 from curate.select.medoids import central_view, view_distance
 
 
-def spacing_curve(c: np.ndarray, a: np.ndarray, depths: np.ndarray, max_k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def spacing_curve(c: np.ndarray, a: np.ndarray, depths: np.ndarray,
+                  max_k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(order [k], rho [k]) for embedded views ``c``, ``a`` [K, 3] with look-at ``depths`` [K] > 0.
 
     ``order``: the farthest-point order in the view distance, from the view nearest the mean

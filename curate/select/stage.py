@@ -68,8 +68,8 @@ def selection_record(sel: "Selection", cams: "Cameras", pool: list[int], holdout
     chosen = [int(pool[k]) for k in sel.chosen]
     return {**sel.to_dict(), "chosen": chosen, "initial": [], "chosen_names": [cams.names[i] for i in chosen],
             "budget": len(chosen), "budget_text": budget_text, "holdout_every": holdout_every,
-            "holdout": list(holdout), "pool": list(pool), "n_nodes": len(grid.active_indices()), "up_axis": up_axis(cams),
-            "res": int(grid.res), "box": grid.box_min.tolist() + grid.box_max.tolist()}
+            "holdout": list(holdout), "pool": list(pool), "n_nodes": len(grid.active_indices()),
+            "up_axis": up_axis(cams), "res": int(grid.res), "box": grid.box_min.tolist() + grid.box_max.tolist()}
 
 
 KIND_WORDS = {"walk": "a walk-through", "object": "an object capture"}
@@ -92,7 +92,7 @@ def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
     from curate.core.budget import DEFAULT, by_kind, parse_budget
     if parse_budget(text) != DEFAULT:
         return str(text), str(text)
-    from curate.select.select import capture_kind
+    from curate.select.methods import capture_kind
     kind = capture_kind(cams)[0]
     b = by_kind(text, kind)
     return b, f"{DEFAULT}: {b} ({KIND_WORDS[kind]})"
@@ -116,7 +116,7 @@ def run(ctx: "RunContext") -> StageResult:
     parts = {"select": cfg.select, "budget": text}
     measured = None
     if b == AUTO:
-        from curate.evaluate.budget import measured_budget
+        from curate.core.budget import measured_budget
         parts["budget_tolerance"] = cfg.budget_tolerance
         measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
         if measured is not None:

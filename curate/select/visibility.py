@@ -107,7 +107,8 @@ def frustum_visible_reference(cams: Cameras, node) -> list[bool]:
         zmag = ((abs(x * r[2][0]) + abs(y * r[2][1])) + abs(zc * r[2][2])) + abs(r[2][3])
         u = ((x * r[0][0] + y * r[0][1]) + zc * r[0][2]) + r[0][3]
         v = ((x * r[1][0] + y * r[1][1]) + zc * r[1][2]) + r[1][3]
-        out.append(z > DEPTH_TOL * zmag and z > floor and 0 <= u < float(cams.width[k]) * z and 0 <= v < float(cams.height[k]) * z)
+        out.append(z > DEPTH_TOL * zmag and z > floor and 0 <= u < float(cams.width[k]) * z
+                   and 0 <= v < float(cams.height[k]) * z)
     return out
 
 

@@ -75,8 +75,8 @@ from curate.sfm.matching import match, pair_counts, rematch_left_out
 from curate.sfm.model import cameras_from_reconstruction
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
-from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos, refuse_inside, take_counts,
-                             takes_not_joined, takes_of, too_few_message, write_outputs)
+from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos,
+                             refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message, write_outputs)
 from curate.sfm.reconstruction import map_capture, model_sizes
 
 logger = logging.getLogger(__name__)

@@ -74,7 +74,8 @@ def intrinsics_from_colmap(model: str, params) -> tuple[float, float, float, flo
     if model == "OPENCV":
         fx, fy, cx, cy, *d = p
         return fx, fy, cx, cy, np.array(d, np.float64)
-    raise ValueError(f"camera model {model} is not supported (use SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV)")
+    raise ValueError(f"camera model {model} is not supported "
+                     "(use SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV)")
 
 
 def colmap_from_intrinsics(fx: float, fy: float, cx: float, cy: float, dist) -> tuple[str, list[float]]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,24 @@ from curate.sfm.io import colmap_from_intrinsics, intrinsics_from_colmap
 from curate.sfm.native import load as load_pycolmap
 
 logger = logging.getLogger(__name__)
+
+
+@dataclass
+class Poses:
+    """Cameras read from a pose source."""
+
+    cameras: Cameras
+    """[N] cameras (OpenCV camera-to-world)."""
+    files: list[str]
+    """[N] image path of each camera (absolute where it could be resolved)."""
+    points: np.ndarray | None = None
+    """[P, 3] sparse points (COLMAP model only)."""
+    colors: np.ndarray | None = None
+    """[P, 3] uint8 colours of the points."""
+    errors: np.ndarray | None = None
+    """[P] reprojection errors of the points."""
+    reconstruction: object | None = None
+    """The ``pycolmap.Reconstruction`` (COLMAP model only)."""
 
 
 def cameras_from_reconstruction(rec, warn: bool = True) -> tuple[Cameras, np.ndarray, np.ndarray, np.ndarray]:
@@ -128,9 +147,8 @@ def raw_quaternions(model: Path) -> list[tuple[Path, str, np.ndarray]]:
 
 
 def read_colmap_model(model: Path, photos: Path | None):
-    """A COLMAP model folder as :class:`curate.sfm.poses.Poses` (image paths under ``photos`` when given)."""
+    """A COLMAP model folder as :class:`Poses` (image paths under ``photos`` when given)."""
     pycolmap = load_pycolmap()
-    from curate.sfm.poses import Poses
     try:
         rec = pycolmap.Reconstruction(model)
     except Exception as e:  # noqa: BLE001 - pycolmap raises its own error types

@@ -49,7 +49,7 @@ def check_photos(cams: Cameras, originals: list[str], source: Path) -> tuple[lis
     size: the intrinsics hold); another aspect is an error naming the file and both sizes (the poses
     do not describe that image, e.g. an EXIF-rotated photo under a landscape camera). Relative names
     (a COLMAP model without a photo folder) are not checked."""
-    from curate.sfm.ingest import probe_image
+    from curate.core.images import probe_image
     records, keep = [], []
     for i, (n, o) in enumerate(zip(cams.names, originals)):
         rec = {"original": o, "rel": n, "status": "kept", "reason": "", "working": "", "registered": True}
@@ -146,8 +146,8 @@ def _pose_photos(cfg: SfmConfig, poses, source: Path, photos: Path | None):
              "poses_without_photo": [names[i] for i in range(len(names)) if m.files[i] is None][:50],
              "photos_without_pose": [p.relative_to(folder).as_posix() for p in unposed][:50]}
     if len(idx) < len(names):
-        logger.warning("sfm import: %d of the %d poses of %s have no photo in %s (left out), e.g. %s", len(names) - len(idx),
-                       len(names), source, folder, _examples(stats["poses_without_photo"]))
+        logger.warning("sfm import: %d of the %d poses of %s have no photo in %s (left out), e.g. %s",
+                       len(names) - len(idx), len(names), source, folder, _examples(stats["poses_without_photo"]))
     if unposed:
         logger.warning("sfm import: %d of the %d photos of %s have no pose in %s (left out), e.g. %s", len(unposed),
                        m.n_photos, folder, source, _examples(stats["photos_without_pose"]))

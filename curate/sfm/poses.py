@@ -14,27 +14,9 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 
 from curate.core.cameras import Cameras
-
-
-@dataclass
-class Poses:
-    """Cameras read from a pose source."""
-
-    cameras: Cameras
-    """[N] cameras (OpenCV camera-to-world)."""
-    files: list[str]
-    """[N] image path of each camera (absolute where it could be resolved)."""
-    points: np.ndarray | None = None
-    """[P, 3] sparse points (COLMAP model only)."""
-    colors: np.ndarray | None = None
-    """[P, 3] uint8 colours of the points."""
-    errors: np.ndarray | None = None
-    """[P] reprojection errors of the points."""
-    reconstruction: object | None = None
-    """The ``pycolmap.Reconstruction`` (COLMAP model only)."""
+from curate.sfm.model import Poses, read_colmap_model
 
 
 def _colmap_model(path: Path) -> Path | None:
@@ -72,7 +54,6 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
     if source.is_dir():
         model = _colmap_model(source)
         if model is not None:
-            from curate.sfm.model import read_colmap_model
             photos = photos if photos is not None else default_photos(source)
             return read_colmap_model(model, Path(photos) if photos is not None else None)
         found = find_pose_source(source)
@@ -187,7 +168,7 @@ def _with_ext(p: Path) -> Path | None:
     ``r_0``), the file with one."""
     if p.is_file():
         return p
-    from curate.sfm.ingest import IMAGE_EXTS
+    from curate.core.images import IMAGE_EXTS
     if p.suffix.lower() not in IMAGE_EXTS:
         for ext in sorted(IMAGE_EXTS) + sorted(e.upper() for e in IMAGE_EXTS):
             q = p.with_name(p.name + ext)

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from curate.core.cameras import Cameras
-from curate.sfm.ingest import PhotoRecord, find_images, ingest, source_root
+from curate.core.images import PhotoRecord
+from curate.sfm.ingest import find_images, ingest, source_root
 from curate.sfm.quality import assess, phash, sharpness
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import normalization

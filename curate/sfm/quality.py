@@ -104,7 +104,7 @@ def files_sharpness(paths, progress: bool = False) -> np.ndarray:
     """[N] :func:`sharpness` of the image files ``paths`` (any format ``curate.sfm.ingest``
     reads, RAW included); NaN for a file that cannot be read (logged)."""
     from tqdm import tqdm
-    from curate.sfm.ingest import read_image
+    from curate.core.images import read_image
     out = np.full(len(paths), np.nan)
     for i, p in enumerate(tqdm(paths, desc="sharpness", disable=not progress, leave=False)):
         try:

@@ -172,8 +172,8 @@ def import_warning(run_dir: Path) -> str | None:
         out.append(f"no 3D points could be triangulated from the photos with the known poses ({tri.get('reason')}; "
                    f"see {Path(run_dir) / 'sfm' / 'colmap.log'}): the export's sparse/0 has none")
     elif tri.get("status") == "done" and tri.get("n_points", 0) == 0:
-        out.append(f"triangulating the photos with the known poses found no 3D points ({tri.get('n_pairs_verified', 0)} "
-                   "verified image pairs): the export's sparse/0 has none")
+        out.append("triangulating the photos with the known poses found no 3D points "
+                   f"({tri.get('n_pairs_verified', 0)} verified image pairs): the export's sparse/0 has none")
     return "; ".join(out) or None
 
 

@@ -32,7 +32,7 @@ def _working_copy(src: str, dst: Path, size: tuple[int, int]) -> None:
     suffix; the original's bytes when nothing changes."""
     from PIL import Image
 
-    from curate.sfm.ingest import RAW_EXTS, decode_upright, read_image
+    from curate.core.images import RAW_EXTS, decode_upright, read_image
     if Path(src).suffix.lower() in RAW_EXTS:
         rgb, _ = read_image(src)
         if (rgb.shape[1], rgb.shape[0]) != size:
@@ -81,7 +81,7 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
     """
     pycolmap = load_pycolmap()
 
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     from tqdm import tqdm
 
     t0 = time.perf_counter()

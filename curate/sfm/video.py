@@ -269,7 +269,7 @@ def _write(frame, t: float, i: int, rotation: int, path: Path, rel: str, out_dir
            prefix: str | None):
     """Write one frame's working copy (at most ``max_size`` on its longer side, upright); its record."""
     from PIL import Image
-    from curate.sfm.ingest import PhotoRecord
+    from curate.core.images import PhotoRecord
     sw, sh = frame.width, frame.height                               # as stored
     w0, h0 = (sh, sw) if int(round((rotation or 0) / 90.0)) % 2 else (sw, sh)   # as shown
     s = min(1.0, max_size / max(w0, h0))

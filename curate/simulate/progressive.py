@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from curate.core.cameras import Cameras, look_at
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.select.greedy import NodeState
 from curate.select.visibility import build_pair_index
 
@@ -347,7 +347,8 @@ class FieldOracle(GridOracle):
         """Re-derive the volume from ``field`` and the cameras taken so far; returns the occupied fraction."""
         from curate.occupancy.masks import RefineConfig, field_occupancy
         c = self.cfg
-        occ = field_occupancy(field, self.grid, RefineConfig(threshold=c.threshold, supersample=c.supersample)) > c.threshold
+        occ = field_occupancy(field, self.grid,
+                              RefineConfig(threshold=c.threshold, supersample=c.supersample)) > c.threshold
         if c.carve:
             vox = float(np.max((self.grid.box_max - self.grid.box_min) / max(c.res - 1, 1)))
             diag = float(np.linalg.norm(self.grid.box_max - self.grid.box_min))

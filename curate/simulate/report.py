@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from curate.report import charts
-from curate.report.html_parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
-from curate.report.plots import top_down_axes
+from curate.html import charts
+from curate.html.parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
+from curate.html.plots import top_down_axes
 
 logger = logging.getLogger(__name__)
 
@@ -45,9 +45,10 @@ def _sim_tables(rep: dict) -> str:
            "method's cameras (best of each column in bold):</p><table>" + head + "".join(rows) + "</table>"]
     if ssim:
         srows = "".join(f'<tr><td class="l">{esc(SIM_LABEL.get(m, m))}</td>'
-                        + "".join(f"<td>{fmt_num(row.get(t), 3)}</td>" for t in tests) + "</tr>" for m, row in ssim.items())
-        out.append("<p>SSIM:</p><table>" + '<tr><th class="l">train set</th>' + "".join(f"<th>{esc(t)}</th>" for t in tests)
-                   + "</tr>" + srows + "</table>")
+                        + "".join(f"<td>{fmt_num(row.get(t), 3)}</td>" for t in tests) + "</tr>"
+                        for m, row in ssim.items())
+        out.append("<p>SSIM:</p><table>" + '<tr><th class="l">train set</th>'
+                   + "".join(f"<th>{esc(t)}</th>" for t in tests) + "</tr>" + srows + "</table>")
     if "ours" in pv:
         from curate.core.stats import paired_difference
         prow = []

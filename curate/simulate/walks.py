@@ -23,7 +23,8 @@ def room_walk(n_loop: int = 110, n_orbit: int = 50, seed: int = 0) -> Cameras:
     c_orbit = np.stack([table[0] + 1.3 * np.cos(a), table[1] + 1.2 * np.sin(a), 1.2 + 0.2 * np.sin(2 * a)], 1)
     c2w = np.concatenate([look_at(c_loop, c_loop + d_loop), look_at(c_orbit, np.broadcast_to(table, c_orbit.shape))])
     n = n_loop + n_orbit
-    return Cameras(c2w, 277.0, 277.0, 160.0, 120.0, 320, 240, names=tuple(f"images/frame_{i:04d}.jpg" for i in range(n)))
+    return Cameras(c2w, 277.0, 277.0, 160.0, 120.0, 320, 240,
+                   names=tuple(f"images/frame_{i:04d}.jpg" for i in range(n)))
 
 
 WALK_KINDS = ("loop", "corridor", "turn", "linger", "two_sessions")

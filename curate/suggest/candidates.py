@@ -123,7 +123,8 @@ def capture_envelope(cams: Cameras, fs: FreeSpace, occ: np.ndarray, box_min, box
     ref = int(np.argsort(cams.fx, kind="stable")[len(cams) // 2])   # a typical camera of the capture
     intr = (float(cams.fx[ref]), float(cams.fy[ref]), float(cams.cx[ref]), float(cams.cy[ref]),
             int(cams.width[ref]), int(cams.height[ref]))
-    return Envelope(up, (float(np.percentile(h, height_percentiles[0])), float(np.percentile(h, height_percentiles[1]))),
+    return Envelope(up,
+                    (float(np.percentile(h, height_percentiles[0])), float(np.percentile(h, height_percentiles[1]))),
                     (float(np.percentile(p, pitch_percentiles[0])), float(np.percentile(p, pitch_percentiles[1]))),
                     clearance, view_margin, intr, look)
 

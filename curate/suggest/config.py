@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field as dc_field
 
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.suggest.choices import FIELD_MODES, NODE_MODES  # noqa: F401  (re-exported)
 
 

@@ -1,6 +1,6 @@
 """Feasible poses around an object capture: the orbit's missing heights and sides.
 
-An object capture (:func:`curate.select.select.capture_kind`: cameras around a point, looking at it) sees little of
+An object capture (:func:`curate.select.methods.capture_kind`: cameras around a point, looking at it) sees little of
 the room it stands in, and its cameras stand where the object's own rays carve little free space: the walk's rule
 (stand where the capture saw empty space) leaves nowhere to stand. What such a capture lacks is views of the object
 from the heights and sides it did not film. So a pose around an object is drawn on the capture's own view sphere

@@ -1,4 +1,5 @@
-"""The suggestions in the formats tools read: NeRF ``transforms.json`` and COLMAP text (``images.txt``, ``cameras.txt``).
+"""The suggestions in the formats tools read: NeRF ``transforms.json`` and COLMAP text
+(``images.txt``, ``cameras.txt``).
 
 In the world frame of ``RUN/sfm/cameras.json`` (COLMAP's frame after SfM, the poses' frame after an import).
 The photos do not exist yet: each pose is named ``suggest_01.jpg``, ``suggest_02.jpg``...
@@ -37,7 +38,8 @@ def write_colmap_text(folder: Path, cams: Cameras, names: list[str]) -> tuple[Pa
     cam_txt = folder / "cameras.txt"
     cam_txt.write_text("\n".join(lines) + "\n")
     q, t = colmap_from_c2w(cams.c2w) if len(cams) else (np.zeros((0, 4)), np.zeros((0, 3)))
-    lines = ["# Image list with two lines of data per image:", "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
+    lines = ["# Image list with two lines of data per image:",
+             "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
              "#   POINTS2D[] as (X, Y, POINT3D_ID)", f"# Number of images: {len(cams)}, mean observations per image: 0"]
     for i in range(len(cams)):
         lines.append(" ".join([str(i + 1), *(repr(float(v)) for v in q[i]), *(repr(float(v)) for v in t[i]),

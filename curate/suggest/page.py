@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from curate.report.html_parts import CSS, esc, note
+from curate.html.parts import CSS, esc, note
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +52,8 @@ def _load_thumb(path: str, side: int) -> np.ndarray | None:
 def floor_plan_svg(rec: dict, inp, pl, used: np.ndarray) -> str:
     """The floor plans (now, with the path, the chosen subset and the suggestions; and after the suggestions) as
     one inline SVG (module docstring)."""
-    from curate.report.charts import _figure, _svg
-    from curate.report.plots import floorplan, top_down_axes
+    from curate.html.charts import figure, svg
+    from curate.html.plots import floorplan, top_down_axes
     cams = inp.cams
     k, a, b, _ = top_down_axes(cams.c2w)
     res = inp.res
@@ -80,7 +80,7 @@ def floor_plan_svg(rec: dict, inp, pl, used: np.ndarray) -> str:
     w = 1120
     main_w = 0.64 * w
     h = int(np.clip(main_w * ext_b / max(ext_a, 1e-9), 320, 820)) + 70
-    fig, _ = _figure(w, h)
+    fig, _ = figure(w, h)
     fig.clf()
     gs = fig.add_gridspec(2, 2, width_ratios=(2.0, 1.0), height_ratios=(1.0, 0.035), wspace=0.12, hspace=0.32)
     axs = [fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1])]
@@ -125,11 +125,11 @@ def floor_plan_svg(rec: dict, inp, pl, used: np.ndarray) -> str:
     pos = axs[1].get_position()          # the legend under the small map, where the figure has room
     fig.legend(*axs[0].get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(pos.x0, pos.y0 - 0.07),
                ncol=1, frameon=False, fontsize=9)
-    return _svg(fig)
+    return svg(fig)
 
 
 def _cards(rec: dict, inp, d: Path) -> str:
-    from curate.report.plots import jpeg_data_uri, png_data_uri
+    from curate.html.plots import jpeg_data_uri, png_data_uri
     out = []
     units = "m" if rec["units"] == "m" else "units"
     for s in rec["suggestions"]:
@@ -167,8 +167,8 @@ def _how(rec: dict) -> str:
              + f"; occupancy from {rec['occupancy']}"),
             *((("where", f"an object capture: on its view sphere, {o['radii'][0]:.2f} to {o['radii'][1]:.2f} {u} "
                           f"from the object's centre, at elevations {o['elevation_deg'][0]:+.0f}° to "
-                          f"{o['elevation_deg'][1]:+.0f}° (the capture filmed {o['captured_elevation_deg'][0]:+.0f}° to "
-                          f"{o['captured_elevation_deg'][1]:+.0f}°), looking at the centre, no roll; "
+                          f"{o['elevation_deg'][1]:+.0f}° (the capture filmed {o['captured_elevation_deg'][0]:+.0f}° "
+                          f"to {o['captured_elevation_deg'][1]:+.0f}°), looking at the centre, no roll; "
                           f"{100 * rec.get('feasible_share', 0):.0f}% of the sphere feasible"),)
               if (o := rec.get("orbit")) else
               (("where", f"in the {rec['free_voxels']} voxels the capture's rays crossed as free space before the "
@@ -180,11 +180,12 @@ def _how(rec: dict) -> str:
                            "no roll"))),
             ("clearance", f"centre at least {env['clearance']:.2f} {u} from occupied nodes"
                           + ("" if rec.get("orbit") else " and from space the capture did not see to be empty")
-                          + f" (the capture's {cp:g}th "
-                          f"percentile, at least one voxel, at most a quarter of its typical viewing distance); nothing "
-                          f"occupied nearer than {env['view_margin']:.2f} {u} in view (the {vp:g}th percentile of the "
-                          "nearest surfaces it saw, at least one voxel, at most half the typical viewing distance)"),
-            ("placement", f"greedy, as Algorithm 1: {int(np.median(rec['n_candidates'])) if rec['n_candidates'] else 0} "
+                          + f" (the capture's {cp:g}th percentile, at least one voxel, at most a quarter of its "
+                          f"typical viewing distance); nothing occupied nearer than {env['view_margin']:.2f} {u} in "
+                          f"view (the {vp:g}th percentile of the nearest surfaces it saw, at least one voxel, at most "
+                          "half the typical viewing distance)"),
+            ("placement", "greedy, as Algorithm 1: "
+                          f"{int(np.median(rec['n_candidates'])) if rec['n_candidates'] else 0} "
                           "feasible random candidates per photo, each scored by the energy of the capture, the "
                           "photos placed before it and itself"),
             ("time", f"{t['ms_per_camera']:.0f} ms per placed photo, {t['ms_per_candidate']:.2f} ms per candidate "

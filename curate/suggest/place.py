@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from curate.core.cameras import Cameras
-from curate.select.energy import EnergyConfig, EnergyTerms, energy_from_hist
+from curate.select.config import EnergyConfig
+from curate.select.energy import EnergyTerms, energy_from_hist
 from curate.select.greedy import NodeState
 from curate.select.visibility import build_pair_index
 from curate.suggest.candidates import Feasibility

@@ -218,11 +218,11 @@ def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
     (``inp.occ``, ``inp.nodes_mask``): the stage's computation without its files (the validation harness's too).
 
     A walk-through gets poses where the capture saw empty space (:class:`curate.suggest.candidates.Feasibility`);
-    an object capture (:func:`curate.select.select.capture_kind`) gets poses on its own view sphere
+    an object capture (:func:`curate.select.methods.capture_kind`) gets poses on its own view sphere
     (:class:`curate.suggest.orbit.OrbitFeasibility`). ValueError saying what the capture lacks when nothing is
     feasible."""
     occ, nodes_mask = inp.occ, inp.nodes_mask
-    from curate.select.select import capture_kind
+    from curate.select.methods import capture_kind
     from curate.suggest.candidates import Feasibility, capture_envelope
     from curate.suggest.freespace import cast_free_space
     from curate.suggest.orbit import OrbitFeasibility, capture_orbit
@@ -331,7 +331,8 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
                             "centre": sugg.centres[s].tolist(), "view_dir": sugg.view_dirs[s].tolist(),
                             "height": float(sugg.centres[s] @ env.up),
                             "pitch_deg": float(np.degrees(np.arcsin(np.clip(sugg.view_dirs[s] @ env.up, -1, 1)))),
-                            "energy_gain": gains[s], "nearest": instr[s].to_dict(), "nearest_label": inp.labels[int(near[s])],
+                            "energy_gain": gains[s], "nearest": instr[s].to_dict(),
+                            "nearest_label": inp.labels[int(near[s])],
                             "preview": previews[s]} for s in range(len(sugg))]}
     write_json_atomic(d / "suggestions.json", rec)
     write_page(run_dir, d, rec, inp, pl, used)

@@ -48,7 +48,8 @@ def load_dataset(folder: Path) -> tuple[Cameras, list[str]]:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, type=Path)
-    ap.add_argument("--scale", type=float, default=None, help="image scale (default: fox 1/8, office 1/4, templering 1/2)")
+    ap.add_argument("--scale", type=float, default=None,
+                    help="image scale (default: fox 1/8, office 1/4, templering 1/2)")
     ap.add_argument("--budgets", default="30,60,120,300", help="training seconds at which to evaluate")
     ap.add_argument("--holdout", type=int, default=14, help="every n-th image is a test view")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/bench_field/<data name>)")

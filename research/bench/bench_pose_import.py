@@ -83,7 +83,8 @@ def main(argv=None) -> int:
             tri = st.get("triangulation") or {}
             print(f"{name}: {tri.get('n_points')} points in {tri.get('seconds')} s (track "
                   f"{tri.get('mean_track_length')}, {tri.get('mean_reprojection_error_px')} px); export "
-                  f"{model['n_images']} images, {model['n_points3D']} points seen by {model.get('n_images_with_points')}, "
+                  f"{model['n_images']} images, {model['n_points3D']} points seen by "
+                  f"{model.get('n_images_with_points')}, "
                   f"components {model['components']}", flush=True)
         results[name] = res
     print(json.dumps(results))

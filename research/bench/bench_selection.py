@@ -64,7 +64,7 @@ def nodes(res: int):
 def warm_up() -> float:
     """Load (or compile) the numba kernel and torch once; returns the seconds it took."""
     import torch  # noqa: F401  (import time is not selection time)
-    from curate.select.energy import EnergyConfig
+    from curate.select.config import EnergyConfig
     from curate.select.greedy import greedy_select
     from curate.select.visibility import build_pair_index
     t0 = time.perf_counter()
@@ -74,7 +74,8 @@ def warm_up() -> float:
 
 def case_main() -> dict:
     warm = warm_up()
-    from curate.select.energy import EnergyConfig, energy_of_subset
+    from curate.select.config import EnergyConfig
+    from curate.select.energy import energy_of_subset
     from curate.select.greedy import bruteforce_scores, greedy_select
     from curate.select.visibility import build_pair_index
     cfg = EnergyConfig()
@@ -97,7 +98,8 @@ def case_main() -> dict:
 
 
 def case_exact() -> dict:
-    from curate.select.energy import EnergyConfig, energy_of_subset
+    from curate.select.config import EnergyConfig
+    from curate.select.energy import energy_of_subset
     from curate.select.greedy import greedy_select, greedy_select_bruteforce
     from curate.select.visibility import build_pair_index
     out = {}
@@ -117,7 +119,7 @@ def case_exact() -> dict:
 
 def case_select(n: int, res: int, budget: int, key: str) -> dict:
     warm = warm_up()
-    from curate.select.energy import EnergyConfig
+    from curate.select.config import EnergyConfig
     from curate.select.greedy import greedy_select
     from curate.select.visibility import build_pair_index
     cfg = EnergyConfig()
@@ -139,8 +141,10 @@ def case_methods(n: int, budget: int, key: str) -> dict:
     steadier than absolute times on a shared machine)."""
     warm_up()
     from curate.core.grid import NodeGrid
-    from curate.select.medoids import MedoidsConfig, embed, path_weights, view_depths
-    from curate.select.select import SelectConfig, select
+    from curate.select.config import MedoidsConfig
+    from curate.select.medoids import embed, path_weights, view_depths
+    from curate.select.config import SelectConfig
+    from curate.select.select import select
     from curate.select.visibility import build_pair_index
     from research.variants import Variant, select_variant
     cams = pool(n, 2)
@@ -210,8 +214,8 @@ def main() -> None:
     for name in ("main", "methods", "methods3000", "exact", "s1300", "large"):
         if name == "large" and a.skip_large:
             continue
-        p = subprocess.run([sys.executable, "-m", "research.bench.bench_selection", "--case", name], capture_output=True,
-                           text=True, cwd=Path(__file__).resolve().parents[2])
+        p = subprocess.run([sys.executable, "-m", "research.bench.bench_selection", "--case", name],
+                           capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2])
         if p.returncode != 0:
             print(p.stderr, file=sys.stderr)
             raise SystemExit(f"case {name} failed")

@@ -2,8 +2,8 @@
 
 Defaults: budget 60 cameras per method, 160x120 images, 30 test views per test set,
 300 random candidates per placement step (the paper: 1000), 24^3 node grid, 1000 field
-training iterations per method and room (a fixed count, fair under a varying load), occupancy from the scene (oracle variant). Every setting is
-a flag and the settings used are printed in the JSON.
+training iterations per method and room (a fixed count, fair under a varying load), occupancy from the scene
+(oracle variant). Every setting is a flag and the settings used are printed in the JSON.
 
 Prints one JSON object as its last line: ``table`` maps train method (ours, random,
 hemisphere, fvs) -> test set (random, hemisphere, ours, average) -> mean PSNR over the
@@ -28,7 +28,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.field.model import FieldConfig
 from curate.simulate.progressive import CameraSpec, FieldOccupancyConfig, ProgressiveConfig
 from curate.simulate.experiment import METHODS, TEST_SETS, SimulateConfig, run_simulation
@@ -51,14 +51,16 @@ def main() -> None:
     ap.add_argument("--occupancy", default="oracle", choices=["oracle", "field", "both"])
     ap.add_argument("--train-between", type=int, default=250, help="field variant: iterations after each camera")
     ap.add_argument("--n-free-first", type=int, default=20, help="cameras drawn in the free box first")
-    ap.add_argument("--min-iters", type=int, default=1000, help="field variant: iterations before its occupancy is used")
+    ap.add_argument("--min-iters", type=int, default=1000,
+                    help="field variant: iterations before its occupancy is used")
     ap.add_argument("--loop-rays", type=int, default=0, help="field variant: rays per iteration of the loop's field "
                     "(0: the default field's)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
     out = a.out or tempfile.mkdtemp(prefix="bench_simulate_")
     methods = tuple(a.methods.split(","))
-    loop_field = FieldConfig(val_every=0, batch_rays=a.loop_rays, occ_update_start=max(1, min(100, a.train_between // 2)),
+    loop_field = FieldConfig(val_every=0, batch_rays=a.loop_rays,
+                             occ_update_start=max(1, min(100, a.train_between // 2)),
                              occ_update_every=max(1, min(100, a.train_between // 2))) if a.loop_rays else None
     runs = {"oracle": [("oracle", methods)], "field": [("field", methods)],
             "both": [("oracle", methods), ("field", ("ours",))]}[a.occupancy]
@@ -91,8 +93,9 @@ def main() -> None:
                       "test_sets": [a.seed + 1000 + i for i in range(3)], "scene_seed": 0},
                       "ours_beats_random_and_hemisphere": ours_wins,
                       "settings": {**vars(a), "size": [w, h], "energy": asdict(EnergyConfig()),
-                                   "occupancy_note": "ours: " + {"oracle": "scene geometry", "field": "the field trained "
-                                                     "as cameras are added", "both": "both variants"}[a.occupancy]
+                                   "occupancy_note": "ours: " + {"oracle": "scene geometry",
+                                                                 "field": "the field trained as cameras are added",
+                                                                 "both": "both variants"}[a.occupancy]
                                    + "; baselines and test sets: scene geometry"},
                       "field_loop": field_loops, "timings": timings, "out": out}))
 

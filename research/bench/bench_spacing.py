@@ -30,7 +30,8 @@ def walk_cameras(n: int, seed: int = 0):
 
 def main(argv=None) -> int:
     from curate.select.auto_budget import choose_budget
-    from curate.select.medoids import MedoidsConfig, embed, medoids_select
+    from curate.select.config import MedoidsConfig
+    from curate.select.medoids import embed, medoids_select
     from curate.select.spacing import spacing_curve
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[300, 1000, 3000])

@@ -149,7 +149,7 @@ def test_default_label_follows_autos_rule(harness, monkeypatch):
     capture: a changed rule (e.g. objects: FVS -> energy) must not reuse the old folders,
     while a method other than auto does not depend on the rule."""
     from curate.select import methods
-    from curate.select.select import SelectConfig
+    from curate.select.config import SelectConfig
     rule, tag = harness.default_label(SelectConfig())
     assert f"object={methods.OBJECT_METHOD}" in rule and f"walk={methods.WALK_METHOD}" in rule
     assert harness.default_label(SelectConfig()) == (rule, tag)        # stable across calls

@@ -9,7 +9,7 @@ from curate.core.cameras import Cameras
 from research.coverage import (CoverageConfig, cell_coverage_greedy, cell_coverage_value, cell_similarity,
                              coverage_select, facility_location_bruteforce, facility_location_greedy,
                              facility_location_value, pose_similarity)
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.core.grid import NodeGrid
 from research.variants import Variant, select_variant
 from curate.select.visibility import build_pair_index

@@ -1,4 +1,5 @@
-"""The view-medoid variants measured and not adopted (research.medoids_variants): cost powers, an energy share, a sharpness prior."""
+"""The view-medoid variants measured and not adopted (research.medoids_variants): cost powers, an energy share,
+a sharpness prior."""
 
 import dataclasses
 
@@ -6,12 +7,13 @@ import numpy as np
 import pytest
 
 from curate.core.cameras import Cameras, look_at
-from curate.select.energy import EnergyConfig
+from curate.select.config import EnergyConfig
 from curate.core.grid import NodeGrid
 from curate.select.medoids import embed, path_weights, view_depths
 from research.medoids_variants import MedoidsVariantConfig as M, medoids_select
 from research.variants import Variant, select_variant
-from curate.select.select import SelectConfig, select
+from curate.select.config import SelectConfig
+from curate.select.select import select
 from curate.select.visibility import build_pair_index
 from tests.conftest import random_pool
 
@@ -100,7 +102,8 @@ def test_energy_share_medoids_then_the_paper_greedy(share, budget, initial):
     plain = select_variant(Variant("medoids", medoids=M(energy_share=0.0)), cams, GRID, budget, index=idx)
     assert plain.chosen == medoids_select(cams, budget, M(), (), GRID.nodes(), idx)[0]
     # the adopted product method: the variant with its knobs at their neutral values
-    from curate.select.medoids import MedoidsConfig, medoids_select as product
+    from curate.select.config import MedoidsConfig
+    from curate.select.medoids import medoids_select as product
     assert plain.chosen == product(cams, budget, MedoidsConfig(), (), GRID.nodes(), idx)[0]
     for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError):

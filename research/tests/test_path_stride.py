@@ -6,7 +6,8 @@ import pytest
 
 from curate.core.cameras import Cameras, look_at
 from curate.select.baselines import stride_subset
-from curate.select.path import PathConfig, path_select
+from curate.select.config import PathConfig
+from curate.select.path import path_select
 from research.path_stride import path_stride
 
 

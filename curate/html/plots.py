@@ -1,7 +1,7 @@
 """Images of the HTML reports: floor plans (heat maps), colour bars, thumbnails as data URIs.
 
 Heat maps and image strips are PNG / JPEG data URIs (PIL), colour bars small inline SVG;
-the charts are drawn by matplotlib in :mod:`curate.report.charts`. Nothing is fetched from
+the charts are drawn by matplotlib in :mod:`curate.html.charts`. Nothing is fetched from
 the network.
 """
 

@@ -17,7 +17,7 @@ PALETTE = ("#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#d
 _DPI = 100.0
 
 
-def _figure(width: int, height: int):
+def figure(width: int, height: int):
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
@@ -27,7 +27,7 @@ def _figure(width: int, height: int):
     return fig, ax
 
 
-def _svg(fig) -> str:
+def svg(fig) -> str:
     """The figure as an inline ``<svg>`` string (deterministic ids), the figure closed."""
     import matplotlib.pyplot as plt
     buf = io.StringIO()
@@ -45,7 +45,7 @@ def _finite(a) -> np.ndarray:
 
 def line_chart(series: dict, title: str, xlabel: str, ylabel: str, width: int = 520, height: int = 300) -> str:
     """Line chart; ``series`` maps a name to (x [n], y [n]) (non-finite points are skipped)."""
-    fig, ax = _figure(width, height)
+    fig, ax = figure(width, height)
     for i, (name, (x, y)) in enumerate(series.items()):
         x, y = np.asarray(x, np.float64).ravel(), np.asarray(y, np.float64).ravel()
         ok = np.isfinite(x) & np.isfinite(y) if len(x) == len(y) else np.zeros(0, bool)
@@ -57,7 +57,7 @@ def line_chart(series: dict, title: str, xlabel: str, ylabel: str, width: int = 
     ax.set_ylabel(ylabel)
     if len(series) > 1:
         ax.legend(frameon=False)
-    return _svg(fig)
+    return svg(fig)
 
 
 def budget_chart(k, loss, tolerance: float, chosen: int, measured=None, check_loss=None, advised: int | None = None,
@@ -65,7 +65,7 @@ def budget_chart(k, loss, tolerance: float, chosen: int, measured=None, check_lo
     """``--budget auto``: the predicted loss [n] against the budgets ``k`` [n], the tolerance as a
     dashed line, the chosen budget as a dot; ``measured``: the budget check's points [(k, loss dB)]
     as crosses, ``check_loss`` [n] its fitted curve at ``k`` and ``advised`` its budget."""
-    fig, ax = _figure(width, height)
+    fig, ax = figure(width, height)
     k, loss = np.asarray(k, np.float64).ravel(), np.asarray(loss, np.float64).ravel()
     ok = np.isfinite(k) & np.isfinite(loss) if len(k) == len(loss) else np.zeros(0, bool)
     ax.plot(k[ok], loss[ok], color=PALETTE[0], lw=1.8, label="predicted from the poses")
@@ -90,16 +90,17 @@ def budget_chart(k, loss, tolerance: float, chosen: int, measured=None, check_lo
     ax.set_xlabel("photos chosen (log scale)")
     ax.set_ylabel("dB below all photos")
     ax.legend(frameon=False, fontsize=8)
-    return _svg(fig)
+    return svg(fig)
 
 
-def bar_chart(names, values, errors=None, title: str = "", ylabel: str = "", width: int = 520, height: int = 300) -> str:
+def bar_chart(names, values, errors=None, title: str = "", ylabel: str = "", width: int = 520,
+              height: int = 300) -> str:
     """Bar chart with optional error bars (e.g. std over seeds). Each bar's value is written above
     its error bar, never through it. When the bars are close to each other the value axis is cut
     (it would hide the differences) and the chart says where it starts."""
     v = np.asarray(values, np.float64).ravel()
     e = np.zeros_like(v) if errors is None else np.nan_to_num(np.asarray(errors, np.float64).ravel())
-    fig, ax = _figure(width, height)
+    fig, ax = figure(width, height)
     x = np.arange(len(v))
     ok = np.isfinite(v)
     ax.bar(x[ok], v[ok], color=[PALETTE[i % len(PALETTE)] for i in x[ok]], width=0.7,
@@ -123,7 +124,7 @@ def bar_chart(names, values, errors=None, title: str = "", ylabel: str = "", wid
     for xi in x[~ok]:
         ax.text(xi, 0, "n/a", ha="center", va="bottom", color="#777")
     ax.set_ylabel(ylabel)
-    return _svg(fig)
+    return svg(fig)
 
 
 def camera_map(xy: np.ndarray, dirs_xy: np.ndarray, chosen, title: str, extra_xy: np.ndarray | None = None,
@@ -133,7 +134,7 @@ def camera_map(xy: np.ndarray, dirs_xy: np.ndarray, chosen, title: str, extra_xy
     ``extra_xy`` [E, 2] (e.g. held-out views) drawn as hollow squares. The legend shows each mark as
     it is drawn (the legend is made from the drawn marks). ``axis_labels``: the world axes plotted
     horizontally and vertically."""
-    return _svg(camera_map_figure(xy, dirs_xy, chosen, title, extra_xy, width, height, labels, axis_labels)[0])
+    return svg(camera_map_figure(xy, dirs_xy, chosen, title, extra_xy, width, height, labels, axis_labels)[0])
 
 
 def camera_map_figure(xy, dirs_xy, chosen, title, extra_xy=None, width=520, height=420,
@@ -141,7 +142,7 @@ def camera_map_figure(xy, dirs_xy, chosen, title, extra_xy=None, width=520, heig
     """(figure, axes) of :func:`camera_map`."""
     xy = np.asarray(xy, np.float64).reshape(-1, 2)
     d = np.asarray(dirs_xy, np.float64).reshape(-1, 2)
-    fig, ax = _figure(width, height)
+    fig, ax = figure(width, height)
     allp = np.concatenate([xy] + ([np.asarray(extra_xy, np.float64).reshape(-1, 2)] if extra_xy is not None else []))
     allp = allp[np.all(np.isfinite(allp), axis=1)]
     span = float(np.ptp(allp, axis=0).max()) if len(allp) > 1 else 1.0
