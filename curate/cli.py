@@ -17,12 +17,14 @@ import logging
 import re
 import sys
 from pathlib import Path
+from typing import get_args
 
 from curate import __version__
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
 from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
 from curate.export.config import MODES, UNDISTORT
+from curate.simulate.choices import Scene, SimOccupancy
 from curate.suggest.choices import FIELD_MODES, NODE_MODES
 
 
@@ -247,7 +249,7 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--triangulate", "sfm.triangulate", choices=TRIANGULATE)]
 RUN = BUDGET + BUDGET_CHECK + METHOD + ENERGY + GRID + TRAIN + EVAL + NO_EVAL + EXPORT + SFM
 
-SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen")),
+SIMULATE = [Opt("--scene", "scene", choices=get_args(Scene)),
             Opt("--scene-seed", "scene_seed", parse=int),
             Opt("--budget", "budget", parse=int),
             Opt("--n-test", "n_test", parse=int),
@@ -259,7 +261,7 @@ SIMULATE = [Opt("--scene", "scene", choices=("livingroom", "office", "kitchen"))
             Opt("--train-seconds", "train_seconds", parse=float),
             Opt("--train-iters", "train_iters", parse=int),
             Opt("--methods", "methods", parse=_words, metavar="A,B,..."),
-            Opt("--occupancy", "occupancy", choices=("oracle", "field")),
+            Opt("--occupancy", "occupancy", choices=get_args(SimOccupancy)),
             Opt("--train-between", "train_between", parse=int),
             Opt("--seed", "seed", parse=int)]
 

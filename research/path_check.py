@@ -49,11 +49,11 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+", help="run folders whose SfM stage finished")
     a = ap.parse_args(argv)
-    from curate.sfm.continuity import _speeds, off_path, path_jumps, step_ratios
+    from curate.sfm.continuity import speeds, off_path, path_jumps, step_ratios
     for run in a.runs:
         for model, take, t, names, c in takes_along(run):
             isl = off_path(t, c)
-            v = _speeds(t, c)
+            v = speeds(t, c)
             med = float(np.median(v)) if len(v) else 0.0
             ratio = v / med if med > 0 else np.zeros_like(v)
             around = step_ratios(t, c)

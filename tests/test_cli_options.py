@@ -241,3 +241,31 @@ def test_every_option_field_has_an_attribute_docstring():
     missing = [f"{c.__qualname__}.{f.name}" for c in classes for f in dataclasses.fields(c)
                if not field_docs(c).get(f.name)]
     assert not missing, f"fields without an attribute docstring: {missing}"
+
+
+def _field_type(cfg, path: str):
+    """The type hint of the config field ``path`` ("sfm.matcher") of the config object ``cfg``."""
+    import sys
+    *owners, name = path.split(".")
+    for o in owners:
+        cfg = getattr(cfg, o)
+    f = next(f for f in dataclasses.fields(cfg) if f.name == name)
+    return eval(f.type, vars(sys.modules[type(cfg).__module__])) if isinstance(f.type, str) else f.type
+
+
+def test_every_choice_is_declared_once_as_the_fields_literal():
+    """Issue 51: a flag's choices are its config field's ``Literal[...]`` (the tuple the CLI offers is derived
+    from it), so the choices, the validation and the help cannot drift apart. The method's choices come from
+    the method registry (a field of type str checked against it)."""
+    import typing
+    seen = []
+    for cmd, opts in cli.COMMAND_OPTS.items():
+        base = cli._base_for(cmd)
+        for o in opts:
+            if not o.choices or o.flag == "--method":
+                continue
+            hint = _field_type(base, o.path)
+            assert typing.get_origin(hint) is typing.Literal, f"{cmd} {o.flag}: {hint} is not a Literal"
+            assert tuple(o.choices) == typing.get_args(hint), f"{cmd} {o.flag}"
+            seen.append(o.flag)
+    assert {"--matcher", "--mapper", "--on-split", "--triangulate", "--camera-mode", "--undistort"} <= set(seen)

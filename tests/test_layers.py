@@ -9,7 +9,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-LEAVES = ("curate", "curate.config", "curate.select.methods", "curate.select.bins", "curate.suggest.choices")
+LEAVES = ("curate", "curate.config", "curate.select.methods", "curate.select.bins", "curate.suggest.choices",
+          "curate.simulate.choices")
 """Modules of the lowest layer besides ``curate.core.*`` and every package's ``config``: light, importable by all."""
 
 LAYERS = ("core", ("field", "html"), "sfm", "occupancy", "select", "evaluate", "export", "report", "simulate",

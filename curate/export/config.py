@@ -4,11 +4,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
-MODES = ("hardlink", "copy", "link")
+ExportMode = Literal["hardlink", "copy", "link"]
+MODES = get_args(ExportMode)
 """``ExportConfig.mode`` choices."""
-UNDISTORT = ("auto", "off")
+Undistort = Literal["auto", "off"]
+UNDISTORT = get_args(Undistort)
 """``ExportConfig.undistort`` choices."""
 DOWNSCALES = (2, 4, 8)
 """``ExportConfig.downscale`` factors nerfstudio (``--downscale-factor``) and 3DGS (``-r``) know."""
@@ -18,12 +20,12 @@ DOWNSCALES = (2, 4, 8)
 class ExportConfig:
     """How the chosen subset is written (``RUN/export``)."""
 
-    mode: Literal["hardlink", "copy", "link"] = "hardlink"
+    mode: ExportMode = "hardlink"
     """How the photos enter ``images/``: 'hardlink' (hard links to the originals where the file system allows,
     copies elsewhere: the export alone carries every image, for tar or rsync to a training machine, and takes no
     space on the same disk), 'copy', or 'link' (symbolic links to the originals: nothing is copied, and the
     export is valid only beside them)."""
-    undistort: Literal["auto", "off"] = "auto"
+    undistort: Undistort = "auto"
     """'auto': where a camera has lens distortion (a phone video's radial distortion), the images are undistorted
     and the cameras written as PINHOLE (COLMAP's undistorter), as 3D Gaussian splatting's loader requires; 'off':
     the original photos with their distorted cameras (OPENCV in transforms.json)."""

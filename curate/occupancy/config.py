@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
+from typing import Literal, get_args
+
+RefineField = Literal["auto", "always"]
+REFINE_FIELD = get_args(RefineField)
+"""``RefineConfig.field`` choices."""
 
 
 @dataclass
@@ -54,7 +59,7 @@ class RefineConfig:
     from any point)."""
     prior_dilation: int = 2
     """Dilation (voxels) of the prior for 'intersect_dilated'."""
-    field: str = "auto"
+    field: RefineField = "auto"
     """When a radiance field refines the occupancy: 'auto' (only for the paper's energy, when the
     sparse points are too few to give the scene's surface, e.g. poses without points) or 'always'
     (the paper's refinement on every run: one more training)."""
@@ -75,5 +80,3 @@ class RefineConfig:
                 raise ValueError(f"refine {name} must be an integer >= {lo}, got {v!r}")
 
 
-REFINE_FIELD = ("auto", "always")
-"""``RefineConfig.field`` choices."""

@@ -20,12 +20,13 @@ depend on the signs or sizes of the noise left in x and y.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, get_args
 
 if TYPE_CHECKING:
     import numpy as np
 
-BINNINGS = ("paper", "equal-area")
+Binning = Literal["paper", "equal-area"]
+BINNINGS = get_args(Binning)
 """How the direction bins are laid out (module docstring)."""
 
 MAX_BINS = 4096

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from curate.select.bins import DirectionBins
+from curate.select.bins import Binning, DirectionBins
 from curate.select.methods import DEFAULT_METHOD, PATH_WEIGHTS, REGISTRY
 
 GAMMA_MAX = 20.0
@@ -27,7 +27,7 @@ class EnergyConfig:
     """Direction bins along theta, the angle from the scene's +z axis (authors' code: 5)."""
     n_phi: int = 10
     """Direction bins along the azimuth phi = atan2(y, x) (authors' code: 10)."""
-    binning: str = "paper"
+    binning: Binning = "paper"
     """"paper": uniform in theta, solid-angle shares; "equal-area": uniform in cos(theta)."""
 
     def __post_init__(self) -> None:

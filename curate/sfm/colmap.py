@@ -25,37 +25,7 @@ given); poses that come without 3D points get points triangulated from the photo
 held fixed (:mod:`curate.sfm.triangulation`: the same SIFT extraction and matching, then COLMAP's
 point triangulator).
 
-Run-folder contract, ``RUN/sfm/``:
-
-* ``stage.json``: stage record (key, config, versions, timings, statistics); written
-  last, a run killed half-way has none and is redone.
-* ``images/``: working copies (SfM only), longer side <= ``max_image_size``.
-* ``sparse/0/``: COLMAP binary model of the registered images, COLMAP's world frame
-  (for an import: the imported cameras at their own intrinsics and names, with the source's points,
-  or the points triangulated for them; none with ``triangulate='off'``).
-  ``sparse/1/``, ...: the other models of a capture that split, largest first, each in its
-  own frame (``stats.parts`` lists them; ``--on-split each`` curates them too).
-* ``cameras.json``: the same cameras as ``curate.core.cameras.Cameras`` (OpenCV c2w, same
-  world frame), sorted by name; names are the working-copy names (SfM) or the image
-  names of the imported model / the ``file_path`` of the imported transforms.json.
-  Intrinsics are those of the working copies (SfM) or of the source (import).
-* ``transforms.json``: the same cameras in the nerfstudio convention. SfM: file paths
-  relative to ``RUN/sfm`` (``images/<working name>``), so ``RUN/sfm`` is a complete
-  nerfstudio dataset; import: absolute paths of the original photos.
-  ``curate.sfm.io.original_cameras`` maps cameras to the full-resolution originals.
-* ``points.npy`` [P, 3] float32 sparse points, ``points_rgb.npy`` [P, 3] uint8,
-  ``points_error.npy`` [P] float32 reprojection errors (absent for an import without points).
-* ``normalization.json``: ``x_canonical = scale * (x - centre)`` maps the scene into
-  [-1, 1]^3 (``curate.sfm.io.normalization``).
-* ``images.json``: per input file: original path, working name, status (``kept``,
-  ``dropped`` or ``skipped`` with ``reason``), quality metrics, ``registered``, its take
-  (``extra.take``: its video, or ``photos`` / ``photos in a/b/`` for the photos of a folder).
-  ``stage.json``'s ``stats.takes`` counts per take its frames and those in the model. An import
-  lists each pose (its photo, or ``skipped``: no photo in the folder) and the folder's photos no
-  pose names (``skipped``).
-* ``colmap.log``: COLMAP's own log; ``database.db``: COLMAP's feature database (an import's:
-  of the triangulation, at the working size).
-* ``dense/fused.ply``: dense point cloud, only with CUDA (``dense='auto'``).
+What ``RUN/sfm/`` holds, file by file: docs/architecture.md, "RUN/sfm in detail".
 """
 
 from __future__ import annotations

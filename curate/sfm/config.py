@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
-
-MATCHERS = ("auto", "exhaustive", "sequential", "spatial", "retrieval")
+Matcher = Literal["auto", "exhaustive", "sequential", "spatial", "retrieval"]
+MATCHERS = get_args(Matcher)
 """``SfmConfig.matcher`` choices. The vocabulary trees (``sequential``'s loop detection, ``retrieval``) are
 trained on the capture itself: COLMAP's published trees are downloads."""
-CAMERA_MODES = ("auto", "single", "per_image")
+CameraMode = Literal["auto", "single", "per_image"]
+CAMERA_MODES = get_args(CameraMode)
 """``SfmConfig.camera_mode`` choices."""
-ON_SPLIT = ("largest", "each", "stop")
+OnSplit = Literal["largest", "each", "stop"]
+ON_SPLIT = get_args(OnSplit)
 """``SfmConfig.on_split`` choices."""
-MAPPERS = ("auto", "incremental", "global")
+Mapper = Literal["auto", "incremental", "global"]
+MAPPERS = get_args(Mapper)
 """``SfmConfig.mapper`` choices."""
-TRIANGULATE = ("auto", "off")
+AutoOff = Literal["auto", "off"]
+TRIANGULATE = get_args(AutoOff)
 """``SfmConfig.triangulate`` choices."""
 MIN_PART = 10
 """``on_split = 'each'``: the fewest registered photos a part needs to be curated on its own."""
@@ -79,7 +84,7 @@ class SfmConfig:
     blur_fraction: float = 0.3
     """Blurry threshold, relative to the pool's median sharpness."""
     # --- features
-    camera_mode: str = "auto"
+    camera_mode: CameraMode = "auto"
     """One camera for all photos (single) or one per photo (per_image); auto: single when every photo comes from one
     camera model at one size."""
     camera_model: str = "SIMPLE_RADIAL"
@@ -90,7 +95,7 @@ class SfmConfig:
     sift_peak_threshold: float = 0.02 / 3
     """SIFT's peak threshold (COLMAP's default); lower finds more features."""
     # --- matching
-    matcher: str = "auto"
+    matcher: Matcher = "auto"
     """Which photo pairs to match: exhaustive (all), sequential (each frame with the next ones, and loops), spatial
     (by GPS), or auto: exhaustive for a small set, else spatial with GPS, sequential for video frames or numbered
     photos, retrieval otherwise; retrieval: each photo with its most similar photos (a vocabulary tree trained on the
@@ -129,7 +134,7 @@ class SfmConfig:
     guided_matching: bool = False
     """COLMAP's guided matching (more matches, slower)."""
     # --- mapping
-    mapper: str = "auto"
+    mapper: Mapper = "auto"
     """How matches become cameras: incremental (COLMAP's), global (COLMAP's global mapper, formerly GLOMAP), or auto:
     incremental, then global on the same matches when the incremental model leaves photos out, the global model kept
     where it agrees with the incremental parts and holds more photos than their largest, by at least 5% of the
@@ -168,14 +173,14 @@ class SfmConfig:
     video: VideoConfig = field(default_factory=VideoConfig)
     """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""
     # --- outputs
-    dense: str = "auto"
+    dense: AutoOff = "auto"
     """'auto': dense point cloud when pycolmap has CUDA; 'off': none."""
-    triangulate: str = "auto"
+    triangulate: AutoOff = "auto"
     """Known poses (--poses) that come without 3D points (a transforms.json, a cameras.json, a COLMAP model
     without points): auto triangulates points from the photos with the poses held fixed (SIFT features and
     matches as SfM makes them, at the working size of --max-size), so the run and the export's sparse/0
     carry the point cloud 3DGS starts from; off imports the poses alone, without points."""
-    on_split: str = "largest"
+    on_split: OnSplit = "largest"
     """When SfM leaves kept photos out of its largest model (the capture split): 'largest' curates the largest part
     with a loud warning; 'each' also curates every other part of >= 10 photos in RUN/parts/<k> (the budget shared by
     size; each part is its own scene, in its own frame); 'stop' stops."""
@@ -188,7 +193,7 @@ class SfmConfig:
     """tqdm bars on the terminal."""
 
     def __post_init__(self) -> None:
-        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": ("auto", "off"), "on_split": ON_SPLIT,
+        choices = {"camera_mode": CAMERA_MODES, "matcher": MATCHERS, "dense": TRIANGULATE, "on_split": ON_SPLIT,
                    "mapper": MAPPERS, "triangulate": TRIANGULATE}
         for k, ok in choices.items():
             if getattr(self, k) not in ok:

@@ -1,13 +1,10 @@
 """Frames a model placed off their video's path: a run of consecutive frames that jumps away from the
-walk and back (issue 36, part 1: a frame checked by its agreement with its neighbours in capture order).
+walk and back, found by the frames' agreement with their neighbours in capture order.
 
-A video is a continuous path: between two frames a tenth of a second apart the camera moves a
-hand's breadth. An incremental model can still register a stretch of a take in the wrong place, a
-piece hinged on a few wrong matches: office.mp4 cut into two takes that cross the walk's weak stretch
-(its frames 173-186), mapped with one local refinement per photo (since withdrawn), came back as one
-model of 371 frames in which 14 of them, from both takes, sat 42-46 deg off, entered and left by steps
-21-32 times the take's median step (docs/sfm.md). Each such frame agrees with its own neighbours in the
-piece, so no check of a frame against the points it sees finds it; the path does.
+A video is a continuous path: between two frames a tenth of a second apart the camera moves a hand's
+breadth. An incremental model can still register a stretch of a take in the wrong place, a piece hinged on
+a few wrong matches whose frames agree with each other and with the points they see: only the path finds
+it (the case that showed it, office.mp4 in two takes: docs/sfm-investigations.md).
 
 :func:`off_path` works on one take's registered frames in time order and flags an *island*: a run
 of frames entered by a jump and left by the next jump (a step at a speed over :data:`JUMP_FACTOR`
@@ -53,7 +50,7 @@ JUMP_WINDOW = 10
 """Steps on each side of a step that :func:`path_jumps` compares it with (a second at 10 candidates a second)."""
 
 
-def _speeds(t: np.ndarray, c: np.ndarray) -> np.ndarray:
+def speeds(t: np.ndarray, c: np.ndarray) -> np.ndarray:
     """[n-1] distance over time between consecutive frames (time steps floored at a millisecond; a step
     too large for a float is infinitely fast)."""
     with np.errstate(over="ignore", invalid="ignore"):
@@ -72,7 +69,7 @@ def off_path(t: np.ndarray, c: np.ndarray, factor: float = JUMP_FACTOR) -> np.nd
     n = len(t)
     if n < 4 or not (np.isfinite(t).all() and np.isfinite(c).all()):
         return np.zeros(0, int)
-    v = _speeds(t, c)
+    v = speeds(t, c)
     med = float(np.median(v))
     if not med > 0:
         return np.zeros(0, int)
@@ -82,7 +79,7 @@ def off_path(t: np.ndarray, c: np.ndarray, factor: float = JUMP_FACTOR) -> np.nd
     for a, b in zip(jumps[:-1], jumps[1:]):     # an island [a, b): entered at a, left at b, no jump inside
         if b - a > n // 2 or a - 1 in out:     # the frame before it must be on the path
             continue
-        way = _speeds(t[[a - 1, b]], c[[a - 1, b]])[0]
+        way = speeds(t[[a - 1, b]], c[[a - 1, b]])[0]
         if way <= limit:
             out.update(range(a, b))
     return np.array(sorted(out), int)
@@ -95,7 +92,7 @@ def step_ratios(t: np.ndarray, c: np.ndarray, window: int = JUMP_WINDOW) -> np.n
     take that mostly stood still) stays near 1.
 
     t: [n] seconds, increasing; c: [n, 3] camera centres (finite; see :func:`path_jumps`)."""
-    v = _speeds(t, c)
+    v = speeds(t, c)
     if len(v) == 0:
         return v
     med = float(np.median(v))

@@ -1,5 +1,6 @@
 """COLMAP's incremental mapper run step by step, each global bundle adjustment's solver chosen from the
-model's shape (issue 36, part 5; docs/sfm.md, "Which solver for a global adjustment past 1,000 photos").
+model's shape (the measurements: docs/sfm-investigations.md, "Which solver for a global adjustment past 1,000
+photos").
 
 ``pycolmap.incremental_mapping`` builds its global adjustments' options in C++ with Ceres' solver left
 at COLMAP's choice: a sparse direct solve (Cholesky of the reduced camera system) up to 1,000 photos in

@@ -31,13 +31,14 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, get_args
 
 import numpy as np
 
 from curate.select.baselines import farthest_view, fibonacci_hemisphere
 from curate.core.cameras import Cameras, look_at
 from curate.core.grid import NodeGrid
+from curate.simulate.choices import Scene, SimOccupancy
 from curate.simulate.progressive import (CameraSpec, FieldOccupancyConfig, FieldOracle, ProgressiveConfig, acceptable,
                           draw_acceptable, progressive_placement, scene_oracle)
 
@@ -54,7 +55,7 @@ TEST_SETS = ("hemisphere", "random", "ours")
 class SimulateConfig:
     """A synthetic-room comparison."""
 
-    scene: str = "livingroom"
+    scene: Scene = "livingroom"
     """Layout: livingroom, office or kitchen."""
     scene_seed: int = 0
     """Seed of the room's furniture and textures."""
@@ -78,7 +79,7 @@ class SimulateConfig:
     """Field training iterations per method instead of a time (default: --train-seconds)."""
     seed: int = 0
     """Seed of every random draw (placements, test sets, training)."""
-    occupancy: str = "oracle"
+    occupancy: SimOccupancy = "oracle"
     """Where ours finds the scene's surfaces when it places cameras: oracle (the room's own geometry)
     or field (a field trained as cameras are added, the paper's setting).
 
@@ -92,7 +93,7 @@ class SimulateConfig:
     validation, its empty-space mask re-pruned every min(100, train_between / 2) iterations)."""
 
     def __post_init__(self):
-        if self.occupancy not in ("oracle", "field"):
+        if self.occupancy not in get_args(SimOccupancy):
             raise ValueError(f"occupancy must be 'oracle' or 'field', got {self.occupancy!r}")
         if self.train_between < 1:
             raise ValueError(f"--train-between must be >= 1, got {self.train_between}")

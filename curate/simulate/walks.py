@@ -33,7 +33,7 @@ standing at a few spots and turning on the spot; lingering slowly, then moving f
 sessions of one room (a loop, then a second, lower loop the other way round, started elsewhere)."""
 
 
-def _smooth_noise(rng, n: int, scale: float, corr: int) -> np.ndarray:
+def smooth_noise(rng, n: int, scale: float, corr: int) -> np.ndarray:
     """[n] zero-mean noise of standard deviation ~``scale``, correlated over ~``corr`` samples."""
     k = max(1, int(corr))
     x = rng.normal(0, 1, n + 2 * k)
@@ -110,13 +110,13 @@ def hand_held_walk(n: int, kind: str = "loop", seed: int = 0, width: int = 640, 
         k = int(fps)                                                 # turning round takes a second or two
         win = np.hanning(2 * k + 1)
         yaw = np.convolve(np.pad(yaw, k, mode="edge"), win / win.sum(), "valid")
-        yaw = yaw + 0.6 * np.sin(2 * np.pi * f / (6 * fps)) + _smooth_noise(rng, n, 0.15, 3 * fps)
+        yaw = yaw + 0.6 * np.sin(2 * np.pi * f / (6 * fps)) + smooth_noise(rng, n, 0.15, 3 * fps)
     else:
-        yaw = look + _smooth_noise(rng, n, 0.05, fps)
+        yaw = look + smooth_noise(rng, n, 0.05, fps)
     shake = 0.004 * np.sqrt(30 / fps)                               # radians of hand shake per frame
-    yaw = yaw + _smooth_noise(rng, n, shake, 2)
-    pitch = -0.12 + 0.1 * np.sin(2 * np.pi * f / (9 * fps)) + _smooth_noise(rng, n, shake, 2)
-    roll = _smooth_noise(rng, n, 0.03, fps)
+    yaw = yaw + smooth_noise(rng, n, shake, 2)
+    pitch = -0.12 + 0.1 * np.sin(2 * np.pi * f / (9 * fps)) + smooth_noise(rng, n, shake, 2)
+    roll = smooth_noise(rng, n, 0.03, fps)
     d = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
     c2w = look_at(c, c + d)
     cr, sr = np.cos(roll), np.sin(roll)

@@ -1,7 +1,11 @@
 """The choices of ``curate suggest``'s options, apart from :mod:`curate.suggest.config` so that the command line
 reads them without importing numpy (``curate --help`` stays instant)."""
 
-FIELD_MODES = ("auto", "train", "none")
+from typing import Literal, get_args
+
+FieldMode = Literal["auto", "train", "none"]
+FIELD_MODES = get_args(FieldMode)
 """``SuggestConfig.field`` choices."""
-NODE_MODES = ("surface", "surface+frontier")
+NodeMode = Literal["surface", "surface+frontier"]
+NODE_MODES = get_args(NodeMode)
 """``SuggestConfig.nodes`` choices."""

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, field as dc_field
 
 from curate.select.config import EnergyConfig
-from curate.suggest.choices import FIELD_MODES, NODE_MODES  # noqa: F401  (re-exported)
+from curate.suggest.choices import FIELD_MODES, NODE_MODES, FieldMode, NodeMode  # noqa: F401  (re-exported)
 
 
 MAX_ADD = 200
@@ -26,7 +26,7 @@ class SuggestConfig:
     a transforms.json is often rescaled), with the captured path's length for scale."""
     n_candidates: int = 1000
     """Feasible random poses drawn and scored for each placed camera (Algorithm 1 of the paper: 1000)."""
-    nodes: str = "surface"
+    nodes: NodeMode = "surface"
     """Nodes the energy is summed over: 'surface' (the run's selection nodes, the occupied surface band) or
     'surface+frontier' (also the unobserved voxels next to observed free space: the edges of what the capture
     has seen)."""
@@ -45,7 +45,7 @@ class SuggestConfig:
     probe: tuple[int, int] = (32, 24)
     """Rays (columns, rows) each capture camera casts through the occupancy grid to find the free space it
     observed."""
-    field: str = "auto"
+    field: FieldMode = "auto"
     """Radiance field for the preview renders: 'auto' (the run's field when it has one; a field is trained only
     when the run's occupancy cannot place cameras, e.g. imported poses without points), 'train' (the run's
     field, else train one: previews for every run), 'none' (never train)."""

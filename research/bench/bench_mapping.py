@@ -140,7 +140,7 @@ def hall_walk(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_de
     every 8 s) with hand shake and roll as :func:`curate.simulate.walks.hand_held_walk`. It covers new
     ground the whole way: no frame sees what a frame 10 m earlier saw. Names ``frame_00000.jpg``..."""
     from curate.core.cameras import Cameras, look_at
-    from curate.simulate.walks import _smooth_noise
+    from curate.simulate.walks import smooth_noise
     rng = np.random.default_rng(seed + 5)
     f = np.arange(n, dtype=float)
     x = 2.0 + f * HALL_SPEED / FPS
@@ -148,10 +148,10 @@ def hall_walk(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_de
     z = 1.55 + 0.03 * np.sin(f * 2 * np.pi * 1.8 / FPS)
     c = np.stack([x, y, z], 1)
     shake = 0.004 * np.sqrt(30 / FPS)
-    yaw = 1.22 * np.sin(2 * np.pi * f / (8 * FPS)) + _smooth_noise(rng, n, 0.1, 3 * int(FPS))
-    yaw = yaw + _smooth_noise(rng, n, shake, 2)
-    pitch = -0.12 + 0.1 * np.sin(2 * np.pi * f / (9 * FPS)) + _smooth_noise(rng, n, shake, 2)
-    roll = _smooth_noise(rng, n, 0.03, int(FPS))
+    yaw = 1.22 * np.sin(2 * np.pi * f / (8 * FPS)) + smooth_noise(rng, n, 0.1, 3 * int(FPS))
+    yaw = yaw + smooth_noise(rng, n, shake, 2)
+    pitch = -0.12 + 0.1 * np.sin(2 * np.pi * f / (9 * FPS)) + smooth_noise(rng, n, shake, 2)
+    roll = smooth_noise(rng, n, 0.03, int(FPS))
     d = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
     c2w = look_at(c, c + d)
     cr, sr = np.cos(roll), np.sin(roll)
@@ -259,7 +259,7 @@ def grid_flight(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_
     a 2-D pattern of overlaps with no loop along the way, the shape part 5's solver choice is to be tested
     on (docs/sfm.md). Names ``frame_00000.jpg``..."""
     from curate.core.cameras import Cameras
-    from curate.simulate.walks import _smooth_noise
+    from curate.simulate.walks import smooth_noise
     rng = np.random.default_rng(seed + 11)
     k, ls = grid_plan(n)
     step = GRID_SPEED / FPS
@@ -270,10 +270,10 @@ def grid_flight(n: int, seed: int = 0, width: int = 640, height: int = 480, fov_
     along = np.minimum(t, ls)
     x = GRID_MARGIN + np.where(j % 2 == 0, along, ls - along)
     y = GRID_MARGIN + j * GRID_SPACING + np.clip(t - ls, 0, GRID_SPACING)
-    z = GRID_ALTITUDE + _smooth_noise(rng, n, 0.03, int(FPS))
+    z = GRID_ALTITUDE + smooth_noise(rng, n, 0.03, int(FPS))
     c = np.stack([x, y, z], 1)
     R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])   # columns: image x, y, optical axis
-    ang = np.stack([_smooth_noise(rng, n, np.radians(2.0), int(FPS)) for _ in range(3)], 1)
+    ang = np.stack([smooth_noise(rng, n, np.radians(2.0), int(FPS)) for _ in range(3)], 1)
     from scipy.spatial.transform import Rotation
     R = R0[None] @ Rotation.from_rotvec(ang).as_matrix()
     c2w = np.tile(np.eye(4), (n, 1, 1))
