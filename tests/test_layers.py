@@ -19,11 +19,8 @@ LAYERS = ("core", ("field", "html"), "sfm", "occupancy", "select", "evaluate", "
 
 
 def _modules() -> dict[str, Path]:
-    out = {}
-    for p in (ROOT / "curate").rglob("*.py"):
-        name = ".".join(p.relative_to(ROOT).with_suffix("").parts)
-        out[name[: -len(".__init__")] if name.endswith(".__init__") else name] = p
-    return out
+    from research.import_map import modules
+    return modules(ROOT)
 
 
 def _layer(module: str) -> int:
@@ -37,82 +34,48 @@ def _layer(module: str) -> int:
 
 
 def _imports(modules: dict[str, Path]) -> dict[str, set[str]]:
-    """{module: the curate modules it imports}, TYPE_CHECKING blocks left out (they run at no time)."""
-    out: dict[str, set[str]] = {}
-    for name, path in modules.items():
-        tree = ast.parse(path.read_text())
-        skip = {id(n) for node in ast.walk(tree)
-                if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test) for n in ast.walk(node)}
-        found = set()
-        for node in ast.walk(tree):
-            if id(node) in skip:
-                continue
-            if isinstance(node, ast.Import):
-                cands = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                cands = [f"{node.module}.{a.name}" for a in node.names] + [node.module]
-            else:
-                continue
-            for c in cands:
-                if c.split(".")[0] == "research":
-                    found.add(c)
-                elif c in modules and c != name:
-                    found.add(c)
-                    break
-        out[name] = found
-    return out
+    """{module: the curate modules it imports}, at the top or inside a function; TYPE_CHECKING blocks left out
+    (they run at no time)."""
+    from research.import_map import imports
+    return imports(modules)[0]
 
 
 def test_a_module_imports_only_its_own_layer_or_lower_ones():
     modules = _modules()
     bad = [f"{m} (layer {_layer(m)}) imports {t} (layer {_layer(t)})"
-           for m, targets in _imports(modules).items() for t in targets
-           if not t.startswith("research") and _layer(t) > _layer(m)]
+           for m, targets in _imports(modules).items() for t in targets if _layer(t) > _layer(m)]
     assert not bad, "\n".join(bad)
 
 
+def _top_names(node: ast.AST) -> list[str]:
+    if isinstance(node, ast.Import):
+        return [a.name.split(".")[0] for a in node.names]
+    return [(node.module or "").split(".")[0]] if isinstance(node, ast.ImportFrom) else []
+
+
 def test_no_import_circles_between_modules_and_no_research_in_the_package():
+    from research.import_map import circles
     modules = _modules()
-    imports = _imports(modules)
-    assert not [f"{m} imports {t}" for m, ts in imports.items() for t in ts if t.startswith("research")]
-    graph = {m: {t for t in ts if t in modules and t != "curate"} for m, ts in imports.items()}
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on: set[str] = set()
-    circles: list[list[str]] = []
-
-    def visit(v: str) -> None:            # Tarjan's strongly connected components
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        for w in sorted(graph[v]):
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = []
-            while True:
-                w = stack.pop()
-                on.discard(w)
-                comp.append(w)
-                if w == v:
-                    break
-            if len(comp) > 1:
-                circles.append(sorted(comp))
-
-    for v in sorted(graph):
-        if v not in index:
-            visit(v)
-    assert not circles, circles
+    research = [f"{m}: {ast.unparse(n)}" for m, p in modules.items() for n in ast.walk(ast.parse(p.read_text()))
+                if "research" in _top_names(n)]
+    assert not research, research
+    assert not circles(modules, _imports(modules))
 
 
-def test_the_layer_check_sees_a_function_level_import_upward():
-    """The check itself: an import inside a function counts (262 of them hid the circles before)."""
-    src = "def f():\n    from curate.cli import main\n"
-    tree = ast.parse(src)
-    names = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
-    assert names == ["curate.cli"] and _layer("curate.cli") > _layer("curate.core.stage")
-    assert _layer("curate.select.config") == 0 < _layer("curate.field.model") < _layer("curate.sfm.colmap")
+def test_the_checks_see_imports_inside_functions_and_circles(tmp_path):
+    """The checks themselves, on a small tree: an import inside a function counts (262 of them hid the circles
+    before), one under TYPE_CHECKING does not, and two modules importing each other make a circle."""
+    from research.import_map import circles, imports, modules
+    files = {"curate/__init__.py": "", "curate/core/__init__.py": "", "curate/cli.py": "import curate.core.b\n",
+             "curate/core/a.py": "def f():\n    from curate.cli import main\n",
+             "curate/core/b.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import curate.core.a\n"
+                                 "def g():\n    from curate.core.c import h\n",
+             "curate/core/c.py": "from curate.core.b import g\n"}
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    mods = modules(tmp_path)
+    edges = imports(mods)[0]
+    assert edges["curate.core.a"] == {"curate.cli"} and edges["curate.core.b"] == {"curate.core.c"}
+    assert _layer("curate.cli") > _layer("curate.core.a")          # what the layer test refuses
+    assert circles(mods, edges) == [["curate.core.b", "curate.core.c"]]
