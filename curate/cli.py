@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import get_args
 
 from curate import __version__
+from curate.core.paths import RunPaths
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
 from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
@@ -331,7 +332,7 @@ def saved_config(run_dir: Path):
     """(the RunConfig saved in RUN/run.json, the whole record)."""
     from curate.config import RunConfig, upgrade_config
     from curate.core.stage import config_from_dict
-    p = run_dir / "run.json"
+    p = RunPaths(run_dir).run_json
     if not p.is_file():
         raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
     try:
@@ -377,7 +378,7 @@ def cmd_score(args) -> int:
 
 def cmd_select(args) -> int:
     inp = Path(args.input)
-    if (inp / "run.json").is_file():
+    if RunPaths(inp).run_json.is_file():
         return _select_run_folder(args)
     if not inp.exists():
         raise CliError(f"{args.input}: no such run folder or pose file")
@@ -387,7 +388,7 @@ def cmd_select(args) -> int:
         except CliError as e:
             raise CliError(f"{args.input} is neither a run folder (no run.json) nor a pose file "
                            f"(transforms.json, a COLMAP model, cameras.json): {e}")
-        if (inp / "sfm" / "stage.json").is_file():   # a folder of `curate sfm`: poses, no run yet
+        if RunPaths(inp).record("sfm").is_file():   # a folder of `curate sfm`: poses, no run yet
             raise CliError(f"{args.input} holds the cameras of `curate sfm`, not a run of `curate run`: "
                            f"`curate select {args.input} --out DIR` chooses from those cameras into DIR, or "
                            f"`curate run PHOTOS --out {args.input}` goes on from them to a selection, its export and "
@@ -614,10 +615,10 @@ def print_verdict(rep: dict, run_dir: Path) -> None:
     if v.get("how_many"):
         print(v["how_many"])
     secs = rep.get("wall_seconds")
-    print(f"report: {run_dir / 'report.html'}" + (f" ({secs:.0f} s)" if secs is not None else ""))
-    if (run_dir / "export" / "transforms.json").is_file():
+    print(f"report: {RunPaths(run_dir).report_html}" + (f" ({secs:.0f} s)" if secs is not None else ""))
+    if RunPaths(run_dir).export_transforms.is_file():
         from curate.export.trainable import train_commands
-        cmds = dict((t, c) for t, c in train_commands(run_dir / "export"))
+        cmds = dict((t, c) for t, c in train_commands(RunPaths(run_dir).export))
         print(f"train on it: {cmds['nerfstudio, Gaussian splatting']}   (3DGS: "
               f"{cmds['3D Gaussian splatting (reference code)']}; more in the report)")
 

@@ -13,6 +13,7 @@ import logging
 import time
 from pathlib import Path
 
+from curate.core.paths import RunPaths
 from curate.config import RunConfig
 from curate.core.graph import BY_NAME, RUN_WRITES, STAGES, RunContext, redone_after
 from curate.core.stage import StageResult
@@ -27,7 +28,7 @@ def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> N
     from curate.core.stage import config_dict, versions, write_json_atomic
     def absolute(p):   # as given, made absolute: a stage re-run from another directory finds the same files
         return str(Path(p).absolute()) if p else None
-    write_json_atomic(Path(run_dir) / "run.json", {"config": config_dict(cfg), "photos": absolute(photos),
+    write_json_atomic(RunPaths(run_dir).run_json, {"config": config_dict(cfg), "photos": absolute(photos),
                                                    "poses": absolute(poses), "versions": versions()})
 
 
@@ -53,7 +54,7 @@ def check_same_capture(run_dir: Path, photos, poses) -> None:
     import json
     run_dir = Path(run_dir)
     try:
-        rec = json.loads((run_dir / "run.json").read_text())
+        rec = json.loads(RunPaths(run_dir).run_json.read_text())
     except (OSError, ValueError):
         return
 
@@ -62,7 +63,7 @@ def check_same_capture(run_dir: Path, photos, poses) -> None:
 
     def moved_photos(a, b) -> bool:        # the run's photos, by their names, in another folder
         try:
-            had = {Path(r["original"]).name for r in json.loads((run_dir / "sfm" / "images.json").read_text())["photos"]
+            had = {Path(r["original"]).name for r in json.loads(RunPaths(run_dir).images_json.read_text())["photos"]
                    if r.get("original") and Path(r["original"]).parent == Path(a).resolve()}
             from curate.sfm.ingest import find_images
             imgs, other = find_images(b)
@@ -91,7 +92,7 @@ def split_parts(run_dir: Path) -> list[dict]:
     ``sparse/1``, ...) with at least :data:`MIN_PART` photos; [] when it did not split."""
     from curate.core.stage import read_stage
     from curate.sfm.config import MIN_PART
-    parts = ((read_stage(Path(run_dir) / "sfm") or {}).get("stats") or {}).get("parts") or []
+    parts = ((read_stage(RunPaths(run_dir).sfm) or {}).get("stats") or {}).get("parts") or []
     parts = [p for p in parts if p["n_registered"] >= MIN_PART]
     return parts if len(parts) > 1 else []
 
@@ -116,7 +117,7 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
                        sfm=replace(cfg.sfm, on_split="largest"))
         print(f"part {k}: {p['n_registered']} photos, budget {pcfg.budget} -> {sub}", flush=True)
         # photos: SfM's working copies, found beside the model (RUN/sfm/images; the other parts' are not listed)
-        run(pcfg, None, sub, poses=run_dir / "sfm" / p["model"], force=force, executor=executor)
+        run(pcfg, None, sub, poses=RunPaths(run_dir).sfm / p["model"], force=force, executor=executor)
 
 
 def check_budget(budget: str, run_dir: Path) -> None:
@@ -125,7 +126,7 @@ def check_budget(budget: str, run_dir: Path) -> None:
     import json
     from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
     from curate.select.stage import budget_of_run
-    n = len(json.loads((Path(run_dir) / "sfm" / "cameras.json").read_text())["cameras"])
+    n = len(json.loads(RunPaths(run_dir).cameras.read_text())["cameras"])
     text, said = budget_of_run(budget, run_dir)
     b = parse_budget(text)
     if b == AUTO:

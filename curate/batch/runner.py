@@ -56,6 +56,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable
 
+from curate.core.paths import RunPaths
 from curate.batch.log import folder_log
 from curate.batch.summary import make_row, write_summary_html
 from curate.html.parts import fmt_num
@@ -266,7 +267,7 @@ def stage_in_progress(run_dir: str | Path, cfg) -> str:
     folder's row names)."""
     from curate.core.graph import first_unfinished
     d = Path(run_dir)
-    return first_unfinished(cfg, d) if (d / "run.json").is_file() else "starting"
+    return first_unfinished(cfg, d) if RunPaths(d).run_json.is_file() else "starting"
 
 
 # ------------------------------------------------------------------ executors
@@ -413,7 +414,7 @@ def _run_batch(folders: list, out, cfg, executor: str, jobs: int, ray_address, r
     for it in items:
         prev = _read_row(it)
         if (not force and prev and prev.get("status") == "ok" and prev.get("key") == keys[it.name]
-                and (Path(it.run_dir) / "report.json").is_file()):
+                and RunPaths(it.run_dir).report_json.is_file()):
             prev.pop("key", None)
             rows[it.name] = {**prev, "resumed": True}
         else:

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.graph import first_unfinished
 from curate.html.parts import fmt_num
 
@@ -26,8 +27,8 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
            "pool": None, "chosen": None, "chosen_names": [], "psnr": {m: None for m in METHODS},
            "psnr_random_std": None, "selection_minus_random": None,
            "wall_seconds": None if wall is None else round(wall, 2), "report": None, "resumed": False}
-    if status == "ok" and (rd / "report.json").is_file():
-        rep = json.loads((rd / "report.json").read_text())
+    if status == "ok" and RunPaths(rd).report_json.is_file():
+        rep = json.loads(RunPaths(rd).report_json.read_text())
         sel = rep.get("selection", {})
         from curate.evaluate.units import legacy_keys
         m = legacy_keys(rep.get("methods", {}))
@@ -38,11 +39,11 @@ def make_row(item: Folder, status: str, reason: str = "", wall: float | None = N
                    psnr={k: (m[k]["psnr"] if k in m else None) for k in METHODS},
                    psnr_random_std=m.get("random", {}).get("psnr_std"),
                    selection_minus_random=paired.get("selection-random", {}).get("mean"),
-                   report=f"{item.name}/report.html" if (rd / "report.html").is_file() else None)
+                   report=f"{item.name}/report.html" if RunPaths(rd).report_html.is_file() else None)
     elif status == "failed":
         if cfg is not None and rd.is_dir():
             row["failed_stage"] = first_unfinished(cfg, rd)
-        imgs = rd / "sfm" / "images.json"
+        imgs = RunPaths(rd).images_json
         try:
             if imgs.is_file():
                 photos = json.loads(imgs.read_text()).get("photos", [])

@@ -11,6 +11,8 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
+
 if TYPE_CHECKING:
     from curate.config import RunConfig
 
@@ -102,11 +104,11 @@ def measured_budget(cfg: "RunConfig", run_dir: str | Path) -> dict | None:
     """``RUN/budget/budget.json`` when the budget stage measured it for these options on this scene (its key is
     :func:`measured_key`'s) and the curve gave a budget, else None: the select stage then uses the law."""
     from curate.core.stage import read_stage
-    rec = read_stage(Path(run_dir) / "budget")
+    rec = read_stage(RunPaths(run_dir).budget)
     if not rec or rec.get("key") != measured_key(cfg, run_dir):
         return None
     try:
-        out = json.loads((Path(run_dir) / "budget" / "budget.json").read_text())
+        out = json.loads(RunPaths(run_dir).budget_json.read_text())
     except (OSError, ValueError):
         return None
     chk = out.get("check") or {}

@@ -60,6 +60,8 @@ import uuid
 from pathlib import Path
 from typing import Iterable, Iterator, NamedTuple
 
+from curate.core.paths import RunPaths
+
 log = logging.getLogger(__name__)
 
 MARKER = ".curate-run.json"
@@ -169,12 +171,12 @@ def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: boo
     created, marked = None, False
     if o.is_dir() and not (o / MARKER).is_file():
         entries = sorted(e.name for e in o.iterdir())
-        if (o / "run.json").is_file() and (o / "sfm" / "stage.json").is_file():
+        if RunPaths(o).run_json.is_file() and RunPaths(o).record("sfm").is_file():
             raise RunFolderError(f"{raw} is a run folder of curate 0.1 (no {MARKER}): this version cannot prove which "
                                  "of its files are curate's, so it does not write there; run again into a new folder")
         if must_exist:  # a stage command needs a run folder; it never makes one of the user's folder
             raise RunFolderError(f"{raw} is not a run folder (no run.json): `curate run PHOTOS --out RUN` makes one"
-                                 if not (o / "run.json").is_file() else
+                                 if not RunPaths(o).run_json.is_file() else
                                  f"{raw} is not a run folder curate created (no {MARKER})")
         if entries and not adopt:
             raise RunFolderError(f"{raw} is a non-empty folder curate did not create (no {MARKER}; it holds "

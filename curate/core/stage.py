@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable
 
+from curate.core.paths import RunPaths
 from curate.core.graph import BY_NAME, NAMES, READS
 
 STAGE_FILE = "stage.json"
@@ -152,7 +153,7 @@ def finished_record(run_dir: str | Path, stage: str) -> dict | None:
     rec = read_stage(Path(run_dir) / stage)
     if rec is None and stage == "evaluate":
         try:
-            rec = json.loads((Path(run_dir) / "evaluate" / "summary.json").read_text())
+            rec = json.loads(RunPaths(run_dir).summary.read_text())
         except (OSError, ValueError):
             return None
     return rec if isinstance(rec, dict) else None

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.budget import MEASURED_FOLDS, measured_key
 from curate.core.stage import StageResult
 
@@ -59,7 +60,7 @@ def run(ctx: "RunContext") -> StageResult:
 
     t0 = time.perf_counter()
     cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
-    d = run_dir / "budget"
+    d = RunPaths(run_dir).budget
     key = measured_key(cfg, run_dir)
     if begin_stage(d, key, force):
         return StageResult("budget", d, False, time.perf_counter() - t0)

@@ -23,6 +23,8 @@ from typing import Callable
 
 import numpy as np
 
+from curate.core.paths import RunPaths
+
 log = logging.getLogger(__name__)
 
 MIN_FOLDS = 2
@@ -75,7 +77,7 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     from curate.evaluate.units import (PROGRESS_FILE, _copy_unit, _unit_entry, auto_workers, read_metrics,
                                        save_ground_truth)
     from tqdm import tqdm
-    ev_dir = Path(run_dir) / "evaluate"
+    ev_dir = RunPaths(run_dir).evaluate
     train = train or _unit_entry
     t0 = time.monotonic()
     budget_s = 60.0 * cfg.minutes

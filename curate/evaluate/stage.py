@@ -26,6 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
@@ -87,7 +88,7 @@ def run(ctx: "RunContext") -> StageResult:
 
     t0 = time.perf_counter()
     cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
-    d = run_dir / "evaluate"
+    d = RunPaths(run_dir).evaluate
     ev = cfg.evaluate
     key = eval_key(cfg, run_dir)
     if force:

@@ -33,6 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.core.cameras import Cameras
 from curate.core.executors import available_memory, cpu_count
 from curate.evaluate.config import EvalConfig  # noqa: F401  (re-exported: research imports it from here)
@@ -94,7 +95,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     from curate.core.stage import begin_stage, finish_stage, write_json_atomic, write_text_atomic
     from curate.field.train import TrainStats, load_image, train_field
 
-    d = Path(run_dir) / "evaluate" / unit.key
+    d = RunPaths(run_dir).evaluate / unit.key
     check_holder(run_dir, lock_token)
     if begin_stage(d, key):
         return json.loads((d / "metrics.json").read_text())
@@ -187,7 +188,7 @@ def save_ground_truth(run_dir: str | Path, cams: Cameras, paths: Sequence[str], 
     """``RUN/evaluate/gt/<stem>.png``: the held-out images at evaluation size."""
     from curate.field.metrics import save_png
     from curate.field.train import load_image
-    d = Path(run_dir) / "evaluate" / "gt"
+    d = RunPaths(run_dir).gt
     for i in holdout:
         p = d / f"{_stem(cams.names[i])}.png"
         if not p.is_file():
@@ -210,7 +211,7 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     from tqdm import tqdm
     field_paths = field_paths or {}
     save_ground_truth(run_dir, cams, paths, holdout)
-    todo = [u for u in units if not is_fresh(Path(run_dir) / "evaluate" / u.key, keys[u.key])]
+    todo = [u for u in units if not is_fresh(RunPaths(run_dir).evaluate / u.key, keys[u.key])]
     fresh = [u for u in units if u not in todo]
     # units with equal keys (e.g. method "auto" chose exactly the FVS subset) train once; the others copy it
     first: dict[str, Unit] = {keys[u.key]: u for u in reversed(fresh)}
@@ -222,7 +223,7 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     todo = [u for u in todo if all(u is not d for d, _ in dups)]
     results: dict[str, dict] = {}
     for u in fresh:
-        results[u.key] = json.loads((Path(run_dir) / "evaluate" / u.key / "metrics.json").read_text())
+        results[u.key] = json.loads((RunPaths(run_dir).evaluate / u.key / "metrics.json").read_text())
     pix = int(np.max([np.sum(cams.width[u.subset] * cams.height[u.subset]) for u in todo])) if todo else 0
     n_train = [u for u in todo if u.key not in field_paths]
     workers = auto_workers(cfg, len(n_train), pix)
@@ -232,7 +233,7 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     args = [(str(run_dir), u, cfg, cams, list(paths), list(holdout), box, keys[u.key], field_paths.get(u.key), token,
              level) for u in todo]
     # progress in training iterations over every unit (each training reports through its progress file)
-    ev_dir = Path(run_dir) / "evaluate"
+    ev_dir = RunPaths(run_dir).evaluate
     trained = [u for u in todo if u.key not in field_paths]
     bar = tqdm(total=len(trained) * cfg.iters, desc=f"evaluate: {len(trained)} trainings", unit="it",
                disable=not progress or not trained, smoothing=0.05)
@@ -283,7 +284,7 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
                                  initargs=(os.getpid(),)) as ex:
             collect({ex.submit(_unit_entry, a): a[1].key for a in args})
     for u, src in dups:
-        results[u.key] = _copy_unit(Path(run_dir) / "evaluate", src.key, u, results[src.key])
+        results[u.key] = _copy_unit(RunPaths(run_dir).evaluate, src.key, u, results[src.key])
     bar.close()
     return {u.key: results[u.key] for u in units}
 
@@ -312,7 +313,7 @@ def clear_evaluation(run_dir: str | Path) -> None:
     truth; nothing at all when it holds a file curate did not write
     (:class:`curate.core.runfolder.RunFolderError`)."""
     from curate.core.runfolder import clear_tree
-    clear_tree(Path(run_dir) / "evaluate", own=EVAL_OWN)
+    clear_tree(RunPaths(run_dir).evaluate, own=EVAL_OWN)
 
 
 LEGACY_KEYS = {"energy": "selection", "energy-random": "selection-random", "energy-fvs": "selection-fvs",

@@ -7,6 +7,7 @@ import json
 import time
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
@@ -25,8 +26,8 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.select.stage import read_selection
     t0 = time.perf_counter()
     cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
-    d = run_dir / "export"
-    key = stage_key({"export": cfg.export}, [key_of(run_dir / "select")])
+    d = RunPaths(run_dir).export
+    key = stage_key({"export": cfg.export}, [key_of(RunPaths(run_dir).select)])
     if force or not is_fresh(d, key):
         check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
     if begin_stage(d, key, force):  # unchanged: its warning still holds
@@ -35,7 +36,7 @@ def run(ctx: "RunContext") -> StageResult:
     sel = read_selection(run_dir)
     export_subset(run_dir, sel["chosen_names"], d, config=cfg.export)
     model = json.loads((d / "export.json").read_text())["model"]
-    sfm = read_stage(run_dir / "sfm") or {}
+    sfm = read_stage(RunPaths(run_dir).sfm) or {}
     # what stops a trainer is a warning (atop the report); separate groups of images only matter to a tool that
     # registers the subset again, so it is said beside the training commands, not in the warning box
     warn = points_warning(model, sfm)

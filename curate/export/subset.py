@@ -41,6 +41,7 @@ import shutil
 from dataclasses import asdict
 from pathlib import Path
 
+from curate.core.paths import RunPaths
 from curate.export.config import ExportConfig
 from curate.export.trainable import PLY_NAME
 from curate.sfm.io import load_sfm, original_cameras, sfm_dir
@@ -225,7 +226,7 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     """
     cfg = config or ExportConfig(mode=mode)
     run_dir = Path(run_dir).resolve()
-    out = Path(out_dir).resolve() if out_dir is not None else run_dir / "export"
+    out = Path(out_dir).resolve() if out_dir is not None else RunPaths(run_dir).export
     res = load_sfm(run_dir)
     cams = res.cameras
     index = {n: i for i, n in enumerate(cams.names)}

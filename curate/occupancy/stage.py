@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
@@ -56,7 +57,7 @@ def surface_band(mask: np.ndarray, k: int, outside_free: bool = False) -> np.nda
 def load_node_grid(run_dir: Path):
     """The selection's NodeGrid (box, resolution, node band mask) from ``RUN/occupancy``."""
     from curate.core.grid import NodeGrid
-    z = np.load(Path(run_dir) / "occupancy" / "occupancy.npz")
+    z = np.load(RunPaths(run_dir).occupancy_npz)
     return NodeGrid(z["box_min"], z["box_max"], int(z["res"]), z["nodes_mask"])
 
 
@@ -103,7 +104,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
 
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
-    d = run_dir / "occupancy"
+    d = RunPaths(run_dir).occupancy
     ev = cfg.evaluate
     sfm = load_sfm(run_dir)
     field_needed, why = needs_field(cfg, sfm.cameras, 0 if sfm.points is None else len(sfm.points))
@@ -112,7 +113,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         parts["box"] = list(cfg.box)
     if train_on is not None:
         parts["train_on"] = [int(i) for i in train_on]
-    deps = [key_of(run_dir / "sfm")]
+    deps = [key_of(RunPaths(run_dir).sfm)]
     key_field = stage_key(parts, deps)
     if not field_needed and not force and is_fresh(d, key_field):
         return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too

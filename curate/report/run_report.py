@@ -28,6 +28,7 @@ from typing import Callable
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.html import charts, plots
 from curate.html.parts import CSS, duration, esc, fmt_num, note, read_json, safe_section
 from curate.html.plots import colorbar, floorplan, heatmap_svg, top_down_axes
@@ -84,14 +85,14 @@ class _Run:
 
     def __init__(self, run_dir: Path):
         self.dir = run_dir
-        self.rep = read_json(run_dir / "report.json") or {}
-        self.sel = read_json(run_dir / "select" / "selection.json") or {}
+        self.rep = read_json(RunPaths(run_dir).report_json) or {}
+        self.sel = read_json(RunPaths(run_dir).selection) or {}
         if not self.sel and isinstance(self.rep.get("selection"), dict):
             self.sel = self.rep["selection"]
         from curate.evaluate.units import legacy_keys   # a report of curate 0.1 called the selection 'energy'
         self.methods: dict = legacy_keys(self.rep.get("methods") or {})
         self.paired: dict = legacy_keys(self.rep.get("paired") or {})
-        self.sfm_rec: dict = read_json(run_dir / "sfm" / "stage.json") or {}
+        self.sfm_rec: dict = read_json(RunPaths(run_dir).record("sfm")) or {}
         self.sfm_stats: dict = self.sfm_rec.get("stats") or {}
         self._cams = None
         self._records = None
@@ -105,19 +106,19 @@ class _Run:
     def cams(self):
         if self._cams is None:
             from curate.core.cameras import Cameras
-            p = self.dir / "sfm" / "cameras.json"
+            p = RunPaths(self.dir).cameras
             self._cams = Cameras.load(p) if p.is_file() else False
         return self._cams or None
 
     @property
     def records(self) -> dict:
         if self._records is None:
-            self._records = read_json(self.dir / "sfm" / "images.json") or {}
+            self._records = read_json(RunPaths(self.dir).images_json) or {}
         return self._records
 
     def image_path(self, name: str) -> Path | None:
         """The photo of camera ``name``: the SfM working copy, else the original (import)."""
-        w = self.dir / "sfm" / "images" / name
+        w = RunPaths(self.dir).working_images / name
         if w.is_file():
             return w
         for r in self.records.get("photos", []):
@@ -148,7 +149,7 @@ def _warnings(run: _Run) -> list[str]:
     r = run.rep
     each = ((r.get("config") or {}).get("sfm") or {}).get("on_split") == "each"
     out = [w for w in (split_warning(run.dir, each=each), path_warning(run.sfm_stats),
-                       (read_json(run.dir / "export" / "stage.json") or {}).get("warning")) if w]
+                       (read_json(RunPaths(run.dir).record("export")) or {}).get("warning")) if w]
     stale = r.get("stale") or {}
     if "export" in stale:
         from curate.core.stage import refresh_command, stale_root
@@ -170,7 +171,7 @@ def _verdict(run: _Run) -> str:
     v = run.rep.get("verdict") or verdict(run.rep)
     s = run.sel
     how = method_name(s.get("method"))
-    exp = read_json(run.dir / "export" / "export.json") or {}
+    exp = read_json(RunPaths(run.dir).export_json) or {}
     given = s.get("budget_text") or "auto"        # "default: auto (an object capture)" when the default chose auto
     lines = [f"<p><b>{esc(v['exported'].split(' (')[0])}</b>, by {esc(how)}"
              + (f" (how many: <code>--budget {esc(given.split(':')[0])}</code>"
@@ -336,7 +337,7 @@ def _bars(run: _Run) -> str:
 
 def _renders(run: _Run) -> str:
     m = run.methods
-    gt_dir = run.dir / "evaluate" / "gt"
+    gt_dir = RunPaths(run.dir).gt
     if not gt_dir.is_dir():
         return note("No held-out renders in this run folder.")
     cols = []  # (label, key, per_view list)
@@ -368,7 +369,7 @@ def _renders(run: _Run) -> str:
                  f"{esc(Path(n).name)}</td>"]
         for label, key, pv in cols:
             unit = pv.get(n, {}).get("unit", key)   # the fold's unit that rendered it
-            r = _load_rgb(run.dir / "evaluate" / unit / "renders" / f"{stem}.png", 200)
+            r = _load_rgb(RunPaths(run.dir).evaluate / unit / "renders" / f"{stem}.png", 200)
             score = pv.get(n, {})
             txt = f"{fmt_num(score.get('psnr'))} dB" if score else ""
             cells.append(f"<td>{_img(plots.jpeg_data_uri(r, 200, 85), label) if r is not None else 'missing'}"
@@ -426,7 +427,7 @@ def _camera_layout(run: _Run) -> str:
         return note("No registered cameras (sfm/cameras.json missing).")
     k, a, b, _ = top_down_axes(cams.c2w, run.sel.get("up_axis"))
     est = run.rep.get("estimate") or {}
-    hold = [i for i in ((read_json(run.dir / "evaluate" / "summary.json") or {}).get("protocol") or {}).get(
+    hold = [i for i in ((read_json(RunPaths(run.dir).summary) or {}).get("protocol") or {}).get(
         "holdout", []) if 0 <= i < len(cams)] if run.evaluated else []
     chosen = [i for i in run.sel.get("chosen", []) if 0 <= i < len(cams)]
     c, d = cams.centres, cams.view_dirs
@@ -513,7 +514,7 @@ def _skipped(run: _Run) -> str:
 
 # ------------------------------------------------------------------ for experts
 def _floorplan(run: _Run) -> str:
-    p = run.dir / "select" / "nodes.npz"
+    p = RunPaths(run.dir).nodes
     if not p.is_file():
         return note("No per-node energy terms (select/nodes.npz missing).")
     z = np.load(p)
@@ -603,7 +604,7 @@ def _unanswered(run_dir: Path) -> str | None:
 def _train(run: _Run) -> str:
     """The command lines that train on the export, and what it holds."""
     from curate.export.trainable import train_commands
-    exp = read_json(run.dir / "export" / "export.json")
+    exp = read_json(RunPaths(run.dir).export_json)
     if not exp:
         return note("Not exported yet: curate export RUN writes the export.")
     model = exp.get("model") or {}
@@ -619,8 +620,8 @@ def _train(run: _Run) -> str:
     if cfg.get("downscale"):
         held.append("downscaled copies in " + ", ".join(f"<code>images_{esc(f)}</code>" for f in cfg["downscale"]))
     rows = "".join(f'<tr><td class="l">{esc(t)}</td><td class="l"><code>{esc(c)}</code></td></tr>'
-                   for t, c in train_commands(run.dir / "export"))
-    groups = (read_json(run.dir / "export" / "stage.json") or {}).get("connectivity")
+                   for t, c in train_commands(RunPaths(run.dir).export))
+    groups = (read_json(RunPaths(run.dir).record("export")) or {}).get("connectivity")
     return (f"<p>The export holds {'; '.join(held)}.</p>"
             + f'<table><tr><th class="l">trainer</th><th class="l">command</th></tr>{rows}</table>'
             '<p class="small">nerfstudio reads <code>transforms.json</code> (and starts splatting from its '
@@ -651,7 +652,8 @@ def write_html(run_dir: str | Path) -> Path:
     run_dir = Path(run_dir)
     run = _Run(run_dir)
     if not run.rep:
-        logger.warning("report: %s missing or unreadable; the report will be mostly empty", run_dir / "report.json")
+        logger.warning("report: %s missing or unreadable; the report will be mostly empty",
+                       RunPaths(run_dir).report_json)
     body = [safe_section(_first_screen, run)]
     for title, fn, when in SECTIONS:
         if when == "evaluated" and not run.evaluated:
@@ -662,6 +664,6 @@ def write_html(run_dir: str | Path) -> Path:
             f'<title>curate: {esc(_title(run))}</title><style>{CSS}</style></head><body>\n' + "\n".join(body)
             + '\n<p class="small">Written by curate. Self-contained: every image is embedded.</p></body></html>\n')
     from curate.core.stage import write_text_atomic
-    out = write_text_atomic(run_dir / "report.html", page)
+    out = write_text_atomic(RunPaths(run_dir).report_html, page)
     logger.info("report: %s (%.0f kB)", out, out.stat().st_size / 1024)
     return out

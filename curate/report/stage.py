@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.graph import NAMES
 from curate.core.stage import StageResult
 
@@ -25,7 +26,7 @@ def recorded_seconds(run_dir: Path) -> dict[str, float | None]:
         if s == "report":
             continue
         if s == "evaluate":
-            recs = [read_stage(p.parent) for p in sorted((run_dir / "evaluate").glob("*/stage.json"))]
+            recs = [read_stage(p.parent) for p in sorted(RunPaths(run_dir).evaluate.glob("*/stage.json"))]
             out[s] = round(sum(r.get("seconds", 0) for r in recs if r), 2) if recs else None
         else:
             out[s] = (read_stage(run_dir / s) or {}).get("seconds")
@@ -37,7 +38,7 @@ def evaluation_status(run_dir: Path, stale: dict[str, str]) -> dict:
     selection), 'out of date' (it estimates an earlier selection: ``why``, and ``of``: that
     selection's size and method) or 'not run'; ``refresh``: the command that (re)makes it."""
     from curate.core.stage import refresh_command
-    summ = Path(run_dir) / "evaluate" / "summary.json"
+    summ = RunPaths(run_dir).summary
     refresh = refresh_command(run_dir, stale, "evaluate")
     if not summ.is_file():
         return {"status": "not run", "refresh": refresh}
@@ -72,8 +73,8 @@ def run(ctx: "RunContext") -> StageResult:
     if not timings:  # `curate report` alone: the stages as recorded when they ran
         timings = [{"name": k, "seconds": None, "skipped": None} for k in recorded]
     timings = [{**t, "compute_seconds": recorded.get(t["name"])} for t in timings]
-    if wall is None and (run_dir / "report.json").is_file():
-        wall = json.loads((run_dir / "report.json").read_text()).get("wall_seconds")
+    if wall is None and RunPaths(run_dir).report_json.is_file():
+        wall = json.loads(RunPaths(run_dir).report_json.read_text()).get("wall_seconds")
     stale = stale_stages(run_dir)
     rep = {"photos": photos, "run_dir": str(run_dir), "budget": sel["budget"], "n_photos": len(photos_rec),
            "n_registered": len(sfm.cameras), "n_candidates": len(sel["pool"]),
@@ -85,12 +86,12 @@ def run(ctx: "RunContext") -> StageResult:
                                if r.get("status") == "dropped"],
                    "unregistered": [r["original"] for r in photos_rec
                                     if r.get("status") == "kept" and not r.get("registered")],
-                   **(read_stage(run_dir / "sfm") or {}).get("stats", {})},
+                   **(read_stage(RunPaths(run_dir).sfm) or {}).get("stats", {})},
            "selection": {k: v for k, v in sel.items() if k not in ("holdout", "pool")},
            "stale": stale, "config": config_dict(cfg), "version": versions()["curate"],
            "written_at": time.strftime("%Y-%m-%d %H:%M")}
     parts = []
-    for f in sorted((run_dir / "parts").glob("*/report.json"), key=lambda f: int(f.parent.name)
+    for f in sorted(RunPaths(run_dir).parts.glob("*/report.json"), key=lambda f: int(f.parent.name)
                     if f.parent.name.isdigit() else 0):  # --on-split each: the other parts' own runs
         pr = json.loads(f.read_text())
         parts.append({"part": f.parent.name, "n_registered": pr.get("n_registered"),
@@ -100,7 +101,7 @@ def run(ctx: "RunContext") -> StageResult:
         rep["parts"] = parts
     rep["evaluation"] = evaluation_status(run_dir, stale)
     if rep["evaluation"]["status"] == "current":   # figures only of the selection they describe
-        summ = json.loads((run_dir / "evaluate" / "summary.json").read_text())
+        summ = json.loads(RunPaths(run_dir).summary.read_text())
         rep.update({k: summ[k] for k in ("methods", "paired", "gap_closed", "budget_check") if k in summ})
         pr = summ.get("protocol") or {}
         rep["estimate"] = {"budget": pr.get("budget"), "n_pool": pr.get("n_pool", len(pr.get("pool", []))),
@@ -111,8 +112,8 @@ def run(ctx: "RunContext") -> StageResult:
     if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
         rep["budget_check"] = sel["budget_auto"]["measured"]
     rep["verdict"] = verdict(rep)
-    write_json_atomic(run_dir / "report.json", rep)
+    write_json_atomic(RunPaths(run_dir).report_json, rep)
     from curate.report.run_report import write_html
     write_html(run_dir)
-    return StageResult("report", run_dir / "report.json", True, time.perf_counter() - t0,
+    return StageResult("report", RunPaths(run_dir).report_json, True, time.perf_counter() - t0,
                        f"{run_dir / 'report.json'} and report.html")

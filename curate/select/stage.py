@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 log = logging.getLogger(__name__)
@@ -110,7 +111,7 @@ def run(ctx: "RunContext") -> StageResult:
 
     t0 = time.perf_counter()
     cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
-    d = run_dir / "select"
+    d = RunPaths(run_dir).select
     text, said = budget_of_run(cfg.budget, run_dir)
     b = parse_budget(text)
     parts = {"select": cfg.select, "budget": text}
@@ -121,7 +122,7 @@ def run(ctx: "RunContext") -> StageResult:
         measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
         if measured is not None:
             parts["measured"] = measured["budget"]
-    key = stage_key(parts, [key_of(run_dir / "occupancy")])
+    key = stage_key(parts, [key_of(RunPaths(run_dir).occupancy)])
     if begin_stage(d, key, force):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)
@@ -167,7 +168,7 @@ def run(ctx: "RunContext") -> StageResult:
 
 def read_selection(run_dir: Path) -> dict:
     """``RUN/select/selection.json``."""
-    p = Path(run_dir) / "select" / "selection.json"
+    p = RunPaths(run_dir).selection
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no selection yet (run `curate select RUN` first)")
     try:

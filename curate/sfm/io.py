@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.core.cameras import Cameras
 
 SFM_DIR = "sfm"
@@ -165,7 +166,7 @@ def image_paths(run_dir: str | Path, names: list[str], records: dict) -> list[st
         if n not in by:
             raise FileNotFoundError(f"no photo recorded for camera {n!r} in {run_dir}/sfm/images.json")
         kind, r = by[n]
-        out.append(str(run_dir / "sfm" / "images" / n) if kind == "working" else r["original"])
+        out.append(str(RunPaths(run_dir).working_images / n) if kind == "working" else r["original"])
     return out
 
 

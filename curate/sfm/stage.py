@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
@@ -66,7 +67,7 @@ def split_warning(run_dir: Path, each: bool = False) -> str | None:
     sizes and which photos are lost; None when it kept all.
     ``each`` (``--on-split each``): the other parts of >= 10 photos are curated in ``RUN/parts``."""
     from curate.core.stage import read_stage
-    st = (read_stage(Path(run_dir) / "sfm") or {}).get("stats", {})
+    st = (read_stage(RunPaths(run_dir).sfm) or {}).get("stats", {})
     takes = take_warning(st)
     rest = _split_text(st, run_dir, each)
     if takes is None or rest is None:
@@ -151,7 +152,7 @@ def import_warning(run_dir: Path) -> str | None:
     describe), or when no 3D points could be triangulated for poses that came without them; None otherwise."""
     from curate.core.stage import read_stage
     from curate.sfm.poses import MIN_MATCHED_FRACTION
-    rec = read_stage(Path(run_dir) / "sfm") or {}
+    rec = read_stage(RunPaths(run_dir).sfm) or {}
     if rec.get("mode") != "import":
         return None
     st = rec.get("stats") or {}
@@ -191,7 +192,7 @@ def run(ctx: "RunContext") -> StageResult:
         if photos is None:
             raise ValueError("give a photo folder, or --poses with a COLMAP model or transforms.json")
         d, ran = sfm_in_claimed(cfg.sfm, photos, run_dir, force=ctx.force)
-    d = run_dir / "sfm"
+    d = RunPaths(run_dir).sfm
     n = len(json.loads((d / "cameras.json").read_text())["cameras"])
     st = (read_stage(d) or {}).get("stats") or {}
     warn = split_warning(run_dir, each=cfg.sfm.on_split == "each")

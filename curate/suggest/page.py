@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.html.parts import CSS, esc, note
 
 log = logging.getLogger(__name__)
@@ -205,7 +206,7 @@ def write_page(run_dir: Path, d: Path, rec: dict, inp, pl, used: np.ndarray) -> 
     u = "m" if rec["units"] == "m" else "units"
     scale = (f" For scale: your captured path is {path_len:.1f} {u} long, and what you filmed was typically "
              f"{rec['envelope']['look_depth']:.1f} {u} away from the camera.")
-    back = (' · <a href="../report.html">the run\'s report</a>' if (Path(run_dir) / "report.html").is_file() else "")
+    back = (' · <a href="../report.html">the run\'s report</a>' if RunPaths(run_dir).report_html.is_file() else "")
     head = (f"<h1>Where to shoot next</h1><p class=\"small\">{esc(run_dir)}{back}</p>"
             f'<p class="verdict">{len(rec["suggestions"])} more photos, in the order of what they add: the energy '
             f"of the capture (Kopanas &amp; Drettakis 2023) rises from {e0:.1f} to {e1:.1f} "

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from curate.core.paths import RunPaths
 from curate.core.cameras import Cameras
 from curate.core.stage import StageResult
 from curate.suggest.config import SuggestConfig
@@ -107,12 +108,12 @@ def read_run(run_dir: Path) -> RunInputs:
     for rel, what in need.items():
         if not (run_dir / rel).is_file():
             raise FileNotFoundError(f"{run_dir / rel}: missing ({what})")
-    cams = Cameras.load(run_dir / "sfm" / "cameras.json")
+    cams = Cameras.load(RunPaths(run_dir).cameras)
     if len(cams) < 2:
         raise ValueError(f"{run_dir / 'sfm' / 'cameras.json'}: {len(cams)} registered camera(s); need at least 2")
-    records = json.loads((run_dir / "sfm" / "images.json").read_text())
+    records = json.loads(RunPaths(run_dir).images_json.read_text())
     try:
-        z = np.load(run_dir / "occupancy" / "occupancy.npz")
+        z = np.load(RunPaths(run_dir).occupancy_npz)
         occ, nodes = np.asarray(z["refined_mask"], bool), np.asarray(z["nodes_mask"], bool)
         lo, hi = np.asarray(z["box_min"], float), np.asarray(z["box_max"], float)
     except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
@@ -121,7 +122,7 @@ def read_run(run_dir: Path) -> RunInputs:
     if occ.ndim != 3 or occ.shape != nodes.shape or len(set(occ.shape)) != 1:
         raise ValueError(f"{run_dir / 'occupancy' / 'occupancy.npz'}: masks of shape {occ.shape} / {nodes.shape}")
     chosen: list[int] = []
-    sel = run_dir / "select" / "selection.json"
+    sel = RunPaths(run_dir).selection
     if sel.is_file():
         chosen = [int(i) for i in json.loads(sel.read_text()).get("chosen", []) if 0 <= int(i) < len(cams)]
     try:
@@ -294,7 +295,7 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
             raise ValueError("no feasible candidate could be drawn: nothing to suggest")
     except ValueError as e:     # the report says why instead of recommending the command
         write_json_atomic(d / UNANSWERED, {"reason": str(e), "key": key, "inputs": inp.keys[:2]})
-        if (run_dir / "report.json").is_file():
+        if RunPaths(run_dir).report_json.is_file():
             from curate.report.run_report import write_html
             write_html(run_dir)
         raise
@@ -339,7 +340,7 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     finish_stage(d, key, {"suggest": cfg}, t0, outputs={"suggestions": "suggestions.json", "page": "suggest.html",
                                                         "transforms": "transforms.json", "colmap": "images.txt"},
                  seed=cfg.seed)
-    if (run_dir / "report.json").is_file():   # the run's report links the page
+    if RunPaths(run_dir).report_json.is_file():   # the run's report links the page
         from curate.report.run_report import write_html
         write_html(run_dir)
     return StageResult(STAGE, d, True, time.perf_counter() - t0,

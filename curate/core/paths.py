@@ -1,0 +1,126 @@
+"""Where each result lies in a run folder: the one spelling of its layout (docs/architecture.md, "The run folder").
+
+``RunPaths(run_dir).cameras`` is ``RUN/sfm/cameras.json``; a stage's folder is named as the stage
+(:data:`curate.core.graph.STAGES`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class RunPaths:
+    """The files and folders of one run folder."""
+
+    root: Path
+    """The run folder."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "root", Path(self.root))
+
+    def stage(self, name: str) -> Path:
+        """A stage's folder (``RUN/<name>``)."""
+        return self.root / name
+
+    def record(self, name: str) -> Path:
+        """A stage's record (``RUN/<name>/stage.json``), written last: it says the stage finished."""
+        return self.root / name / "stage.json"
+
+    @property
+    def run_json(self) -> Path:
+        """The run's resolved options and inputs."""
+        return self.root / "run.json"
+
+    @property
+    def sfm(self) -> Path:
+        return self.root / "sfm"
+
+    @property
+    def cameras(self) -> Path:
+        """The registered cameras (OpenCV camera-to-world)."""
+        return self.sfm / "cameras.json"
+
+    @property
+    def images_json(self) -> Path:
+        """Every input photo: kept, dropped or skipped, and why."""
+        return self.sfm / "images.json"
+
+    @property
+    def working_images(self) -> Path:
+        """SfM's working copies of the photos."""
+        return self.sfm / "images"
+
+    @property
+    def occupancy(self) -> Path:
+        return self.root / "occupancy"
+
+    @property
+    def occupancy_npz(self) -> Path:
+        """The selection's node grid."""
+        return self.occupancy / "occupancy.npz"
+
+    @property
+    def nodes(self) -> Path:
+        """The nodes and what the chosen photos see of each (written by the select stage)."""
+        return self.select / "nodes.npz"
+
+    @property
+    def budget(self) -> Path:
+        return self.root / "budget"
+
+    @property
+    def budget_json(self) -> Path:
+        """The budget measured on the capture (``--budget auto``, evaluated)."""
+        return self.budget / "budget.json"
+
+    @property
+    def select(self) -> Path:
+        return self.root / "select"
+
+    @property
+    def selection(self) -> Path:
+        """The chosen photos and how."""
+        return self.select / "selection.json"
+
+    @property
+    def evaluate(self) -> Path:
+        return self.root / "evaluate"
+
+    @property
+    def summary(self) -> Path:
+        """The evaluation's figures."""
+        return self.evaluate / "summary.json"
+
+    @property
+    def gt(self) -> Path:
+        """The held-out photos at the evaluation's size."""
+        return self.evaluate / "gt"
+
+    @property
+    def export(self) -> Path:
+        return self.root / "export"
+
+    @property
+    def export_json(self) -> Path:
+        """What the export wrote."""
+        return self.export / "export.json"
+
+    @property
+    def export_transforms(self) -> Path:
+        """The export's transforms.json."""
+        return self.export / "transforms.json"
+
+    @property
+    def report_json(self) -> Path:
+        return self.root / "report.json"
+
+    @property
+    def report_html(self) -> Path:
+        return self.root / "report.html"
+
+    @property
+    def parts(self) -> Path:
+        """The other models of a capture that split, each a run folder."""
+        return self.root / "parts"
