@@ -112,7 +112,7 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
     n_all = sum(p["n_registered"] for p in parts)
     for p in parts[1:]:
         k = Path(p["model"]).name
-        sub = run_dir / "parts" / k
+        sub = RunPaths(run_dir).parts / k
         pcfg = replace(cfg, budget=part_budget(cfg.budget, p["n_registered"], n_all),
                        sfm=replace(cfg.sfm, on_split="largest"))
         print(f"part {k}: {p['n_registered']} photos, budget {pcfg.budget} -> {sub}", flush=True)
