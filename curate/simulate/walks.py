@@ -27,6 +27,52 @@ def room_walk(n_loop: int = 110, n_orbit: int = 50, seed: int = 0) -> Cameras:
                    names=tuple(f"images/frame_{i:04d}.jpg" for i in range(n)))
 
 
+def filmed_walk(seed: int = 0, width: int = 320, height: int = 240, fov_deg: float = 60.0
+                ) -> tuple[Cameras, np.ndarray]:
+    """[N] cameras (N = 200) of a walk through the living room (6 x 5 x 2.7 m, z up) as people film one, candidate
+    frames of a video at 5 per second, and [N] the camera's angular speed (radians per frame, for motion blur):
+    a first lap that stops twice to look around (frames close together: a fifth of the pace, the head sweeping
+    across the room), swings the camera fast twice (blurred frames), turns back for a few steps to film again
+    what it passed, then a second, lower and shorter pass the other way round. What an evenly paced walk lacks
+    and real walks have: frames crowded where the walker lingered and sparse where they hurried.
+    Deterministic from ``seed``; 60 degree horizontal field of view."""
+    rng = np.random.default_rng(seed)
+    mid, rx, ry = np.array([3.0, 2.5]), 1.8, 1.25
+    lap = 2 * np.pi * np.sqrt((rx ** 2 + ry ** 2) / 2)              # metres round the ellipse
+    walk, slow = 0.12, 0.02                                         # metres per frame: walking, lingering
+    # (frames, metres per frame, head sweep amplitude in radians, second pass?) per stretch
+    plan = [(30, walk, 0.0, False), (32, slow, 1.1, False), (26, walk, 0.0, False), (10, -walk, 0.0, False),
+            (24, walk, 0.0, False), (28, slow, 0.9, False), (50, 1.4 * walk, 0.0, True)]
+    ds = np.concatenate([np.full(k, v) for k, v, _, _ in plan])
+    sweep = np.concatenate([np.full(k, a) for k, _, a, _ in plan])
+    second = np.concatenate([np.full(k, p) for k, _, _, p in plan])
+    n = len(ds)
+    f = np.arange(n, dtype=float)
+    s = np.cumsum(ds)
+    s = np.where(second, s[~second][-1] - (s - s[~second][-1]), s)  # the second pass goes the other way round
+    ang = 2 * np.pi * s / lap
+    shrink = np.where(second, 0.72, 1.0)
+    c = np.stack([mid[0] + shrink * rx * np.cos(ang), mid[1] + shrink * ry * np.sin(ang),
+                  np.where(second, 1.15, 1.55) + 0.03 * np.sin(2 * np.pi * f / 3.0)], 1)
+    tangent = np.stack([-rx * np.sin(ang), ry * np.cos(ang)], 1) * np.sign(np.gradient(s))[:, None]
+    yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
+    inward = np.arctan2(mid[1] - c[:, 1], mid[0] - c[:, 0])
+    yaw = np.unwrap(yaw + 0.45 * np.angle(np.exp(1j * (inward - yaw))))     # half-way to the room's centre
+    win = np.hanning(7)
+    yaw = np.convolve(np.pad(yaw, 3, mode="edge"), win / win.sum(), "valid")  # turning round takes a second
+    yaw = yaw + sweep * np.sin(2 * np.pi * f / 30.0)                # looking round where the walker stopped
+    for at in (70, 150):                                            # two fast swings of the camera
+        yaw = yaw + 0.9 * np.exp(-0.5 * ((f - at) / 1.5) ** 2) * np.sign(np.sin(at))
+    yaw = yaw + smooth_noise(rng, n, 0.03, 3)
+    pitch = -0.15 + 0.08 * np.sin(2 * np.pi * f / 23.0) + smooth_noise(rng, n, 0.02, 3)
+    d = np.stack([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)], 1)
+    fx = width / 2 / np.tan(np.radians(fov_deg) / 2)
+    omega = np.abs(np.gradient(yaw)) + np.abs(np.gradient(pitch))
+    cams = Cameras(look_at(c, c + d), fx, fx, width / 2, height / 2, width, height,
+                   names=tuple(f"images/frame_{i:04d}.jpg" for i in range(n)))
+    return cams, omega
+
+
 WALK_KINDS = ("loop", "corridor", "turn", "linger", "two_sessions")
 """Kinds of :func:`hand_held_walk`: laps around the room; back and forth along its long side;
 standing at a few spots and turning on the spot; lingering slowly, then moving fast; and two
