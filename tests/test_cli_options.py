@@ -135,7 +135,7 @@ def test_help_and_version_are_instant_and_light():
     assert "curate 0." in out and out.strip().splitlines()[-1] == "[]"
 
 
-@pytest.mark.parametrize("cmd", ["run", "batch", "select", "evaluate", "export", "suggest", "sfm"])
+@pytest.mark.parametrize("cmd", cli.COMMANDS)
 def test_a_commands_help_imports_no_torch_pycolmap_or_open3d(cmd):
     """Issue 51: `curate run --help` loaded torch (3.4 s of imports before the help appeared): the options live in
     light config modules."""
