@@ -17,6 +17,7 @@ from curate.occupancy.config import OccupancyConfig, RefineConfig
 from curate.select.config import SelectConfig
 from curate.sfm.config import SfmConfig
 
+
 @dataclass
 class RunConfig:
     """Every option of ``curate run``."""

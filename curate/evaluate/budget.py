@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from curate.config import RunConfig
     from curate.core.graph import RunContext
 
+
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
     check on. False while the run has no poses to tell the kind of capture by."""
