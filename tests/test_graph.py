@@ -4,6 +4,7 @@ checks and refreshes, the staleness and the batch summary's failed stage all fol
 from __future__ import annotations
 
 import inspect
+
 import pytest
 
 from curate.config import RunConfig
@@ -32,7 +33,7 @@ def test_a_stage_command_redoes_only_the_cheap_stages_computed_from_it():
     assert graph.downstream("occupancy") == ("budget", "select", "evaluate", "export")
 
 
-def test_the_run_folder_entries_curate_writes_are_every_stages_and_its_own(tmp_path):
+def test_the_run_folder_entries_curate_writes_are_every_stages_and_its_own():
     """What an adopted folder may not already hold: every stage's output, run.json and the parts of a split."""
     assert set(graph.RUN_WRITES) == {"run.json", "parts", "sfm", "occupancy", "budget", "select", "evaluate",
                                      "export", "report.json", "report.html"}
