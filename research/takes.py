@@ -18,6 +18,9 @@ the folder, so curate does not see it) mapping each take's frames to office fram
   motion blur), cut at its middle into ``session1.mp4`` (a loop) and ``session2.mp4`` (a second,
   lower loop the other way round, started elsewhere): a second pass that sees the room from
   elsewhere, not the same frames. Ground truth: ``sessions.cameras.json``.
+* ``sessions_office/``, ``sessions_kitchen/``: the same walk through the other rendered rooms;
+  ``sessions_foreign/``: the living room's two sessions and ``other_room.mp4``, 60 frames of the kitchen: a
+  take that cannot join.
 * ``video_photos/``: ``walk.mp4`` = office.mp4 frames 0..186, and every 5th office JPEG of
   frames 187..372 as photos. They share nothing but what the walk sees twice.
 
@@ -76,42 +79,56 @@ def _fox_frames(fox: Path, size=(540, 360)) -> list[np.ndarray]:
     return out
 
 
-CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos", "sessions")
+CASES = ("two_takes", "two_takes_apart", "three_takes", "video_photos", "sessions", "sessions_office",
+         "sessions_kitchen", "sessions_foreign")
 
 
 def _render_chunk(args):
-    """Rendered, motion-blurred uint8 frames of cameras ``idx`` of the sessions walk (worker process)."""
-    n, idx = args
+    """Rendered, motion-blurred uint8 frames of cameras ``idx`` of the sessions walk in ``room`` (worker)."""
+    n, idx, room = args
     from curate.simulate.synthetic import make_scene
     from curate.simulate.walks import hand_held_walk, motion_blur
-    scene = make_scene("livingroom", 0)
+    scene = make_scene(room, 0)
     cams, omega = hand_held_walk(n, "two_sessions", seed=0, width=320, height=240, room=scene.interior, fps=FPS)
     rgb, _ = scene.render(cams[list(idx)])
     return [motion_blur(im, omega[i], float(cams.fx[i]), FPS / 120) for i, im in zip(idx, rgb)]
 
 
-def make_sessions(out: Path, n: int = 300, jobs: int = 2) -> dict:
-    """``out/sessions/session{1,2}.mp4`` and ``out/sessions.cameras.json`` (the rendered poses)."""
+def _session_frames(room: str, n: int, jobs: int):
+    """(cameras [n], frames [n]) of the two-session walk through the rendered ``room``."""
     from multiprocessing import Pool
 
     from curate.simulate.synthetic import make_scene
     from curate.simulate.walks import hand_held_walk
-    scene = make_scene("livingroom", 0)
+    scene = make_scene(room, 0)
     cams, _ = hand_held_walk(n, "two_sessions", seed=0, width=320, height=240, room=scene.interior, fps=FPS)
     with Pool(jobs) as pool:
-        frames = [f for part in pool.map(_render_chunk, [(n, list(range(a, min(a + 20, n)))) for a in range(0, n, 20)])
-                  for f in part]
+        chunks = [(n, list(range(a, min(a + 20, n))), room) for a in range(0, n, 20)]
+        frames = [f for part in pool.map(_render_chunk, chunks) for f in part]
+    return cams, frames
+
+
+def make_sessions(out: Path, n: int = 300, jobs: int = 2, room: str = "livingroom", name: str = "sessions",
+                  foreign: str | None = None) -> dict:
+    """``out/<name>/session{1,2}.mp4`` and ``out/<name>.cameras.json`` (the rendered poses) of ``room``; with
+    ``foreign``, a third take ``other_room.mp4``: the first session's first 60 frames in that other room, which
+    shares nothing with the first (no truth: it must be left out)."""
+    cams, frames = _session_frames(room, n, jobs)
     h = n // 2
-    write_video(frames[:h], out / "sessions" / "session1.mp4")
-    write_video(frames[h:], out / "sessions" / "session2.mp4")
-    cams.save(out / "sessions.cameras.json")
-    return {"videos": {"session1.mp4": list(range(h)), "session2.mp4": list(range(h, n))}, "photos": {},
-            "cameras": str(out / "sessions.cameras.json")}
+    write_video(frames[:h], out / name / "session1.mp4")
+    write_video(frames[h:], out / name / "session2.mp4")
+    cams.save(out / f"{name}.cameras.json")
+    videos = {"session1.mp4": list(range(h)), "session2.mp4": list(range(h, n))}
+    if foreign is not None:
+        write_video(_session_frames(foreign, n, jobs)[1][:60], out / name / "other_room.mp4")
+        videos["other_room.mp4"] = None
+    return {"videos": videos, "photos": {}, "cameras": str(out / f"{name}.cameras.json")}
 
 
 def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
     """Write ``cases`` under ``out``; returns {case: truth} (also in ``out/<case>.truth.json``)."""
-    frames = _decode(office / "office.mp4")
+    office_cases = {"two_takes", "two_takes_apart", "three_takes", "video_photos"} & set(cases)
+    frames = _decode(office / "office.mp4") if office_cases else []
     n = len(frames)
     a = list(range(0, 140)) + list(range(140, 240, 2))
     b = list(range(n - 1, 239, -1)) + list(range(239, 140, -2))
@@ -146,6 +163,11 @@ def make(office: Path, fox: Path, out: Path, cases: tuple = CASES) -> dict:
         done["video_photos"] = {"videos": {"walk.mp4": list(range(half))}, "photos": photos}
     if "sessions" in cases:
         done["sessions"] = make_sessions(out)
+    for room in ("office", "kitchen"):
+        if f"sessions_{room}" in cases:
+            done[f"sessions_{room}"] = make_sessions(out, room=room, name=f"sessions_{room}")
+    if "sessions_foreign" in cases:
+        done["sessions_foreign"] = make_sessions(out, name="sessions_foreign", foreign="kitchen")
     for k, v in done.items():
         (out / f"{k}.truth.json").write_text(json.dumps(v))
     return done
