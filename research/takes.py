@@ -208,6 +208,37 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     return out
 
 
+def global_model(run: Path, truth_json: Path, office: Path | None) -> dict:
+    """COLMAP's global model of the run's matches as COLMAP returns it, before curate's checks: its size, each
+    take's frames in it and the rotation errors of the frames with ground truth (the join the rule judged: a
+    correct join has no frame over 5 deg and no frame of a take without truth)."""
+    import tempfile
+
+    from curate.sfm.model import cameras_from_reconstruction
+    from research.sfm_mappers import map_with
+    sfm = run / "sfm"
+    recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+    tj = json.loads(truth_json.read_text())
+    with tempfile.TemporaryDirectory() as tmp:
+        models, seconds = map_with("global", sfm / "database.db", sfm / "images", Path(tmp))
+        best = max(models.values(), key=lambda r: r.num_reg_images())
+        cams = cameras_from_reconstruction(best, warn=False)[0]
+    reg = set(cams.names)
+    takes: dict = {}
+    for r in recs:
+        t = takes.setdefault((r.get("extra") or {}).get("video_rel") or "photos", [0, 0])
+        t[0] += 1
+        t[1] += r["working"] in reg
+    out = {"size": len(cams), "seconds": round(seconds, 1), "takes": {k: f"{v[1]} of {v[0]}" for k, v in takes.items()},
+           "foreign_frames": sum(v[1] for k, v in takes.items() if tj["videos"].get(k, 0) is None)}
+    e = errors_against_truth(cams, recs, tj, office)
+    if e is not None:
+        out.update({"rotation_deg_median": round(e["rotation_deg_median"], 2),
+                    "rotation_deg_max": round(e["rotation_deg_max"], 2),
+                    "over_5_deg": int(sum(r > 5 for r in e["rotation_deg"]))})
+    return out
+
+
 def errors_against_truth(cams, recs: list[dict], tj: dict, office: Path | None) -> dict | None:
     """:func:`research.align.pose_errors` of ``cams`` (a model's cameras, named by working name) against
     the case's truth (``tj``: a ``<case>.truth.json``; office cases need ``office``); ``recs``: the kept
@@ -246,12 +277,16 @@ def main(argv=None) -> dict:
     e.add_argument("run", type=Path)
     e.add_argument("--truth", type=Path, default=None, help="<case>.truth.json written by make")
     e.add_argument("--office", type=Path, default=None)
+    e.add_argument("--global-model", action="store_true",
+                   help="also map the matches with COLMAP's global mapper and judge its model against the truth")
     a = ap.parse_args(argv)
     if a.cmd == "make":
         res = {k: {"videos": {v: (len(f) if f else "no truth") for v, f in c["videos"].items()},
                    "photos": len(c["photos"])} for k, c in make(a.office, a.fox, a.out, tuple(a.cases)).items()}
     else:
         res = evaluate(a.run, a.truth, a.office)
+        if a.global_model and a.truth is not None:
+            res["global_model"] = global_model(a.run, a.truth, a.office)
     print(json.dumps(res))
     return res
 
