@@ -16,7 +16,7 @@ once by the harness (:func:`room_scene`), whose fields are also scored on views 
 random in the room's free space, off the capture path (rows ``room-offpath``): the
 free-viewpoint navigation the paper is about, which no real capture here can test.
 
-Methods: ``default`` (curate's default, :class:`curate.select.select.SelectConfig`), ``energy``
+Methods: ``default`` (curate's default, :class:`curate.select.config.SelectConfig`), ``energy``
 (the paper), ``fvs`` (farthest-view sampling), ``random`` (n draws, one training
 each; each hold-out fold draws its own, :func:`random_seed`), ``all`` (the pool field),
 plus any ``--extra`` method of :data:`curate.select.methods.METHODS`, the variants of
@@ -481,7 +481,7 @@ class Bench:
     args: argparse.Namespace
     ev: object                     # curate.evaluate.units.EvalConfig
     methods: list
-    default: object                # curate.select.select.SelectConfig
+    default: object                # curate.select.config.SelectConfig
     label: dict                    # method -> its unit folders' name
     rows: list
     paired: list
@@ -541,7 +541,7 @@ def train_key(ev, subset: list[int], holdout: list[int], deps: list[str]) -> str
 def default_label(default) -> tuple[str, str]:
     """(auto's rule, tag) of curate's default: the tag names its unit folders
     (``q_default-<tag>_...``). ``auto`` picks its method by kind of capture, a rule that is
-    not in :class:`curate.select.select.SelectConfig`, so the rule goes into the tag too: when the
+    not in :class:`curate.select.config.SelectConfig`, so the rule goes into the tag too: when the
     rule changes, the default trains into new folders instead of meeting the old ones."""
     from curate.select import methods
     from curate.core.stage import stage_key

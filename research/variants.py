@@ -1,6 +1,6 @@
 """Selections that were measured and not adopted, runnable by the harness beside the product's methods.
 
-A :class:`Variant` is the product's :class:`curate.select.select.SelectConfig` plus the knobs the
+A :class:`Variant` is the product's :class:`curate.select.config.SelectConfig` plus the knobs the
 product no longer has: pool coverage (:mod:`research.coverage`), a medoid cost power, an energy
 share and a sharpness prior (:mod:`research.medoids_variants`), and a rotation weight for
 farthest-view sampling. :func:`select_variant` runs one and returns a product ``Selection``.

@@ -6,7 +6,7 @@ help (``curate run --help`` lists one line per method: :func:`method_help`) and 
 that runs it, named as ``"module:function"`` and imported only when it runs. Adding a method
 is one :class:`Method` in :data:`REGISTRY` and its function, which
 :func:`curate.select.select.select` calls as ``fn(cams, grid, budget, cfg, initial, index,
-progress) -> Selection`` (``cfg``: the :class:`curate.select.select.SelectConfig`; ``index``:
+progress) -> Selection`` (``cfg``: the :class:`curate.select.config.SelectConfig`; ``index``:
 the pool's pair index over the grid's nodes; a fallback it takes goes into
 ``Selection.note``).
 
