@@ -164,6 +164,16 @@ def current_key(run_dir: str | Path, stage: str) -> str | None:
     return (finished_record(run_dir, stage) or {}).get("key")
 
 
+def required_key(run_dir: str | Path, stage: str) -> str:
+    """:func:`current_key` of a stage another stage is computed from: FileNotFoundError, naming the command that
+    finishes the run, when it has not finished."""
+    key = current_key(run_dir, stage)
+    if key is None:
+        raise FileNotFoundError(f"{Path(run_dir) / stage}: this stage has not finished (run `curate run ... --out "
+                                "RUN` to finish the run)")
+    return key
+
+
 def inputs_of(run_dir: str | Path, stage: str) -> dict[str, str | None]:
     """{input stage: its current key} for ``stage`` (:data:`READS`): what a record names as its inputs."""
     return {s: current_key(run_dir, s) for s in READS.get(stage, ())}

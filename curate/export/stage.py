@@ -20,14 +20,13 @@ EXPORTED = {"hardlink": "hard-linked", "link": "linked", "copy": "copied"}
 
 def run(ctx: "RunContext") -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
-    from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, stage_key
+    from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, required_key, stage_key
     from curate.export.subset import check_unchanged, export_subset
-    from curate.occupancy.stage import key_of
     from curate.select.stage import read_selection
     t0 = time.perf_counter()
     cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
     d = RunPaths(run_dir).export
-    key = stage_key({"export": cfg.export}, [key_of(RunPaths(run_dir).select)])
+    key = stage_key({"export": cfg.export}, [required_key(run_dir, "select")])
     if force or not is_fresh(d, key):
         check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
     if begin_stage(d, key, force):  # unchanged: its warning still holds

@@ -29,16 +29,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def key_of(stage_dir: Path) -> str:
-    """The key of a finished stage (FileNotFoundError, naming the command that makes it, when it has not finished)."""
-    from curate.core.stage import read_stage
-    rec = read_stage(stage_dir)
-    if rec is None:
-        raise FileNotFoundError(f"{stage_dir}: this stage has not finished (run `curate run ... --out RUN` to "
-                                "finish the run)")
-    return rec["key"]
-
-
 def surface_band(mask: np.ndarray, k: int, outside_free: bool = False) -> np.ndarray:
     """[R,R,R] bool: occupied nodes next to free space, widened by ``k`` voxels each side.
     ``outside_free``: space outside the grid counts as free (a full grid's surface is then its outer
@@ -97,7 +87,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
     ``RUN/occupancy``. ``train_on``: the cameras the field trains on (None: every registered one;
     the evaluation harness passes a hold-out fold's pool)."""
     from curate.core.grid import NodeGrid
-    from curate.core.stage import begin_stage, finish_stage, is_fresh, stage_key, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, is_fresh, required_key, stage_key, write_json_atomic
     from curate.field.train import default_box, train_field
     from curate.occupancy.masks import occupancy_from_points, refine_occupancy
     from curate.sfm.io import image_paths, load_sfm
@@ -113,7 +103,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         parts["box"] = list(cfg.box)
     if train_on is not None:
         parts["train_on"] = [int(i) for i in train_on]
-    deps = [key_of(RunPaths(run_dir).sfm)]
+    deps = [required_key(run_dir, "sfm")]
     key_field = stage_key(parts, deps)
     if not field_needed and not force and is_fresh(d, key_field):
         return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too

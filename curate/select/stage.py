@@ -102,8 +102,8 @@ def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
 def run(ctx: "RunContext") -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
-    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
-    from curate.occupancy.stage import key_of, load_node_grid
+    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic
+    from curate.occupancy.stage import load_node_grid
     from curate.select.energy import energy_of_subset
     from curate.select.select import select
     from curate.select.visibility import build_pair_index
@@ -122,7 +122,7 @@ def run(ctx: "RunContext") -> StageResult:
         measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
         if measured is not None:
             parts["measured"] = measured["budget"]
-    key = stage_key(parts, [key_of(RunPaths(run_dir).occupancy)])
+    key = stage_key(parts, [required_key(run_dir, "occupancy")])
     if begin_stage(d, key, force):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)

@@ -187,13 +187,13 @@ def run(ctx: "RunContext") -> StageResult:
     t0 = time.perf_counter()
     cfg, run_dir, photos, poses = ctx.cfg, ctx.run_dir, ctx.photos, ctx.poses
     if poses:
-        d, ran = import_in_claimed(cfg.sfm, poses, run_dir, photos=photos, force=ctx.force)
+        _, ran = import_in_claimed(cfg.sfm, poses, run_dir, photos=photos, force=ctx.force)
     else:
         if photos is None:
             raise ValueError("give a photo folder, or --poses with a COLMAP model or transforms.json")
-        d, ran = sfm_in_claimed(cfg.sfm, photos, run_dir, force=ctx.force)
+        _, ran = sfm_in_claimed(cfg.sfm, photos, run_dir, force=ctx.force)
     d = RunPaths(run_dir).sfm
-    n = len(json.loads((d / "cameras.json").read_text())["cameras"])
+    n = len(json.loads(RunPaths(run_dir).cameras.read_text())["cameras"])
     st = (read_stage(d) or {}).get("stats") or {}
     warn = split_warning(run_dir, each=cfg.sfm.on_split == "each")
     if warn is not None:
