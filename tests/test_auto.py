@@ -61,6 +61,24 @@ def test_auto_runs_the_energy_on_an_object_and_view_medoids_on_walk_photos_in_no
     assert SelectConfig().method == "auto"
 
 
+def test_auto_spaces_a_large_object_capture_as_a_walk_and_its_folds_do_the_same():
+    """Past OBJECT_METHOD_MAX_PHOTOS photos an object capture is chosen as a walk is (the paper's energy was
+    below random on both ~300-photo objects measured), the note says why, and a fold of the evaluation, whose
+    pool is a fourteenth smaller, runs the method the exported selection ran, not the energy."""
+    from curate.evaluate.config import EvalConfig
+    from curate.evaluate.folds import plan_fold
+    from curate.select.methods import OBJECT_METHOD_MAX_PHOTOS
+    grid = NodeGrid([-1, -1, -1], [1, 1, 1], 8)
+    small = select(orbit(OBJECT_METHOD_MAX_PHOTOS), grid, 10, SelectConfig("auto"))
+    assert small.method == "energy"
+    big = orbit(OBJECT_METHOD_MAX_PHOTOS + 5)
+    a = select(big, grid, 10, SelectConfig("auto"))
+    assert a.method in ("path", "medoids") and "object" in a.note and f"more than {OBJECT_METHOD_MAX_PHOTOS}" in a.note
+    assert a.chosen == select(big, grid, 10, SelectConfig(a.method)).chosen
+    fold = plan_fold(EvalConfig(), SelectConfig("auto"), big, grid, 10, 0, ordered=False)
+    assert len(fold.pool) <= OBJECT_METHOD_MAX_PHOTOS and fold.method == a.method
+
+
 @pytest.mark.parametrize("scene,kind", [("office", "walk"), ("fox", "object"), ("templering", "object")])
 def test_capture_kind_on_real_sets(scene, kind):
     from research.datasets import load_ground_truth

@@ -116,6 +116,15 @@ def in_capture_order(cams, nodes=None) -> bool:
     return path_steps(*embed(cams, view_depths(cams, nodes))) is not None
 
 
+def whole_capture_method(select_cfg, cams):
+    """``select_cfg`` with "auto" resolved on the whole capture ``cams``, as the exported selection resolved it
+    (:func:`curate.select.methods.resolve_method`), so that a fold's smaller pool runs the same method."""
+    from dataclasses import replace
+
+    from curate.select.methods import resolve_method
+    return replace(select_cfg, method=resolve_method(cams, select_cfg.method)[0])
+
+
 def plan_fold(cfg: EvalConfig, select_cfg, cams, grid, n_exported: int, offset: int, ordered: bool,
               with_all: bool = True) -> Fold:
     """Fold ``offset`` of ``cams`` (every registered camera): its split, its selection (``select_cfg`` on
@@ -126,6 +135,7 @@ def plan_fold(cfg: EvalConfig, select_cfg, cams, grid, n_exported: int, offset: 
     from curate.select.baselines import farthest_view, random_subset, stride_subset
     from curate.select.select import select
     from curate.select.visibility import build_pair_index
+    select_cfg = whole_capture_method(select_cfg, cams)
     pool, hold = (v.tolist() for v in holdout_split(len(cams), cfg.holdout_every, offset))
     if not hold:
         raise ValueError(f"fold {offset}: no photo to hold out from {len(cams)} registered photos")
@@ -245,6 +255,7 @@ def curve_fold(cfg: EvalConfig, select_cfg, cams, grid, k_law: int, offset: int)
     from curate.core.stats import holdout_split
     from curate.select.select import select
     from curate.select.visibility import build_pair_index
+    select_cfg = whole_capture_method(select_cfg, cams)
     pool, hold = (v.tolist() for v in holdout_split(len(cams), cfg.holdout_every, offset))
     k = eval_budget(k_law, len(cams), len(pool))
     pc = cams[pool]

@@ -18,7 +18,8 @@ video); "random" is a baseline. Variants that were measured and not adopted (poo
 medoid cost powers, a sharpness prior, an energy share) live in ``research/``. "auto" runs no
 function of its own: :func:`curate.select.select.resolve_method` replaces it by
 :data:`WALK_METHOD` on a walk-through (viewing axes that meet nowhere, or near-parallel ones)
-and by :data:`OBJECT_METHOD` on an object capture (cameras around a point, looking at it).
+and by :data:`OBJECT_METHOD` on an object capture (cameras around a point, looking at it) of at most
+:data:`OBJECT_METHOD_MAX_PHOTOS` photos; a larger object capture is chosen as a walk is.
 """
 
 from __future__ import annotations
@@ -66,6 +67,13 @@ OBJECT_METHOD = "energy"
 method, and why': over all seven every-7th hold-out folds it beat farthest-view sampling,
 the earlier choice, in 5 of 6 cells of three object sets and two budgets)."""
 
+OBJECT_METHOD_MAX_PHOTOS = 150
+""""auto" on an object capture of more photos than this runs :data:`WALK_METHOD`: on the two object captures
+of about 300 photos measured (a real plant, 292 photos, and the rendered photo-textured orbit of a coffee table
+in a room, 300), at 14-15% the paper's energy was below random and path spacing ahead of it
+(docs/selection-evidence.md, "Objects of a few hundred photos"); the energy's evidence is three real objects of
+47-67 photos. 150 lies between the two, where nothing was measured."""
+
 PATH_WEIGHTS = True
 """Default of ``MedoidsConfig.path_weights`` (docs/selection-evidence.md)."""
 
@@ -73,7 +81,8 @@ _SELECT = "curate.select.select"
 
 REGISTRY: dict[str, Method] = {m.key: m for m in (
     Method("auto", "chosen by the kind of capture",
-           f"{WALK_METHOD} on a walk-through, {OBJECT_METHOD} on an object capture (told apart by the poses)", None),
+           f"{WALK_METHOD} on a walk-through, {OBJECT_METHOD} on an object capture of at most "
+           f"{OBJECT_METHOD_MAX_PHOTOS} photos (told apart by the poses)", None),
     Method("path", "even spacing along the capture path",
            "frames evenly spaced along the capture path by view change (view medoids when the "
            "photos are not in capture order)", f"{_SELECT}:run_path"),
@@ -152,13 +161,17 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
 
 def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
     """(method that runs, note) for ``method`` on ``cams``: "auto" becomes ``OBJECT_METHOD``
-    on an object capture and ``WALK_METHOD`` on a walk (:func:`capture_kind`), with a note
-    saying why; any other method runs as given, with no note."""
+    on an object capture of at most ``OBJECT_METHOD_MAX_PHOTOS`` photos and ``WALK_METHOD`` on a walk
+    or a larger object capture (:func:`capture_kind`), with a note saying why; any other method runs as
+    given, with no note."""
     if method != "auto":
         return method, ""
     kind, ang = capture_kind(cams)
-    method = OBJECT_METHOD if kind == "object" else WALK_METHOD
+    large = kind == "object" and len(cams) > OBJECT_METHOD_MAX_PHOTOS
+    method = OBJECT_METHOD if kind == "object" and not large else WALK_METHOD
     why = ("the cameras look at one point (an object capture; their median angle to it {:.0f} deg)" if kind == "object"
            else "the cameras do not look at one point (a walk-through; their median angle to the nearest common "
                 "point {:.0f} deg)").format(ang)
+    if large:
+        why += f"; {len(cams)} photos, more than {OBJECT_METHOD_MAX_PHOTOS}: spaced as a walk is"
     return method, f"auto: {why} -> {method}"
