@@ -168,7 +168,8 @@ def test_sigterm_during_a_run_stops_it_cleanly_and_the_rerun_resumes(tmp_path, w
     cap = _first_frames(tmp_path / "cap", 48) if when == "sfm" else SAMPLE    # the points' matching: fewer photos
     cmd = [sys.executable, "-m", "curate", "run", str(cap / "images"), "--poses", str(cap / "transforms.json"),
            "--out", str(run), "--budget", "8", "--iters", "60", "--eval-size", "32", "--res", "12", "--folds", "2",
-           "--workers", "2", *([] if when == "sfm" else ["--triangulate", "off"])]   # points only where killed
+           "--workers", "2", "--refine-iters", "40", "--refine-size", "32",
+           *([] if when == "sfm" else ["--triangulate", "off"])]   # points only where killed
     p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.time()
     ready = (lambda: (run / "sfm" / "database.db").is_file()) if when == "sfm" else \

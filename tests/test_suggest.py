@@ -293,7 +293,8 @@ def test_suggest_command_end_to_end_on_the_sample_walk(tmp_path):
     from curate.core.transforms_json import read_transforms
     run = tmp_path / "run"
     _curate("run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--no-evaluate",
-            "--budget", "12", "--res", "16", "--triangulate", "off", "--out", str(run))   # no points: a field
+            "--budget", "12", "--res", "16", "--triangulate", "off", "--refine-iters", "40", "--refine-size", "32",
+            "--out", str(run))   # no points: a field
     # a field trained 60 iterations at 64 px is haze: nowhere is seen empty around a camera; said in one line,
     # and the run's report says so instead of recommending the command
     bad = _curate("suggest", str(run), "--add", "3", "--candidates", "150", "--field-iters", "60", "--field-size", "64",
