@@ -90,14 +90,15 @@ def part_errors(best, parts: list[set], run: Path, truth_json: Path | None, offi
     if truth_json is None:
         return [{} for _ in parts]
     from curate.sfm.model import cameras_from_reconstruction
-    from research.takes import errors_against_truth
+    from research.takes import errors_against_truth, truth_of
     recs = [r for r in json.loads((run / "sfm" / "images.json").read_text())["photos"] if r["status"] == "kept"]
     cams = cameras_from_reconstruction(best, warn=False)[0]
     tj = json.loads(truth_json.read_text())
     e = errors_against_truth(cams, recs, tj, office)
     if e is None:
         return [{} for _ in parts]
-    with_truth = [n for n in cams.names if n in _truth_names(recs, tj)]
+    have = truth_of(recs, tj)
+    with_truth = [n for n in cams.names if n in have]   # the order errors_against_truth keeps
     err = dict(zip(with_truth, e["rotation_deg"]))
     out = []
     for p in parts:
@@ -105,20 +106,6 @@ def part_errors(best, parts: list[set], run: Path, truth_json: Path | None, offi
         out.append({"median": round(float(np.median(v)), 2), "max": round(float(np.max(v)), 2), "n": len(v),
                     "without_truth": len(p) - len(v)} if v else {"without_truth": len(p)})
     return out
-
-
-def _truth_names(recs: list[dict], tj: dict) -> set[str]:
-    """Working names of the kept records with a true pose (the order :func:`errors_against_truth` keeps)."""
-    have = set()
-    for r in recs:
-        e = r.get("extra") or {}
-        if e.get("video"):
-            idx = tj["videos"].get(e["video_rel"])
-            if idx is not None and idx[e["frame"]] is not None:
-                have.add(r["working"])
-        elif r["rel"] in tj["photos"]:
-            have.add(r["working"])
-    return have
 
 
 def measure(run: Path, truth: Path | None, office: Path | None) -> dict:

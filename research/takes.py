@@ -183,13 +183,7 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     cams = load_sfm(run).cameras
     reg = set(cams.names)
 
-    def take_of(r):
-        return (r.get("extra") or {}).get("video_rel") or "photos"
-    takes: dict = {}
-    for r in recs:
-        t = takes.setdefault(take_of(r), [0, 0])
-        t[0] += 1
-        t[1] += r["working"] in reg
+    takes = take_counts(recs, reg)
     out = {"run": str(run), "matcher": stats.get("matcher"), "mapper": stats.get("mapper"),
            "model_sizes": stats.get("model_sizes"), "n_kept": stats.get("n_kept"),
            "takes": {k: f"{v[1]} of {v[0]}" for k, v in takes.items()},
@@ -208,6 +202,32 @@ def evaluate(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     return out
 
 
+def take_counts(recs: list[dict], registered: set[str]) -> dict[str, list[int]]:
+    """{take (its video, or "photos"): [frames kept, of them registered]} of the kept records ``recs`` of
+    ``images.json``; ``registered``: the working names a model holds."""
+    takes: dict = {}
+    for r in recs:
+        t = takes.setdefault((r.get("extra") or {}).get("video_rel") or "photos", [0, 0])
+        t[0] += 1
+        t[1] += r["working"] in registered
+    return takes
+
+
+def truth_of(recs: list[dict], tj: dict) -> dict[str, int]:
+    """{working name: index of its true pose} of the kept records ``recs`` that have one in the case's truth
+    ``tj`` (a ``<case>.truth.json``: each video's frames, and photos, to truth indices)."""
+    gt_of = {}
+    for r in recs:
+        e = r.get("extra") or {}
+        if e.get("video"):
+            idx = tj["videos"].get(e["video_rel"])
+            if idx is not None and idx[e["frame"]] is not None:
+                gt_of[r["working"]] = idx[e["frame"]]
+        elif r["rel"] in tj["photos"]:
+            gt_of[r["working"]] = tj["photos"][r["rel"]]
+    return gt_of
+
+
 def global_model(run: Path, truth_json: Path, office: Path | None) -> dict:
     """COLMAP's global model of the run's matches as COLMAP returns it, before curate's checks: its size, each
     take's frames in it and the rotation errors of the frames with ground truth (the join the rule judged: a
@@ -223,12 +243,7 @@ def global_model(run: Path, truth_json: Path, office: Path | None) -> dict:
         models, seconds = map_with("global", sfm / "database.db", sfm / "images", Path(tmp))
         best = max(models.values(), key=lambda r: r.num_reg_images())
         cams = cameras_from_reconstruction(best, warn=False)[0]
-    reg = set(cams.names)
-    takes: dict = {}
-    for r in recs:
-        t = takes.setdefault((r.get("extra") or {}).get("video_rel") or "photos", [0, 0])
-        t[0] += 1
-        t[1] += r["working"] in reg
+    takes = take_counts(recs, set(cams.names))
     out = {"size": len(cams), "seconds": round(seconds, 1), "takes": {k: f"{v[1]} of {v[0]}" for k, v in takes.items()},
            "foreign_frames": sum(v[1] for k, v in takes.items() if tj["videos"].get(k, 0) is None)}
     e = errors_against_truth(cams, recs, tj, office)
@@ -247,15 +262,7 @@ def errors_against_truth(cams, recs: list[dict], tj: dict, office: Path | None) 
     from research.align import pose_errors
     from research.datasets import load_office
     truth = Cameras.load(tj["cameras"]) if tj.get("cameras") else load_office(office)
-    gt_of = {}
-    for r in recs:
-        e = r.get("extra") or {}
-        if e.get("video"):
-            idx = tj["videos"].get(e["video_rel"])
-            if idx is not None and idx[e["frame"]] is not None:
-                gt_of[r["working"]] = idx[e["frame"]]
-        elif r["rel"] in tj["photos"]:
-            gt_of[r["working"]] = tj["photos"][r["rel"]]
+    gt_of = truth_of(recs, tj)
     keep = [i for i, nm in enumerate(cams.names) if nm in gt_of]
     if len(keep) < 3:
         return None
