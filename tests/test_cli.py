@@ -212,8 +212,13 @@ def _posed_run(tmp_path, stages_done: str):
     from curate.pipeline import save_run_config
     from curate.core.transforms_json import read_transforms
     src = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    import shutil
     cams, files = read_transforms(src / "transforms.json")
-    tj = write_transforms(tmp_path / "poses" / "transforms.json", cams[list(range(8))], files[:8])
+    (tmp_path / "poses" / "images").mkdir(parents=True)
+    for f in files[:8]:   # the photos beside their poses: a pose file names nothing outside its folder
+        shutil.copyfile(f, tmp_path / "poses" / "images" / Path(f).name)
+    tj = write_transforms(tmp_path / "poses" / "transforms.json", cams[list(range(8))],
+                          [f"images/{Path(f).name}" for f in files[:8]])
     run = runfolder.claim(tmp_path / "my run")
     save_run_config(RunConfig(), run, None, tj)
     if stages_done == "sfm":

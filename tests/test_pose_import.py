@@ -4,6 +4,7 @@ command reads the same pose sources; poses without points get points triangulate
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -155,7 +156,7 @@ def test_run_and_select_accept_the_same_pose_sources(tmp_path, capsys):
     for k, src in enumerate(sources):
         sel = tmp_path / f"sel{k}"
         assert main(["select", str(src), "--budget", "3", "--out", str(sel), "--method", "medoids", "--res", "8"]) == 0
-        chosen, files = read_transforms(sel / "transforms.json")
+        chosen, files = read_transforms(sel / "transforms.json", contained=False)   # curate select's own paths
         assert len(chosen) == 3 and all(Path(f).is_file() for f in files), src
         run = tmp_path / f"run{k}"
         for ph in ([str(cap / "images")], []):
@@ -377,3 +378,113 @@ def test_a_colmap_image_with_a_zero_quaternion_is_an_error_naming_the_file_and_i
     txt.write_text("\n".join(lines) + "\n")
     with pytest.raises(ValueError, match=r"images.txt: image b.jpg has a rotation quaternion of zero length"):
         read_colmap_model(tmp_path / "txt", None)
+
+
+# ------------------------------------------------------------------ a pose file never reaches outside its capture
+def _secret(tmp_path) -> Path:
+    """A readable image outside every capture folder of these tests: the file a hostile pose file points at."""
+    from PIL import Image
+    s = tmp_path / "elsewhere" / "secret.png"
+    s.parent.mkdir()
+    Image.fromarray(np.full((48, 64, 3), 7, np.uint8)).save(s)
+    return s
+
+
+def _no_secret_exported(run: Path) -> None:
+    assert not (run / "export").exists() or not any("secret" in p.name for p in (run / "export").rglob("*"))
+
+
+@pytest.mark.parametrize("kind", ["txt", "bin"])
+def test_a_colmap_model_naming_a_file_outside_the_capture_is_refused_before_anything_is_read(
+        tmp_path, capsys, monkeypatch, kind):
+    """The sweep's security finding (issue 61): images.txt naming ../../../../../etc/passwd, run from the photo
+    folder without giving it, copied /etc/passwd into RUN/export/images. The names were resolved against the
+    working directory and never checked."""
+    root, bare = capture(tmp_path / "cap")
+    secret = _secret(tmp_path)
+    from curate.core.cameras import Cameras
+    hops = "../" * len(Path(os.path.relpath(root / "images", "/")).parts)
+    names = list(bare.names)
+    names[3] = hops + os.path.relpath(secret, "/")       # ../../../../tmp/.../elsewhere/secret.png
+    names[5] = str(secret)                               # and an absolute path
+    model = tmp_path / "model"
+    model.mkdir()
+    rec = reconstruction_from_cameras(Cameras(bare.c2w, bare.fx, bare.fy, bare.cx, bare.cy, bare.width, bare.height,
+                                              bare.dist, tuple(names)))
+    (rec.write_text if kind == "txt" else rec.write)(str(model))
+    monkeypatch.chdir(root / "images")
+    run = tmp_path / "run"
+    assert main(["run", "--poses", str(model), "--budget", "11", "--no-evaluate", "--undistort", "off",
+                 "--export-mode", "copy", "--out", str(run), "--triangulate", "off"]) == 2
+    err = one_line_error(capsys)
+    assert f"images.{kind}" in err and "outside the capture's folder" in err and "secret.png" in err
+    _no_secret_exported(run)
+
+
+@pytest.mark.parametrize("how", ["climbs", "absolute", "link"])
+def test_a_transforms_json_naming_a_file_outside_its_folder_is_refused_naming_the_frame(tmp_path, capsys, how):
+    root, _ = capture(tmp_path / "cap")
+    secret = _secret(tmp_path)
+    data = json.loads((root / "transforms.json").read_text())
+    if how == "link":
+        (root / "images" / "img_04.png").unlink()
+        (root / "images" / "img_04.png").symlink_to(secret)
+    else:
+        data["frames"][4]["file_path"] = os.path.relpath(secret, root) if how == "climbs" else str(secret)
+    (root / "transforms.json").write_text(json.dumps(data))
+    run = tmp_path / "run"
+    assert main(["run", "--poses", str(root / "transforms.json"), "--out", str(run), "--export-mode", "copy",
+                 *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "transforms.json: frame 4 names" in err and "outside the capture's folder" in err, err
+    assert ("a link that leads to" in err) == (how == "link")
+    _no_secret_exported(run)
+
+
+def test_a_cameras_json_naming_a_file_outside_its_folder_is_refused(tmp_path, capsys):
+    root, _ = capture(tmp_path / "cap")
+    secret = _secret(tmp_path)
+    data = json.loads((root / "cameras.json").read_text())
+    data["cameras"][2]["name"] = str(secret)
+    (root / "cameras.json").write_text(json.dumps(data))
+    assert main(["run", "--poses", str(root / "cameras.json"), "--out", str(tmp_path / "run"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "cameras.json: camera 2 names" in err and "an absolute path elsewhere" in err
+
+
+def test_with_a_photo_folder_a_pose_finds_its_photo_only_inside_it(tmp_path, capsys):
+    """A name that climbs out is looked up by its file name in the folder, never opened where it points; a photo
+    of the folder that is a link out is refused."""
+    root, _ = capture(tmp_path / "cap")
+    secret = _secret(tmp_path)
+    data = json.loads((root / "transforms.json").read_text())
+    data["frames"][1]["file_path"] = os.path.relpath(secret, root)   # ../elsewhere/secret.png: no such photo here
+    (root / "transforms.json").write_text(json.dumps(data))
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out", str(run),
+                 "--export-mode", "copy", *FAST]) == 0
+    rec = json.loads((run / "sfm" / "images.json").read_text())
+    assert not any("secret" in (r.get("original") or "") and r["status"] == "kept" for r in rec["photos"])
+    _no_secret_exported(run)
+    (root / "images" / "img_06.png").unlink()
+    (root / "images" / "img_06.png").symlink_to(secret)
+    assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out",
+                 str(tmp_path / "run2"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "transforms.json: the pose of 'images/img_06.png' names" in err and "a link that leads to" in err
+
+
+def test_a_bare_colmap_model_never_finds_its_photos_in_the_working_directory(tmp_path, capsys, monkeypatch):
+    """Its image names were looked up in the working directory (how the sweep's /etc/passwd got in); now a model
+    with no photo folder given and none beside it is cameras without photos, and a stage that needs the photos
+    says how to give them."""
+    root, bare = capture(tmp_path / "cap")
+    model = tmp_path / "model"
+    shutil.copytree(root / "sparse" / "0", model)
+    monkeypatch.chdir(root / "images")                    # the photos are here, under the model's names
+    run = tmp_path / "run"
+    assert main(["run", "--poses", str(model), "--out", str(run), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert "images.json: no photo was found for the pose of 'img_" in err and "curate run PHOTOS --poses" in err
+    assert not (run / "export" / "images").exists()
+    assert main(["run", str(root / "images"), "--poses", str(model), "--out", str(tmp_path / "run2"), *FAST]) == 0

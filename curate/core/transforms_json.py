@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from curate.core.cameras import Cameras, opencv_from_opengl, opengl_from_opencv
+from curate.core.paths import inside, within_capture
 
 _IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".JPEG", ".tif", ".tiff")
 
@@ -47,7 +48,8 @@ CAMERA_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
 (no value: the same)."""
 
 
-def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
+def read_transforms(path: str | Path, photos: str | Path | None = None, contained: bool = True
+                    ) -> tuple[Cameras, list[str]]:
     """Read a transforms.json.
 
     ``photos``: a folder where a frame without ``w``/``h`` finds its image when it is not at its ``file_path``
@@ -56,7 +58,11 @@ def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple
     Returns:
         cameras: OpenCV c2w cameras, ``names`` = each frame's ``file_path`` as written.
         file_paths: absolute paths of the frames' images (resolved against the json's folder;
-            an extension is added when the file path has none, as Blender-synthetic files do).
+            an extension is added when the file path has none, as Blender-synthetic files do). Without
+            ``photos``, a file path that leaves the json's folder (``..``, an absolute path elsewhere, a link
+            out) is a ``ValueError`` naming the file and the frame (:func:`curate.core.paths.within_capture`);
+            with it, nothing outside the json's folder or ``photos`` is opened. ``contained=False`` (curate's
+            own outputs only, such as ``curate select``'s, whose paths climb to the photos) lifts the check.
     """
     path = Path(path)
     try:
@@ -85,11 +91,17 @@ def read_transforms(path: str | Path, photos: str | Path | None = None) -> tuple
                 raise ValueError(f"{path}: frame {i} has no transform_matrix")
             get = lambda k, fr=fr: fr.get(k, meta.get(k))  # noqa: E731
             fp = str(fr.get("file_path", ""))
-            img = _resolve_image(root, fp) if fp else None
+            if contained and photos is None and fp:   # the file's own folder is the capture's: nothing outside
+                within_capture(root, fp, path, f"frame {i}")
+            img = _resolve_image(root, fp) if fp and (inside(root / fp, root) or not contained) else None
+            if contained and img is not None and not inside(img, root):   # the extension added: a link out
+                within_capture(root, str(img.relative_to(root)), path, f"frame {i}")
             w, h = get("w"), get("h")
             if w is None or h is None:
                 if img is None and photos is not None and fp:     # the photo folder the user gave
-                    img = _resolve_image(Path(photos), fp) or _resolve_image(Path(photos), Path(fp).name)
+                    img = next((q for q in (_resolve_image(Path(photos), fp),
+                                            _resolve_image(Path(photos), Path(fp).name))
+                                if q is not None and inside(q, photos)), None)
                 size = _image_size(img)
                 if size is None:
                     raise ValueError(f"{path}: frame {i} ({fp!r}) has no w and h, and its image was not found to "

@@ -44,7 +44,7 @@ from pathlib import Path
 from curate.core.paths import RunPaths
 from curate.export.config import ExportConfig
 from curate.export.trainable import PLY_NAME
-from curate.sfm.io import load_sfm, original_cameras, sfm_dir
+from curate.sfm.io import known_original, load_sfm, original_cameras, sfm_dir
 
 logger = logging.getLogger(__name__)
 
@@ -246,7 +246,8 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
     sub = full[idx]
     recs = {r.get("working") or r.get("rel"): r for r in res.records.get("photos", [])}
     # (original_cameras gives the name, not the path, for an import stage: take it from the record)
-    originals = [str(Path(recs.get(n, {}).get("original") or paths[i]).resolve()) for n, i in zip(chosen, idx)]
+    originals = [str(Path(known_original(recs.get(n, {}).get("original") or paths[i], run_dir)).resolve())
+                 for n, i in zip(chosen, idx)]
     rels = [recs.get(n, {}).get("rel") or n for n in chosen]
     names = export_names(originals, rels)
     for root in _photo_roots(run_dir, originals):

@@ -138,7 +138,7 @@ def original_cameras(cams: Cameras, records: dict) -> tuple[Cameras, list[str]]:
             rec = imported[n]
             ow, oh = rec.get("orig_width") or cams.width[i], rec.get("orig_height") or cams.height[i]
             r = {"scale_x": cams.width[i] / ow, "scale_y": cams.height[i] / oh, "orig_width": ow, "orig_height": oh,
-                 "original": rec["original"]}
+                 "original": rec["original"] if Path(rec["original"]).is_absolute() else ""}
         sx = 1.0 / r["scale_x"] if r else 1.0
         sy = 1.0 / r["scale_y"] if r else 1.0
         fx.append(cams.fx[i] * sx)
@@ -166,8 +166,20 @@ def image_paths(run_dir: str | Path, names: list[str], records: dict) -> list[st
         if n not in by:
             raise FileNotFoundError(f"no photo recorded for camera {n!r} in {run_dir}/sfm/images.json")
         kind, r = by[n]
-        out.append(str(RunPaths(run_dir).working_images / n) if kind == "working" else r["original"])
+        out.append(str(RunPaths(run_dir).working_images / n) if kind == "working" else
+                   known_original(r["original"], run_dir))
     return out
+
+
+def known_original(original: str, run_dir: str | Path) -> str:
+    """``original``, a photo recorded in ``images.json``; ``FileNotFoundError`` when it is a bare name: the import
+    found no photo for that pose (a COLMAP model read without its photo folder keeps its image names), and a bare
+    name is never looked up in the working directory."""
+    if not Path(original).is_absolute():
+        raise FileNotFoundError(f"{RunPaths(run_dir).images_json}: no photo was found for the pose of {original!r} "
+                                "(the poses were read without their photo folder): run again with it: curate run "
+                                "PHOTOS --poses ...")
+    return original
 
 
 def images_txt_rows(path: str | Path, errors: str = "strict") -> list[tuple[str, list[float], list[float], int]]:

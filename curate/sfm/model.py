@@ -147,7 +147,9 @@ def raw_quaternions(model: Path) -> list[tuple[Path, str, np.ndarray]]:
 
 
 def read_colmap_model(model: Path, photos: Path | None):
-    """A COLMAP model folder as :class:`Poses` (image paths under ``photos`` when given)."""
+    """A COLMAP model folder as :class:`Poses`: image paths under ``photos`` when given, else the model's own folder's
+    file where it has one (else the bare name: a camera without a photo), a name that leaves the folder being a
+    ``ValueError`` naming ``images.bin``/``images.txt`` and the image."""
     pycolmap = load_pycolmap()
     try:
         rec = pycolmap.Reconstruction(model)
@@ -160,7 +162,13 @@ def read_colmap_model(model: Path, photos: Path | None):
         raise ValueError(f"{bad[0][0]}: image {bad[0][1]} has a rotation quaternion of zero length or not finite "
                          f"({len(bad)} image(s)); fix or remove it")
     cams, xyz, rgb, err = cameras_from_reconstruction(rec)
-    files = [str((photos / n).resolve()) if photos is not None else n for n in cams.names]
+    if photos is not None:   # looked up in the photo folder only (curate.sfm.poses.match_photos)
+        files = [str((photos / n).resolve()) for n in cams.names]
+    else:   # found in the model's own folder, else cameras without a photo; never outside the model's folder
+        from curate.core.paths import within_capture
+        images = Path(model) / ("images.bin" if (Path(model) / "images.bin").is_file() else "images.txt")
+        found = [within_capture(model, n, images, "an image") for n in cams.names]
+        files = [str(f.resolve()) if f.is_file() else n for f, n in zip(found, cams.names)]
     return Poses(cams, files, xyz, rgb, err, rec)
 
 

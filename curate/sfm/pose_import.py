@@ -124,7 +124,7 @@ def _pose_photos(cfg: SfmConfig, poses, source: Path, photos: Path | None):
         return list(range(len(poses.cameras))), list(poses.files), [], None
     folder = Path(folder).resolve()
     names = list(poses.cameras.names)
-    m = match_photos(names, poses.files, folder, cfg.recursive)
+    m = match_photos(names, poses.files, folder, cfg.recursive, source)
     idx = m.matched
     if not idx:
         if m.n_photos == 0:

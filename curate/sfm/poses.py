@@ -16,6 +16,7 @@ from pathlib import Path
 
 
 from curate.core.cameras import Cameras
+from curate.core.paths import inside, within_capture
 from curate.sfm.model import Poses, read_colmap_model
 
 
@@ -47,6 +48,11 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
     ``photos``: the folder a COLMAP model's (or a cameras.json's) image names are relative to
     (default: :func:`default_photos`; else a cameras.json's names, like a transforms.json's file
     paths, are resolved against its own folder). Raises FileNotFoundError or ValueError with a message naming the file.
+
+    No pose names a file outside its capture: without ``photos``, an image path that leaves the folder it is
+    resolved against (``..``, an absolute path elsewhere, a link out) is a ``ValueError`` naming the pose file
+    and the entry (:func:`curate.core.paths.within_capture`); with ``photos``, each pose's photo is looked up
+    in that folder only (:func:`match_photos`).
     """
     source = Path(source)
     if not source.exists():
@@ -74,8 +80,11 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
             from curate.core.cameras import check_poses
             check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source))
             # names relative to the photo folder (a run folder's sfm/images), else to the file's own folder
-            base = Path(photos) if photos is not None else (default_photos(source) or source.parent)
-            return Poses(cams, [str((base / n).resolve()) if n else n for n in cams.names])
+            if photos is not None:   # looked up in the photo folder only (match_photos)
+                return Poses(cams, [str((Path(photos) / n).resolve()) if n else n for n in cams.names])
+            base = default_photos(source) or source.parent
+            return Poses(cams, [str(within_capture(base, n, source, f"camera {k}").resolve()) if n else n
+                                for k, n in enumerate(cams.names)])
         from curate.core.transforms_json import read_transforms
         cams, files = read_transforms(source, photos)
         return Poses(cams, files)
@@ -177,7 +186,8 @@ def _with_ext(p: Path) -> Path | None:
     return None
 
 
-def match_photos(names: list[str], own: list[str], folder: str | Path, recursive: bool = False) -> PhotoMatch:
+def match_photos(names: list[str], own: list[str], folder: str | Path, recursive: bool = False,
+                 source: str | Path | None = None) -> PhotoMatch:
     """Look each pose's image up in the photo folder ``folder`` (read only).
 
     A pose's photo is, in this order: its own resolved file (``own``) when that lies inside the
@@ -185,7 +195,8 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
     ``FOLDER``); else the one photo of the folder with its file name (extension optional, as in
     Blender-synthetic files), provided that no other photo of the folder and no other pose has that
     name. The folder's photos are its image files and videos (sub-folders with ``recursive``);
-    those no pose names are listed in ``unposed``.
+    those no pose names are listed in ``unposed``. A photo found that is a link leading out of the folder is a
+    ``ValueError`` naming ``source`` (the pose file) and the pose: nothing outside the folder is read.
 
     Args:
         names: [N] the poses' image names as the source writes them.
@@ -210,7 +221,9 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
     taken: set[Path] = set()
     for n, o in zip(names, own):
         rel = _rel_name(n, o, folder)
-        p = _with_ext(folder / rel) if rel is not None else None
+        p = _with_ext(folder / rel) if rel is not None and inside(folder / rel, folder) else None
+        if p is not None and not inside(p, folder):
+            within_capture(folder, rel, source or folder, f"the pose of {n!r}")
         if p is not None and p.resolve() not in taken:
             files.append(str(p.resolve()))
             how.append("path")
@@ -218,6 +231,8 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
             continue
         base = Path(n).name
         cands = by_name.get(base, [])
+        if len(cands) == 1 and not inside(cands[0], folder):
+            within_capture(folder, base, source or folder, f"the pose of {n!r}")
         if len(cands) == 1 and pose_base[base] == 1 and cands[0] not in taken:
             files.append(str(cands[0]))
             how.append("name")
