@@ -23,7 +23,7 @@ from curate import __version__
 from curate.core.paths import RunPaths
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
-from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
+from curate.sfm.config import CAMERA_MODES, GUIDED, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
 from curate.export.config import MODES, UNDISTORT
 from curate.simulate.choices import Scene, SimOccupancy
 from curate.suggest.choices import FIELD_MODES, NODE_MODES
@@ -243,7 +243,7 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--drop-blurry", "sfm.drop_blurry"),
        Opt("--keep-duplicates", "sfm.drop_duplicates", const=False, help="keep near-duplicate photos"),
        Opt("--sift-peak-threshold", "sfm.sift_peak_threshold", parse=float),
-       Opt("--guided-matching", "sfm.guided_matching"),
+       Opt("--guided-matching", "sfm.guided_matching", choices=GUIDED),
        Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
        Opt("--on-split", "sfm.on_split", choices=ON_SPLIT),
        Opt("--max-frames", "sfm.video.max_frames", parse=int),

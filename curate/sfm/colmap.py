@@ -33,6 +33,7 @@ from __future__ import annotations
 import logging
 import shutil
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from curate.core.cameras import Cameras
@@ -45,8 +46,9 @@ from curate.sfm.matching import match, pair_counts, rematch_left_out
 from curate.sfm.model import cameras_from_reconstruction
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
-from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos,
-                             refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message, write_outputs)
+from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_guided, choose_matcher, input_key,
+                             prepare_photos, refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message,
+                             write_outputs)
 from curate.sfm.reconstruction import map_capture, model_sizes
 
 logger = logging.getLogger(__name__)
@@ -121,10 +123,11 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         raise RuntimeError(too_few_message(photos, records, videos, out / "images.json"))
     single = choose_camera_mode(cfg, kept)
     matcher = choose_matcher(cfg, kept)
+    guided = choose_guided(cfg, kept)
     check_free_space(out, len(names), matcher, cfg)     # COLMAP aborts the process on a full disk
     db, images = out / "database.db", out / "images"
     stats: dict = {"n_input_files": len(records), "n_kept": len(names), "camera_mode": "single" if single else
-                   "per_image", "matcher": matcher, **({"videos": videos} if videos else {})}
+                   "per_image", "matcher": matcher, "guided_matching": guided, **({"videos": videos} if videos else {})}
     pycolmap.set_random_seed(cfg.seed)
     with colmap_log(out / "colmap.log"):
         logger.info("sfm: extracting SIFT features (%s camera, %s) ...", stats["camera_mode"], cfg.camera_model)
@@ -134,7 +137,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
         logger.info("sfm: %s matching ...", matcher)
         t = time.perf_counter()
-        match(cfg, db, matcher, takes_of(kept), stats)
+        match(replace(cfg, guided_matching="on" if guided else "off"), db, matcher, takes_of(kept), stats)
         timings["match"] = round(time.perf_counter() - t, 2)
         stats["n_pairs_matched"], stats["n_pairs_verified"] = pair_counts(db, cfg.min_num_matches)
         logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],
