@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from curate.core.graph import BY_NAME
 from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
@@ -109,7 +110,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too
     train_part = parts["train"] if field_needed else None
     key = key_field if field_needed else stage_key({**parts, "train": None}, deps)
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=BY_NAME["occupancy"].owns):
         return StageResult("occupancy", d, False, time.perf_counter() - t0)
     box = default_box(sfm.cameras)
     fld = st = None
@@ -152,7 +153,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
          "nodes": int(band.sum())}
     outputs = {"occupancy": "occupancy.npz", **({"field": "field.pt"} if fld is not None else {})}
     finish_stage(d, key, {"occupancy": cfg.occupancy, "refine": cfg.refine, "train": train_part, "box": cfg.box}, t0,
-                 outputs=outputs, seed=ev.train_seed, counts=n, field=why,
+                 outputs=outputs, owns=BY_NAME["occupancy"].owns, seed=ev.train_seed, counts=n, field=why,
                  train={"iters": st.iters, "train_seconds": st.train_seconds} if st is not None else None)
     src = "refined by a field" if fld is not None else ("from the sparse points" if pts_mask is not None
                                                          else "unknown (no points, no field): the box's walls")

@@ -102,6 +102,7 @@ def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
 def run(ctx: "RunContext") -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
+    from curate.core.graph import BY_NAME
     from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic
     from curate.occupancy.stage import load_node_grid
     from curate.select.energy import energy_of_subset
@@ -123,7 +124,7 @@ def run(ctx: "RunContext") -> StageResult:
         if measured is not None:
             parts["measured"] = measured["budget"]
     key = stage_key(parts, [required_key(run_dir, "occupancy")])
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=BY_NAME["select"].owns):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)
     pool = list(range(len(sfm.cameras)))
@@ -155,7 +156,8 @@ def run(ctx: "RunContext") -> StageResult:
         rec["budget_auto"]["budget"] = budget
     write_json_atomic(d / "selection.json", rec)
     finish_stage(d, key, parts, t0,
-                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
+                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed,
+                 owns=BY_NAME["select"].owns)
     from curate.select.methods import method_label
     how = method_label(sel.method) + (" (auto)" if cfg.select.method == "auto" else "")
     why = (f"; {auto.note}" if measured is None else

@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 from curate.core.cameras import Cameras
+from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage
 from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.continuity import drop_off_path, jumps_along
@@ -52,6 +53,9 @@ from curate.sfm.reconstruction import map_capture, model_sizes
 logger = logging.getLogger(__name__)
 
 __all__ = ["run_sfm"]
+
+SFM = BY_NAME["sfm"]
+"""The stage's row of the graph: what it writes (``owns``) and what nothing reads again (``spare``)."""
 
 
 def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
@@ -107,7 +111,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     out = _sfm_dir(run_dir)
     refuse_inside(out, photos)
     key = input_key(cfg, photos)
-    if begin_stage(out, key, force):
+    if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm: up to date (%s), skipped", out)
         return out, False
     started = time.perf_counter()
@@ -195,6 +199,6 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     paths = [f"images/{n}" for n in cams.names]
     stats.update(write_outputs(out, cams, xyz, rgb, err, records, paths, cfg.normalize_percentile))
     stats["dense"] = dense
-    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,
                  seed=cfg.seed, mode="sfm", photos=str(photos), timings=timings, stats=stats)
     return out, True

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from curate.core.cameras import Cameras
+from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import sfm_dir as _sfm_dir
@@ -18,6 +19,9 @@ from curate.sfm.subset_model import write_subset_model
 from curate.sfm.triangulation import triangulate_known_poses
 
 logger = logging.getLogger(__name__)
+
+SFM = BY_NAME["sfm"]
+"""The stage's row of the graph: what it writes (``owns``) and what nothing reads again (``spare``)."""
 
 
 def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
@@ -207,7 +211,7 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
     readable = sum(Path(o).is_absolute() for o in originals)
     triangulate = cfg.triangulate == "auto" and not has_points and readable >= 2
     key = _import_key(cfg, source, photos, originals, left, triangulate)
-    if begin_stage(out, key, force):
+    if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm import: up to date (%s), skipped", out)
         return out, False
     started = time.perf_counter()
@@ -241,7 +245,7 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
         rec.write(sparse)
         xyz = rgb = err = None
     stats.update(write_outputs(out, cams, xyz, rgb, err, records + left, originals, cfg.normalize_percentile))
-    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,
                  mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)
     logger.info("sfm import: %d cameras, %d points from %s", len(cams), stats["n_points"], source)
     return out, True
