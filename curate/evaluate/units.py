@@ -278,13 +278,15 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
             t.join()
         show()
     else:
-        import multiprocessing as mp
         import os
-        from concurrent.futures import ProcessPoolExecutor
-        from curate.core.runfolder import die_with_parent
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
-                                 initargs=(os.getpid(),)) as ex:
+        from curate.core.pools import end_pool, local_pool
+        ex = local_pool(workers, worker_start, (os.getpid(),))
+        try:
             collect({ex.submit(_unit_entry, a): a[1].key for a in args})
+        except BaseException:
+            end_pool(ex, kill=True)      # no training outlives the command
+            raise
+        end_pool(ex)
     for u, src in dups:
         results[u.key] = _copy_unit(RunPaths(run_dir).evaluate, src.key, u, results[src.key])
     bar.close()
