@@ -76,9 +76,13 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
         raise ValueError(f"{source}: not a pose file: its JSON is nested too deeply to read") from None
     try:
         if isinstance(data, dict) and "convention" in data:
-            cams = Cameras.from_dict(data)
+            try:
+                cams = Cameras.from_dict(data)
+            except ValueError as e:   # a value no camera has: the file, the camera and the field named
+                raise ValueError(f"{source}: {e}") from None
             from curate.core.cameras import check_poses
-            check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source))
+            check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source),
+                        dist=cams.dist)
             # names relative to the photo folder (a run folder's sfm/images), else to the file's own folder
             if photos is not None:   # looked up in the photo folder only (match_photos)
                 return Poses(cams, [str((Path(photos) / n).resolve()) if n else n for n in cams.names])
