@@ -376,3 +376,53 @@ def test_the_databases_space_is_estimated_at_its_real_size_not_far_beyond():
     assert 96e6 < database_bytes(75, "exhaustive", cfg) < 5 * 96e6      # photos with features near the cap
     assert 77e6 < database_bytes(373, "sequential", cfg) < 2**30        # small frames: fewer features than the cap
     assert database_bytes(1000, "exhaustive", cfg) < 10 * 2**30          # was 49 GB
+
+
+def test_a_full_disk_while_a_training_saves_its_field_names_the_file(tmp_path, capsys, monkeypatch):
+    """Issue 61: a full disk during the evaluation ended in torch's "[enforce fail at inline_container.cc:672]",
+    an internal error; it is the one line of every full disk, naming the field being written, exit 2."""
+    import errno
+    import io
+    from curate.field import model
+    from test_export import ring, write_photos
+    from curate.core.transforms_json import write_transforms
+    cams = ring(12)
+    write_photos(tmp_path / "cap", cams)
+    write_transforms(tmp_path / "cap" / "transforms.json", cams)
+    run = tmp_path / "run"
+    assert cli.main(["run", str(tmp_path / "cap" / "photos"), "--poses", str(tmp_path / "cap" / "transforms.json"),
+                     "--out", str(run), "--no-evaluate", "--budget", "4", "--res", "8", "--triangulate", "off",
+                     "--method", "medoids"]) == 0
+
+    class Full(io.BytesIO):
+        def write(self, b):
+            raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(model, "open", lambda p, mode="r": Full(), raising=False)
+    capsys.readouterr()
+    assert cli.main(["evaluate", str(run), "--folds", "1", "--workers", "1", "--iters", "5", "--eval-size", "16",
+                     "--random-seeds", "1"]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("curate ")]
+    assert len(err) == 1 and "the disk is full" in err[0] and "field.pt" in err[0] and str(run / "evaluate") in err[0]
+    assert "inline_container" not in err[0]
+
+
+def test_a_colmap_model_cut_short_by_a_full_disk_is_an_error_not_an_empty_model(tmp_path, monkeypatch):
+    """COLMAP's writer leaves empty cameras.bin and images.bin on a full disk and says nothing (an export without
+    cameras, exit 0): the model is read back after writing, and one cut short is a full disk naming the folder."""
+    import errno
+    import shutil
+    from test_export import ring
+    from curate.sfm.model import reconstruction_from_cameras, write_model
+    rec = reconstruction_from_cameras(ring(5))
+    write_model(rec, tmp_path / "ok")                                   # a whole model: read back, nothing said
+
+    class CutShort:
+        def write_binary(self, path):
+            rec.write_binary(path)
+            for f in ("cameras.bin", "images.bin"):
+                (Path(path) / f).write_bytes(b"")
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=0))
+    with pytest.raises(OSError) as e:
+        write_model(CutShort(), tmp_path / "full")
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(tmp_path / "full")

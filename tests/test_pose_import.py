@@ -630,3 +630,28 @@ def test_a_broken_colmap_model_is_one_line_naming_the_file_and_what_is_wrong(tmp
     assert main(["run", str(root / "images"), "--poses", str(model), "--out", str(tmp_path / "run"), *FAST]) == 2
     err = one_line_error(capsys)
     assert f"{model}/" in err and said in err and "internal error" not in err, err
+
+
+# ------------------------------------------------------------------ file names that are not UTF-8 (issue 61, item 6)
+def test_a_photo_whose_name_is_not_utf8_is_skipped_and_listed_never_fatal(tmp_path, capsys):
+    """One photo named in Latin-1 bytes (``caf\\xe9.png``) stopped the whole run with "'utf-8' codec can't encode
+    character '\\udce9'": the import and SfM's ingest skip it, list it with why, and go on."""
+    import shutil as sh
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.ingest import ingest
+    from curate.sfm.prep import input_key
+    root, _ = capture(tmp_path / "cap")
+    odd = os.path.join(os.fsencode(root / "images"), b"caf\xe9.png")
+    sh.copyfile(root / "images" / "img_03.png", odd)
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out", str(run), *FAST]) == 0
+    recs = json.loads((run / "sfm" / "images.json").read_text())["photos"]
+    said = [r for r in recs if r["rel"] == "caf\\xe9.png"]
+    assert len(said) == 1 and said[0]["status"] == "skipped" and "not UTF-8" in said[0]["reason"], said
+    assert "caf\\xe9.png" in (run / "report.html").read_text()
+    assert len(json.loads((run / "sfm" / "cameras.json").read_text())["cameras"]) == 12
+    input_key(SfmConfig(), root / "images")                       # SfM: the photos' key, then the ingest
+    recs = ingest(root / "images", tmp_path / "work", 64, progress=False)
+    said = [r for r in recs if r.rel == "caf\\xe9.png"]
+    assert len(said) == 1 and said[0].status == "skipped" and "not UTF-8" in said[0].reason
+    assert sum(r.status == "kept" for r in recs) == 12

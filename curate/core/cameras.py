@@ -230,7 +230,9 @@ class Cameras:
     def save(self, path) -> None:
         import json
         from pathlib import Path
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+        from curate.core.stage import writing
+        with writing(path):
+            Path(path).write_text(json.dumps(self.to_dict(), indent=1))
 
     @staticmethod
     def load(path) -> "Cameras":

@@ -85,8 +85,14 @@ class Stage:
             object.__setattr__(self, "record", f"{self.name}/stage.json")
 
     def run(self, ctx: RunContext) -> "StageResult":
-        """Run the stage (its function imported now)."""
-        return _function(self.runs)(ctx)
+        """Run the stage (its function imported now). An ``OSError`` that names no file (a full disk met by a
+        library) is raised again naming the stage's folder."""
+        try:
+            return _function(self.runs)(ctx)
+        except OSError as e:
+            if e.filename is None and e.errno is not None:
+                raise OSError(e.errno, e.strerror or str(e), str(Path(ctx.run_dir) / self.writes[0])) from None
+            raise
 
     def applies(self, cfg: "RunConfig", run_dir: str | Path) -> bool:
         """The stage is part of this run (its :attr:`when`)."""

@@ -16,6 +16,7 @@ user's it kept; it refuses, naming the file, to remove or write over a file of c
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -84,7 +85,7 @@ def hash_files(paths: Iterable[str | Path], h: "hashlib._Hash | None" = None) ->
     h = h or hashlib.sha256()
     for p in paths:
         p = Path(p)
-        h.update(p.name.encode())
+        h.update(os.fsencode(p.name))
         if p.is_file():
             h.update(str(p.stat().st_size).encode())
             with open(p, "rb") as f:
@@ -265,6 +266,19 @@ def refresh_command(run_dir: str | Path, stale: dict[str, str], stage: str) -> s
     root = stale_root(stale, stage)
     return " && ".join([f"curate {root} {run_dir}"]
                        + ([f"curate {stage} {run_dir}"] if stage != root and not BY_NAME[stage].cheap else []))
+
+
+@contextlib.contextmanager
+def writing(path: str | Path):
+    """``with writing(path):`` an ``OSError`` raised inside without a file name (numpy's, PIL's, a write through a
+    file object: a full disk says only "[Errno 28] No space left on device") is raised again naming ``path``, so
+    the one line the command prints says which file could not be written."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None and e.errno is not None:
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from None
+        raise
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:

@@ -215,7 +215,9 @@ def transforms_dict(cams: Cameras, file_paths: list[str] | None = None, extra: d
 def write_transforms(path: str | Path, cams: Cameras, file_paths: list[str] | None = None,
                      extra: dict | None = None) -> Path:
     """Write ``cams`` as a transforms.json; returns the path."""
+    from curate.core.stage import writing
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(transforms_dict(cams, file_paths, extra), indent=2))
+    with writing(path):
+        path.write_text(json.dumps(transforms_dict(cams, file_paths, extra), indent=2))
     return path

@@ -103,7 +103,7 @@ def run(ctx: "RunContext") -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
     from curate.core.graph import BY_NAME
-    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic, writing
     from curate.occupancy.stage import load_node_grid
     from curate.select.energy import energy_of_subset
     from curate.select.select import select
@@ -145,9 +145,10 @@ def run(ctx: "RunContext") -> StageResult:
     sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
-    np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
-                        frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
-                        res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
+    with writing(d / "nodes.npz"):
+        np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
+                            frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
+                            res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
     rec = selection_record(sel, sfm.cameras, pool, [], 0, said, grid)
     rec["coverage"] = coverage(index, sel.chosen)
     if auto is not None:   # the law's prediction; with the measurement, what was measured and exported

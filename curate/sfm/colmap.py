@@ -43,7 +43,7 @@ from curate.sfm.continuity import drop_off_path, jumps_along
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.matching import match, pair_counts, rematch_left_out
-from curate.sfm.model import cameras_from_reconstruction
+from curate.sfm.model import cameras_from_reconstruction, write_model
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
 from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos,
@@ -164,13 +164,11 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         stats["path_jumps"] = jumps
     stats["model_sizes"] = model_sizes(models)
     sparse = out / "sparse" / "0"
-    sparse.mkdir(parents=True)
-    best.write(sparse)
+    write_model(best, sparse)
     others = sorted((r for r in models.values() if r is not best and r.num_reg_images() >= 2),
                     key=lambda r: -r.num_reg_images())
     for k, r in enumerate(others, 1):  # the other parts of a split capture, for --on-split each
-        (out / "sparse" / str(k)).mkdir()
-        r.write(out / "sparse" / str(k))
+        write_model(r, out / "sparse" / str(k))
     stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
                       for k, r in enumerate([best] + others)]
     for part, r in zip(stats["parts"][1:], others):   # --on-split each curates them: a fold there is named too

@@ -363,6 +363,27 @@ def read_colmap_model(model: Path, photos: Path | None):
     return Poses(cams, files, xyz, rgb, err, rec)
 
 
+def write_model(rec, path: str | Path) -> None:
+    """Write ``rec`` as a binary COLMAP model into ``path``, then read its files back to their last byte
+    (:func:`check_model_files`): COLMAP's writer says nothing when the disk fills (it left empty cameras.bin and
+    images.bin, exit 0). A model cut short is an ``OSError`` (no space left: ENOSPC) naming the folder."""
+    import errno
+    import shutil
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    rec.write_binary(str(path))
+    try:
+        check_model_files(path)
+        for f in ("cameras.bin", "images.bin", "points3D.bin"):
+            if not (path / f).is_file():
+                raise ValueError(f"{path / f} was not written")
+    except ValueError as e:
+        free = shutil.disk_usage(path).free
+        if free < (1 << 20):
+            raise OSError(errno.ENOSPC, "No space left on device", str(path)) from None
+        raise OSError(errno.EIO, f"COLMAP wrote an incomplete model ({e})", str(path)) from None
+
+
 def pycolmap_reconstruction(path: str | Path):
     """The COLMAP model at ``path`` (pycolmap stays inside :mod:`curate.sfm`)."""
     pycolmap = load_pycolmap()

@@ -13,7 +13,8 @@ from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import sfm_dir as _sfm_dir
-from curate.sfm.model import cameras_from_reconstruction, pycolmap_reconstruction, reconstruction_from_cameras
+from curate.sfm.model import (cameras_from_reconstruction, pycolmap_reconstruction, reconstruction_from_cameras,
+                               write_model)
 from curate.sfm.prep import refuse_inside, write_outputs
 from curate.sfm.subset_model import write_subset_model
 from curate.sfm.triangulation import triangulate_known_poses
@@ -139,16 +140,18 @@ def _pose_photos(cfg: SfmConfig, poses, source: Path, photos: Path | None):
              "reason": f"pose without a photo: {m.how[i]}", "working": "", "registered": False}
             for i, n in enumerate(names) if m.files[i] is None]
     unposed = m.unposed if photos is not None else []  # a folder found by the layout, not given: not listed
+    from curate.sfm.ingest import NOT_UTF8, printable, text_name
     from curate.sfm.video import VIDEO_EXTS
-    left += [{"original": str(p), "rel": p.relative_to(folder).as_posix(), "status": "skipped",
+    left += [{"original": printable(p), "rel": printable(p.relative_to(folder).as_posix()), "status": "skipped",
               "reason": ("a video: its frames have no names the poses could refer to" if p.suffix.lower() in VIDEO_EXTS
-                         else f"no pose in {source} names this photo"), "working": "", "registered": False}
+                         else NOT_UTF8 if not text_name(p) else f"no pose in {source} names this photo"),
+              "working": "", "registered": False}
              for p in unposed]
     stats = {"folder": str(folder), "given": photos is not None, "n_poses": len(names), "n_matched": len(idx),
              "n_by_name": sum(m.how[i] == "name" for i in idx), "n_photos": m.n_photos if photos is not None else None,
              "n_unposed": len(unposed) if photos is not None else None,
              "poses_without_photo": [names[i] for i in range(len(names)) if m.files[i] is None][:50],
-             "photos_without_pose": [p.relative_to(folder).as_posix() for p in unposed][:50]}
+             "photos_without_pose": [printable(p.relative_to(folder).as_posix()) for p in unposed][:50]}
     if len(idx) < len(names):
         logger.warning("sfm import: %d of the %d poses of %s have no photo in %s (left out), e.g. %s",
                        len(names) - len(idx), len(names), source, folder, _examples(stats["poses_without_photo"]))
@@ -227,22 +230,19 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
             rec = pycolmap_reconstruction(sparse)
         else:
             rec = poses.reconstruction
-            sparse.mkdir(parents=True)
-            rec.write(sparse)
+            write_model(rec, sparse)
         _, xyz, rgb, err = cameras_from_reconstruction(rec)
         stats["triangulation"] = {"status": "source", "reason": "the source has 3D points"}
     elif triangulate:
         rec, stats["triangulation"] = triangulate_known_poses(cfg, cams, originals, out)
-        sparse.mkdir(parents=True)
-        rec.write(sparse)
+        write_model(rec, sparse)
         _, xyz, rgb, err = cameras_from_reconstruction(rec)
     else:
         reason = ("--triangulate off" if cfg.triangulate == "off" else
                   "fewer than 2 readable photos (image names without a photo folder)")
         stats["triangulation"] = {"status": "off" if cfg.triangulate == "off" else "skipped", "reason": reason}
         rec = reconstruction_from_cameras(cams)
-        sparse.mkdir(parents=True)
-        rec.write(sparse)
+        write_model(rec, sparse)
         xyz = rgb = err = None
     stats.update(write_outputs(out, cams, xyz, rgb, err, records + left, originals, cfg.normalize_percentile))
     finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,

@@ -208,13 +208,15 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
     """
     from collections import Counter
 
-    from curate.sfm.ingest import find_images
+    from curate.sfm.ingest import find_images, text_name
     from curate.sfm.video import VIDEO_EXTS
     folder = Path(folder).resolve()
     imgs, other = find_images(folder, recursive)
-    imgs = [p for p in imgs if p.is_file()]   # a link to nothing (gone, a loop) is no pose's photo: ingest lists it
+    odd = [p for p in imgs if not text_name(p)]          # a name that is not UTF-8 is no pose's: listed as left out
+    imgs = [p for p in imgs if p.is_file() and text_name(p)]   # a link to nothing (gone, a loop) is no pose's photo
     other = [p for p in other if p.is_file()]
-    photos = [p.resolve() for p in imgs] + [p.resolve() for p in other if p.suffix.lower() in VIDEO_EXTS]
+    photos = ([p.resolve() for p in imgs] + [p.resolve() for p in other if p.suffix.lower() in VIDEO_EXTS]
+              + [p for p in odd if p.is_file()])
     by_name: dict[str, list[Path]] = {}
     for p in imgs:
         by_name.setdefault(p.name, []).append(p.resolve())

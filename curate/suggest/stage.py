@@ -266,7 +266,7 @@ def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
 
 def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool = True) -> StageResult:
     """K suggested poses for the run folder -> ``RUN/suggest`` (module docstring)."""
-    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic, writing
     from curate.suggest import outputs
     from curate.suggest.guide import instruction, nearest_frames
     from curate.suggest.page import write_page
@@ -316,11 +316,12 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     outputs.write_transforms_json(d / "transforms.json", sugg, names)
     outputs.write_colmap_text(d, sugg, names)
     flat = np.flatnonzero(used.ravel())
-    np.savez_compressed(d / "coverage.npz", flat=flat, res=inp.res, box_min=inp.box_min, box_max=inp.box_max,
-                        score_before=pl.before.angular_per_node + pl.before.frequency_per_node,
-                        score_after=pl.after.angular_per_node + pl.after.frequency_per_node,
-                        views_before=pl.before.views_per_node, views_after=pl.after.views_per_node,
-                        frontier=front.ravel()[flat])
+    with writing(d / "coverage.npz"):
+        np.savez_compressed(d / "coverage.npz", flat=flat, res=inp.res, box_min=inp.box_min, box_max=inp.box_max,
+                            score_before=pl.before.angular_per_node + pl.before.frequency_per_node,
+                            score_after=pl.after.angular_per_node + pl.after.frequency_per_node,
+                            views_before=pl.before.views_per_node, views_after=pl.after.views_per_node,
+                            frontier=front.ravel()[flat])
     timing = pl.timing()
     gains = pl.gains
     from curate.core.stage import config_dict
