@@ -588,6 +588,10 @@ def cmd_suggest(args) -> int:
         res = suggest(cfg, Path(args.run), args.force, progress=not args.json)
     except (FileNotFoundError, ValueError, RuntimeError) as e:
         raise CliError(str(e))
+    except OSError as e:     # a full disk met by a library that names no file: the stage's folder
+        if e.filename is None and e.errno is not None:
+            raise OSError(e.errno, e.strerror or str(e), str(Path(args.run) / "suggest")) from None
+        raise
     if args.json:
         print(json.dumps({"out": str(res.path), "ran": res.ran, "suggestions": str(res.path / "suggestions.json"),
                           "page": str(res.path / "suggest.html"), "seconds": round(res.seconds, 2)}))

@@ -426,3 +426,34 @@ def test_a_colmap_model_cut_short_by_a_full_disk_is_an_error_not_an_empty_model(
     with pytest.raises(OSError) as e:
         write_model(CutShort(), tmp_path / "full")
     assert e.value.errno == errno.ENOSPC and e.value.filename == str(tmp_path / "full")
+
+
+def test_a_full_disk_when_the_run_folder_is_claimed_or_locked_names_it_and_blocks_nothing(tmp_path, capsys,
+                                                                                          monkeypatch):
+    """A full disk while curate marks a new run folder left a half-written marker that made the next run, once space
+    was freed, refuse the folder as one curate did not create; while it writes the lock, it said only "no space
+    left writing a file". Both name the file, leave nothing, and the same command then works."""
+    import errno
+    from curate.core import runfolder
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    argv = ["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--budget", "4",
+            "--no-evaluate", "--res", "8", "--triangulate", "off", "--method", "medoids"]
+    real_write, real_pwrite = runfolder.Path.write_text, runfolder.os.pwrite
+
+    def full(self, *a, **k):
+        if runfolder.MARKER in self.name:
+            real_write(self, "{")                       # the disk fills half-way through the marker
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(self, *a, **k)
+    monkeypatch.setattr(runfolder.Path, "write_text", full)
+    run = tmp_path / "new" / "run"
+    assert cli.main([*argv, "--out", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "the disk is full" in err and str(run) in err and not (tmp_path / "new").exists()
+    monkeypatch.setattr(runfolder.Path, "write_text", real_write)
+    monkeypatch.setattr(runfolder.os, "pwrite", lambda *a: (_ for _ in ()).throw(OSError(errno.ENOSPC, "full")))
+    assert cli.main([*argv, "--out", str(run)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ": error:" in ln]
+    assert len(err) == 1 and "the disk is full" in err[0] and str(run / runfolder.LOCK) in err[0], err
+    monkeypatch.setattr(runfolder.os, "pwrite", real_pwrite)
+    assert cli.main([*argv, "--out", str(run)]) == 0

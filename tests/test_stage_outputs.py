@@ -196,3 +196,18 @@ def test_an_unreadable_export_folder_is_a_one_line_error_naming_it(run, said, un
     finally:
         os.chmod(exp, 0o755)
     assert one_error(err) and str(exp) in err and "internal error" not in err
+
+
+def test_a_report_page_the_user_changed_is_kept_and_named(run, said):
+    """The report is redone by every command; a report.html the user annotated was written over. It is kept, a
+    line names it, and report.json is current; once the user moves it out, the page is written again."""
+    page = run / "report.html"
+    page.write_text(page.read_text().replace("<body>", "<body><p>my notes</p>", 1))
+    edited = page.read_bytes()
+    said()
+    assert main(["select", str(run), "--budget", "5"]) == 0
+    err = said()[1]
+    assert page.read_bytes() == edited and f"{page} was changed since curate wrote it" in err
+    assert json.loads((run / "report.json").read_text())["budget"] == 5
+    page.unlink()
+    assert main(["report", str(run)]) == 0 and b"my notes" not in page.read_bytes()

@@ -123,8 +123,19 @@ def _write_marker(out: Path, adopted: list[str] | None) -> None:
     if adopted is not None:
         rec["adopted"] = adopted
     tmp = out / f"{MARKER}.tmp{os.getpid()}"
-    tmp.write_text(json.dumps(rec, indent=1))
+    try:
+        tmp.write_text(json.dumps(rec, indent=1))
+    except OSError:
+        tmp.unlink(missing_ok=True)   # a full disk leaves no half-written marker that would block the next claim
+        raise
     os.replace(tmp, out / MARKER)
+
+
+def _why(e: OSError) -> str:
+    import errno
+    if e.errno == errno.ENOSPC:
+        return "the disk is full (no space left on device); free some space, then run again"
+    return str(e.strerror or e)
 
 
 def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
@@ -186,7 +197,7 @@ def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: boo
         try:
             _write_marker(o, entries if entries else None)
         except OSError as e:
-            raise RunFolderError(f"cannot write the run folder {raw}: {e.strerror or e}") from None
+            raise RunFolderError(f"cannot write the run folder {raw}: {_why(e)}") from None
         marked = True
         if entries:
             log.warning("%s: adopted (%d entries of yours kept, never written)", raw, len(entries))
@@ -198,7 +209,13 @@ def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: boo
             o.mkdir(parents=True, exist_ok=True)
             _write_marker(o, None)
         except OSError as e:
-            raise RunFolderError(f"cannot create the run folder {raw}: {e.strerror or e}") from None
+            d = o                        # what this call created goes again (empty folders only)
+            while d.is_dir() and not any(d.iterdir()):
+                d.rmdir()
+                if d == created:
+                    break
+                d = d.parent
+            raise RunFolderError(f"cannot create the run folder {raw}: {_why(e)}") from None
     made = _Made(created, marked)
     if not os.access(o, os.W_OK | os.X_OK):
         raise RunFolderError(f"cannot write the run folder {raw}: read-only")
@@ -421,9 +438,15 @@ class RunLock:
             info = {"pid": os.getpid(), "start_time": proc_start_time(os.getpid()), "host": socket.gethostname(),
                     "command": self.command, "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "token": self.token}
             data = json.dumps(info).encode()
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, data, 0)
-            os.fsync(fd)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, data, 0)
+                os.fsync(fd)
+            except OSError as e:      # a full disk: the lock named, released
+                if fcntl is not None:
+                    fcntl.flock(fd, fcntl.LOCK_UN)
+                os.close(fd)
+                raise OSError(e.errno, e.strerror, str(path)) from None
             _held[self.run_dir] = [fd, self.token, 1]
             return self
 
