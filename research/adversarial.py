@@ -15,7 +15,15 @@ Every case builds its own sandbox (``OUT/cases/<case>/``, copies of ``data_sampl
    anything left there is a violation;
 4. no ``.html`` file in the sandbox contains the raw markup ``<script>alert(1)</script>`` or
    ``"><img src=x onerror=alert(1)>`` (cases put them in file and folder names);
-5. the case's expectation: ``error`` (exit != 0), ``ok`` (exit 0) or ``any`` (only the invariants).
+5. the case's expectation: ``error`` (exit != 0), ``ok`` (exit 0) or ``any`` (only the invariants);
+6. nothing of the command's session is left once it exited (a worker, multiprocessing's resource tracker, a
+   process not yet reaped), plus the case's own checks (a deleted output written again, the user's file kept,
+   no file from outside the capture exported, the error of a full disk naming a file of the run folder).
+
+Issue 61's cases (families uptodate, userfiles, workers, cameras, colmapfiles, names, unreadable, disk) run a
+mode-000 case as a user would (as root: ``capsh`` drops the power to read any file) and a full disk on a tmpfs of
+its own (root only; elsewhere that case is a setup failure). A failed case is counted by kind
+(:func:`kind_of`: security, data loss, silent wrong, hang, unclear); the summary gives the clean share.
 
 Signal cases interrupt a pose import with triangulation (or a short COLMAP SfM run) with SIGTERM / SIGHUP (to
 the PID) or SIGINT (to the process group, as Ctrl-C does) after 1, 3 or 6 s and expect: exit != 0, exactly one
@@ -28,6 +36,7 @@ Run from the project root (at most 2 cases at a time; results in OUT/results.jso
 
     .venv/bin/python -m research.adversarial --out /tmp/adv
     .venv/bin/python -m research.adversarial --out /tmp/adv --only pose-   # rerun the cases whose name has it
+    .venv/bin/python -m research.adversarial --out /tmp/adv --families disk,workers --src /tmp/frozen  # a copy
 """
 
 from __future__ import annotations
