@@ -37,13 +37,14 @@ from dataclasses import replace
 from pathlib import Path
 
 from curate.core.cameras import Cameras
+from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage
 from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.continuity import drop_off_path, jumps_along
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.matching import match, pair_counts, rematch_left_out
-from curate.sfm.model import cameras_from_reconstruction
+from curate.sfm.model import cameras_from_reconstruction, write_model
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
 from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_guided, choose_matcher, input_key,
@@ -54,6 +55,9 @@ from curate.sfm.reconstruction import map_capture, model_sizes
 logger = logging.getLogger(__name__)
 
 __all__ = ["run_sfm"]
+
+SFM = BY_NAME["sfm"]
+"""The stage's row of the graph: what it writes (``owns``) and what nothing reads again (``spare``)."""
 
 
 def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
@@ -109,7 +113,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     out = _sfm_dir(run_dir)
     refuse_inside(out, photos)
     key = input_key(cfg, photos)
-    if begin_stage(out, key, force):
+    if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm: up to date (%s), skipped", out)
         return out, False
     started = time.perf_counter()
@@ -163,13 +167,11 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         stats["path_jumps"] = jumps
     stats["model_sizes"] = model_sizes(models)
     sparse = out / "sparse" / "0"
-    sparse.mkdir(parents=True)
-    best.write(sparse)
+    write_model(best, sparse)
     others = sorted((r for r in models.values() if r is not best and r.num_reg_images() >= 2),
                     key=lambda r: -r.num_reg_images())
     for k, r in enumerate(others, 1):  # the other parts of a split capture, for --on-split each
-        (out / "sparse" / str(k)).mkdir()
-        r.write(out / "sparse" / str(k))
+        write_model(r, out / "sparse" / str(k))
     stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
                       for k, r in enumerate([best] + others)]
     for part, r in zip(stats["parts"][1:], others):   # --on-split each curates them: a fold there is named too
@@ -198,6 +200,6 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     paths = [f"images/{n}" for n in cams.names]
     stats.update(write_outputs(out, cams, xyz, rgb, err, records, paths, cfg.normalize_percentile))
     stats["dense"] = dense
-    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,
                  seed=cfg.seed, mode="sfm", photos=str(photos), timings=timings, stats=stats)
     return out, True

@@ -36,7 +36,7 @@ def input_key(cfg: SfmConfig, photos: Path) -> str:
     root = source_root(photos)
     imgs, other = find_images(photos, cfg.recursive)
     files = sorted(imgs + other, key=lambda p: p.relative_to(root).as_posix())
-    h = hashlib.sha256("\n".join(p.relative_to(root).as_posix() for p in files).encode())
+    h = hashlib.sha256("\n".join(p.relative_to(root).as_posix() for p in files).encode("utf-8", "surrogateescape"))
     conf = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in _NOT_IN_KEY}
     return stage_key({"mode": "sfm", **conf}, [hash_files(files, h), str(photos)])
 
