@@ -390,8 +390,16 @@ def _secret(tmp_path) -> Path:
     return s
 
 
+def _text_secret(tmp_path) -> Path:
+    s = tmp_path / "elsewhere" / "passwd"
+    s.parent.mkdir(exist_ok=True)
+    s.write_text("root:x:0:0:root:/root:/bin/bash\n")
+    return s
+
+
 def _no_secret_exported(run: Path) -> None:
-    assert not (run / "export").exists() or not any("secret" in p.name for p in (run / "export").rglob("*"))
+    assert not (run / "export").exists() or not any("secret" in p.name or p.name == "passwd"
+                                                     for p in (run / "export").rglob("*"))
 
 
 @pytest.mark.parametrize("kind", ["txt", "bin"])
@@ -426,9 +434,9 @@ def test_a_transforms_json_naming_a_file_outside_its_folder_is_refused_naming_th
     root, _ = capture(tmp_path / "cap")
     secret = _secret(tmp_path)
     data = json.loads((root / "transforms.json").read_text())
-    if how == "link":
+    if how == "link":    # a link to a file that is not a photo (a link to a photo elsewhere is a photo: below)
         (root / "images" / "img_04.png").unlink()
-        (root / "images" / "img_04.png").symlink_to(secret)
+        (root / "images" / "img_04.png").symlink_to(_text_secret(tmp_path))
     else:
         data["frames"][4]["file_path"] = os.path.relpath(secret, root) if how == "climbs" else str(secret)
     (root / "transforms.json").write_text(json.dumps(data))
@@ -467,7 +475,7 @@ def test_with_a_photo_folder_a_pose_finds_its_photo_only_inside_it(tmp_path, cap
     assert not any("secret" in (r.get("original") or "") and r["status"] == "kept" for r in rec["photos"])
     _no_secret_exported(run)
     (root / "images" / "img_06.png").unlink()
-    (root / "images" / "img_06.png").symlink_to(secret)
+    (root / "images" / "img_06.png").symlink_to(_text_secret(tmp_path))
     assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out",
                  str(tmp_path / "run2"), *FAST]) == 2
     err = one_line_error(capsys)
@@ -655,3 +663,18 @@ def test_a_photo_whose_name_is_not_utf8_is_skipped_and_listed_never_fatal(tmp_pa
     said = [r for r in recs if r.rel == "caf\\xe9.png"]
     assert len(said) == 1 and said[0].status == "skipped" and "not UTF-8" in said[0].reason
     assert sum(r.status == "kept" for r in recs) == 12
+
+
+def test_a_folder_of_links_to_photos_elsewhere_is_the_users_capture(tmp_path, capsys):
+    """A batch or a dataset tool (DVC, git-annex) keeps photos as links into a store: a link that leads out of the
+    folder to a photo is the folder's photo, with the photo folder given or not."""
+    root, _ = capture(tmp_path / "store")
+    links = tmp_path / "cap"
+    (links / "images").mkdir(parents=True)
+    for f in sorted((root / "images").iterdir()):
+        (links / "images" / f.name).symlink_to(f)
+    shutil.copy(root / "transforms.json", links / "transforms.json")
+    for k, photos in enumerate(([], [str(links / "images")])):
+        assert main(["run", *photos, "--poses", str(links / "transforms.json"), "--out", str(tmp_path / f"r{k}"),
+                     *FAST]) == 0, capsys.readouterr().err
+        assert len(load_sfm(tmp_path / f"r{k}").cameras) == 12
