@@ -112,6 +112,8 @@ def main(argv=None) -> list[dict]:
         tmp = Path(tmp)
         for threads in a.threads:
             kw = {"mapper": a.mapper} if a.mapper else {}
+            if "guided_matching" in st["stats"]:          # as the stage resolved it
+                kw["guided_matching"] = "on" if st["stats"]["guided_matching"] else "off"
             cfg = SfmConfig(progress=False, num_threads=threads, **kw)
             if "tree" in a.steps:
                 hashes = []

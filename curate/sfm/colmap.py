@@ -10,7 +10,7 @@ config) -> SIFT extraction (:mod:`curate.sfm.features`; one shared camera when e
 from the same camera model at the same size, else one camera per photo) -> matching
 (:mod:`curate.sfm.matching`: exhaustive for small pools, sequential for ordered frames, spatial with
 GPS, retrieval for photos in no order, with a second round for the photos its model leaves out; loop
-detection with a vocabulary tree trained on the capture itself, never a download, so it works offline;
+detection with visual words learned from the capture itself (seeded), never a download, so it works offline;
 with several videos, each video's frames are also matched with their most similar frames of the other
 videos; a video with photos is matched exhaustively) -> mapping
 (:func:`curate.sfm.reconstruction.map_capture`: incremental, initial pair with >=

@@ -7,8 +7,8 @@ from typing import Literal, get_args
 
 Matcher = Literal["auto", "exhaustive", "sequential", "spatial", "retrieval"]
 MATCHERS = get_args(Matcher)
-"""``SfmConfig.matcher`` choices. The vocabulary trees (``sequential``'s loop detection, ``retrieval``) are
-trained on the capture itself: COLMAP's published trees are downloads."""
+"""``SfmConfig.matcher`` choices. The visual words (``sequential``'s loop detection, ``retrieval``) are
+learned from the capture itself (:mod:`curate.sfm.retrieval`): COLMAP's published trees are downloads."""
 CameraMode = Literal["auto", "single", "per_image"]
 CAMERA_MODES = get_args(CameraMode)
 """``SfmConfig.camera_mode`` choices."""
@@ -101,7 +101,7 @@ class SfmConfig:
     matcher: Matcher = "auto"
     """Which photo pairs to match: exhaustive (all), sequential (each frame with the next ones, and loops), spatial
     (by GPS), or auto: exhaustive for a small set, else spatial with GPS, sequential for video frames or numbered
-    photos, retrieval otherwise; retrieval: each photo with its most similar photos (a vocabulary tree trained on the
+    photos, retrieval otherwise; retrieval: each photo with its most similar photos (visual words learned from the
     capture itself, not a download)."""
     exhaustive_max_images: int = 150
     """'auto': exhaustive up to this many photos."""
@@ -114,9 +114,9 @@ class SfmConfig:
     sequential_overlap: int = 15
     """Sequential: match each frame with the next N frames."""
     sequential_quadratic: bool = True
-    """Sequential: also frames i + 2^k (helps closing loops without a vocab tree)."""
+    """Sequential: also frames i + 2^k (helps closing loops without loop detection)."""
     loop_detection: bool = True
-    """Sequential: find loops with a vocabulary tree trained on the capture itself (office: without it the walk
+    """Sequential: find loops with visual words learned from the capture itself (office: without it the walk
     splits into 6 models at fast turns)."""
     loop_detection_period: int = 10
     """Sequential loop detection: query every N-th frame."""
@@ -127,7 +127,7 @@ class SfmConfig:
     of its descriptors, so their training time stays fixed."""
     cross_take_matching: bool = True
     """Sequential, with two or more takes (videos; the photos of a folder): also match frames with the most similar
-    frames of the other takes (vocabulary tree trained on the capture), so a second pass joins the first."""
+    frames of the other takes (the capture's visual words), so a second pass joins the first."""
     cross_take_period: int = 2
     """Cross-take matching: query every N-th frame of each take."""
     cross_take_num_images: int = 5
@@ -177,7 +177,7 @@ class SfmConfig:
     qualifies). office: a 124-inlier planar initial pair got a wrong relative pose, a kink that bent the walk by 17
     deg."""
     seed: int = 0
-    """Random seed of COLMAP (verification RANSAC, mapper) and of the vocabulary tree's training sample: same photos
+    """Random seed of COLMAP (verification RANSAC, mapper) and of the visual words' k-means: same photos
     and config, same matches and model."""
     video: VideoConfig = field(default_factory=VideoConfig)
     """Videos among the photos (or given instead of a folder): how their candidate frames are chosen."""

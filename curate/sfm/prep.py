@@ -163,7 +163,7 @@ def cross_take_pairs(ranked, take_of: dict[str, str], per_take: int) -> list[tup
     """The image pairs to match between takes, from a retrieval ranking.
 
     Args:
-        ranked: iterable of (query name, candidate names, most similar first) (the vocabulary tree's
+        ranked: iterable of (query name, candidate names, most similar first) (the visual words'
             answer for each queried frame; the query itself may be among the candidates).
         take_of: name -> take, for every name of ``ranked``.
         per_take: how many of each query's most similar frames of *each other* take to keep.
