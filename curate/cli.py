@@ -404,7 +404,8 @@ def _select_posed(args) -> int:
     from curate.core.stage import write_json_atomic
     from curate.core.transforms_json import write_transforms
     from curate.select.select import select
-    from curate.select.stage import budget_of_pool, selection_record
+    from curate.core.budget import budget_of_pool
+    from curate.select.record import selection_record
 
     if not hasattr(args, Opt("--budget", "budget").dest):
         raise CliError("--budget is required (except for a run folder, which keeps its own)")

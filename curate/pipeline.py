@@ -123,10 +123,9 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
 def check_budget(budget: str, run_dir: Path) -> None:
     """ValueError unless ``budget`` leaves something to choose among the run's registered photos
     (checked before the occupancy stage, which may train)."""
-    import json
-    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
-    from curate.select.stage import budget_of_run
-    n = len(json.loads(RunPaths(run_dir).cameras.read_text())["cameras"])
+    from curate.core.budget import AUTO, budget_of_run, check_fits, parse_budget, resolve_budget
+    from curate.core.run import load_cameras
+    n = len(load_cameras(run_dir))
     text, said = budget_of_run(budget, run_dir)
     b = parse_budget(text)
     if b == AUTO:

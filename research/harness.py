@@ -318,7 +318,7 @@ def node_grid(run: Path, cams):
     """The run's selection nodes; without an occupancy stage (``--proxy-only``), every node
     of a 32^3 grid over the scene box (printed)."""
     from curate.core.grid import NodeGrid
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.core.stage import read_stage
     from curate.field.train import default_box
     if read_stage(run / "occupancy") is not None:

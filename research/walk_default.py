@@ -79,11 +79,11 @@ def main(argv=None) -> int:
     from curate.core.stats import folds_paired, holdout_split
     from curate.evaluate.folds import FOLD_SEED, Fold, eval_budget, fold_order
     from curate.select.methods import resolve_method
-    from curate.select.stage import read_selection
+    from curate.core.run import read_selection
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import Unit, eval_cameras
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.sfm.io import image_paths, load_sfm
     run = Path(a.run)
     cfg, _ = saved_config(run)

@@ -17,7 +17,7 @@ candidates) is a gap in time the speed allows for. Neither is an island.
 :func:`path_jumps` finds what is left once islands are out: a jump with no way back, at over
 :data:`FOLD_FACTOR` times the speed of the steps around it. A model folded at such a step holds every
 frame, and the frames on each side agree with their neighbours; which side is wrong the path cannot
-say, so nothing is left out: the user is told (``curate.sfm.stage.path_warning``).
+say, so nothing is left out: the user is told (``curate.sfm.warn.path_warning``).
 
 :func:`drop_off_path` and :func:`jumps_along` apply both to the takes of a mapper's models.
 """
