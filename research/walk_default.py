@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     ap.add_argument("--iters", type=int, default=0, help="0: the evaluation's default")
     ap.add_argument("--eval-size", type=int, default=0, help="0: the evaluation's default")
     a = ap.parse_args(argv)
-    from curate.cli import saved_config
+    from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.stage import current_key, stage_key
     from curate.core.stats import folds_paired, holdout_split
