@@ -306,7 +306,7 @@ def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = N
     run = out / scene
     cfg = RunConfig(evaluate=ev)
     cfg = _replace(cfg, refine=_replace(cfg.refine, field="always"))
-    # the harness's protocol (docs/selection-evidence.md) imports the poses alone: no triangulated points
+    # the harness's protocol (docs/investigations/selection.md) imports the poses alone: no triangulated points
     import_poses(_replace(cfg.sfm, triangulate="off"), scene_poses(scene, out, data), run)
     if train:
         pool = holdout_split(len(load_sfm(run).cameras), ev.holdout_every)[0].tolist()

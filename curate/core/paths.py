@@ -1,4 +1,4 @@
-"""Where each result lies in a run folder: the one spelling of its layout (docs/architecture.md, "The run folder").
+"""Where each result lies in a run folder: the one spelling of its layout (docs/architecture.md#run-folder).
 
 ``RunPaths(run_dir).cameras`` is ``RUN/sfm/cameras.json``; a stage's folder is named as the stage
 (:data:`curate.core.graph.STAGES`).
