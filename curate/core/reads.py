@@ -57,12 +57,6 @@ def kept(path: str | Path, kind: str, parse: Callable[[Path], T]) -> T:
     return value
 
 
-def forget() -> None:
-    """Let go of every kept file (a test that rewrites a file in place within the same nanosecond)."""
-    with _lock:
-        _kept.clear()
-
-
 def read_text(path: str | Path) -> str:
     """``Path(path).read_text()``, read once while the file stays the same."""
     return kept(path, "text", lambda p: p.read_text())
