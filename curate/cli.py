@@ -307,72 +307,27 @@ def _check_device(device: str | None) -> None:
 
 
 # ---------------------------------------------------------------------- helpers
-def read_poses(path: Path):
-    """(cameras, image paths) of a pose source (:func:`curate.sfm.poses.read_poses`), errors as CliError."""
-    from curate.sfm.poses import read_poses as _read
+def saved_config(run_dir: Path):
+    """(the RunConfig saved in RUN/run.json, the whole record): :func:`curate.pipeline.saved_config`, its errors
+    as CliError."""
+    from curate.pipeline import saved_config as saved
     try:
-        p = _read(path)
+        return saved(run_dir)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e))
-    return p.cameras, p.files
-
-
-def _grid(cfg, cams):
-    from curate.core.grid import NodeGrid, box_from_cameras
-    if cfg.box is not None:
-        lo, hi = cfg.box[:3], cfg.box[3:]
-    else:
-        if len(cams) == 0:
-            raise CliError("no cameras: give --box or a non-empty input")
-        lo, hi = box_from_cameras(cams)
-    return NodeGrid(lo, hi, cfg.occupancy.res)
-
-
-def saved_config(run_dir: Path):
-    """(the RunConfig saved in RUN/run.json, the whole record)."""
-    from curate.config import RunConfig, upgrade_config
-    from curate.core.stage import config_from_dict
-    p = RunPaths(run_dir).run_json
-    if not p.is_file():
-        raise CliError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
-    try:
-        rec = json.loads(p.read_text())
-        return config_from_dict(RunConfig, upgrade_config(rec["config"],
-                                                          (rec.get("versions") or {}).get("curate"))), rec
-    except (ValueError, KeyError, TypeError) as e:
-        raise CliError(f"{p}: not a run record of this curate version ({e})")
 
 
 # ---------------------------------------------------------------------- commands
 def cmd_score(args) -> int:
-    import numpy as np
-    from curate.select.select import score_cameras
-
+    """``curate score POSES``: the energy of a set of cameras (:func:`curate.select.posed.score_posed`)."""
+    from curate.select.posed import score_lines, score_posed
     cfg = run_config(args)
     _check_device(cfg.select.device)
-    cams, _ = read_poses(Path(args.input))
-    ecfg = cfg.select.energy
-    grid = _grid(cfg, cams)
-    t = score_cameras(cams, grid, ecfg, per_node=True, device=cfg.select.device)
-    views = t.views_per_node
-    seen = views > 0
-    out = {**t.summary(), "res": grid.res, "box": grid.box_min.tolist() + grid.box_max.tolist(),
-           "gamma": ecfg.gamma, "bins": [ecfg.n_theta, ecfg.n_phi], "binning": ecfg.binning,
-           "observed_fraction": float(seen.mean()) if views.size else 0.0,
-           "median_views_observed": float(np.median(views[seen])) if np.any(seen) else 0.0}
-    if args.json:
-        print(json.dumps(out))
-        return 0
-    n = max(t.n_nodes, 1)
-    box = ", ".join(f"{v:.4g}" for v in out["box"])
-    print(f"{t.n_cameras} cameras, {t.n_nodes} nodes ({grid.res}^3) in box [{box}]")
-    print(f"  energy     E = {t.energy:.2f}   (each node scores up to 2: at most {2 * t.n_nodes})")
-    print(f"  angular    sum(1 - TV) = {t.angular:.2f}   mean {t.angular / n:.3f} per node"
-          " (1: seen from directions spread evenly over the sphere; ~0.02: from one direction)")
-    print(f"  frequency  sum(O_f^gamma) = {t.frequency:.2f}   mean {t.frequency / n:.3f} per node"
-          f" (gamma {ecfg.gamma}: near 1 once a node is seen at all)")
-    print(f"  coverage   {100 * out['observed_fraction']:.1f}% of nodes seen by at least one camera;"
-          f" median {out['median_views_observed']:.0f} views per seen node")
+    try:
+        out = score_posed(cfg, args.input)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e))
+    print(json.dumps(out) if args.json else "\n".join(score_lines(out)))
     return 0
 
 
@@ -383,9 +338,10 @@ def cmd_select(args) -> int:
     if not inp.exists():
         raise CliError(f"{args.input}: no such run folder or pose file")
     if args.out is None:
+        from curate.select.posed import read_poses
         try:
             read_poses(inp)
-        except CliError as e:
+        except (FileNotFoundError, ValueError) as e:
             raise CliError(f"{args.input} is neither a run folder (no run.json) nor a pose file "
                            f"(transforms.json, a COLMAP model, cameras.json): {e}")
         if RunPaths(inp).record("sfm").is_file():   # a folder of `curate sfm`: poses, no run yet
@@ -399,76 +355,23 @@ def cmd_select(args) -> int:
 
 @_claims("out", ("input",), writes=("transforms.json", "selected.txt", "selection.json"))
 def _select_posed(args) -> int:
-    """``curate select POSES --out OUT``."""
-    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
-    from curate.core.stage import write_json_atomic
-    from curate.core.transforms_json import write_transforms
-    from curate.select.select import select
-    from curate.select.stage import budget_of_pool, selection_record
-
+    """``curate select POSES --out OUT`` (:func:`curate.select.posed.select_posed`)."""
+    from curate.select.posed import select_posed
     if not hasattr(args, Opt("--budget", "budget").dest):
         raise CliError("--budget is required (except for a run folder, which keeps its own)")
     cfg = run_config(args)
     _check_device(cfg.select.device)
-    cams, files = read_poses(Path(args.input))
-    if len(cams) == 0:
-        raise CliError(f"{args.input}: the pool has no cameras")
-    grid = _grid(cfg, cams)
-    index = auto = None
-    text, said = budget_of_pool(cfg.budget, cams)
-    if parse_budget(text) == AUTO:
-        from curate.select.auto_budget import choose_for_pool
-        from curate.select.visibility import build_pair_index
-        index = build_pair_index(cams, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device)
-        try:
-            auto = choose_for_pool(cams, grid.nodes(), index, cfg.budget_tolerance)
-        except ValueError as e:
-            raise CliError(f"{args.input}: {e}")
-        budget = auto.budget
-        if not args.json:
-            print(auto.note)
-    else:
-        budget = resolve_budget(parse_budget(text), len(cams))
-        try:
-            check_fits(said, budget, len(cams), f"cameras of {args.input}")
-        except ValueError as e:
-            raise CliError(str(e))
-    sel = select(cams, grid, budget, cfg.select, progress=not args.json, index=index)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    chosen = sel.chosen
-    # image paths relative to the written transforms.json, so the folder can move with its photos
-    rel = [os_relpath(files[k], out) for k in chosen]
-    write_transforms(out / "transforms.json", cams[chosen], rel)
-    (out / "selected.txt").write_text("".join(Path(files[k]).name + "\n" for k in chosen))
-    rec = {**selection_record(sel, cams, list(range(len(cams))), [], 0, said, grid),
-           **({"budget_auto": auto.to_dict()} if auto is not None else {}),
-           "config": json.loads(json.dumps(_config_dict(cfg.select), default=str))}
-    write_json_atomic(out / "selection.json", rec)
-    if args.json:
-        print(json.dumps({"chosen": chosen, "energy": sel.energy[-1] if sel.energy else 0.0,
-                          "seconds": sel.seconds, "out": str(out)}))
-    else:
-        e = f", E = {sel.energy[-1]:.1f}" if sel.energy else ""
-        print(f"selected {len(chosen)} of {len(cams)} cameras ({sel.method}{e}) in {sel.seconds:.2f}s -> {out}")
-    return 0
-
-
-def os_relpath(path: str, start: Path) -> str:
-    """``path`` relative to the folder ``start`` when both are on one file system root; else absolute."""
-    import os
-    p = Path(path)
-    if not p.is_absolute():
-        p = Path.cwd() / p
     try:
-        return os.path.relpath(p.resolve(), Path(start).resolve())
-    except ValueError:  # pragma: no cover - another drive (Windows)
-        return str(p.resolve())
-
-
-def _config_dict(cfg) -> dict:
-    from curate.core.stage import config_dict
-    return config_dict(cfg)
+        r = select_posed(cfg, args.input, args.out, progress=not args.json, say=None if args.json else print)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(str(e))
+    if args.json:
+        print(json.dumps({k: r[k] for k in ("chosen", "energy", "seconds", "out")}))
+    else:
+        e = f", E = {r['energy']:.1f}" if r["has_energy"] else ""
+        print(f"selected {len(r['chosen'])} of {r['n_cameras']} cameras ({r['method']}{e}) in {r['seconds']:.2f}s "
+              f"-> {r['out']}")
+    return 0
 
 
 @_claims("input", must_exist=True)
@@ -483,43 +386,18 @@ def _select_run_folder(args) -> int:
     return _stage(args, Path(args.input))
 
 
-def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
-    """CliError naming the curate command to run when a stage ``command`` reads has not finished, or when a file it
-    wrote is missing (up to date means the files are there: :func:`curate.core.stage.up_to_date`)."""
-    import shlex
-    from curate.core.graph import BY_NAME
-    from curate.core.runfolder import check_outputs
-    from curate.core.stage import finished_record, read_stage
-    missing = [s for s in BY_NAME[command].needs if finished_record(run_dir, s) is None]
-    gone = {s: check_outputs(run_dir / s, (read_stage(run_dir / s) or {}).get("files"), BY_NAME[s].spare).missing
-            for s in BY_NAME[command].needs if s not in missing}
-    gone = {s: m for s, m in gone.items() if m}
-    if not missing and not gone:
-        return
-    q = shlex.quote
-    inputs = "".join(f" {q(v)}" if k == "photos" else f" --poses {q(v)}"
-                     for k in ("photos", "poses") if (v := rec.get(k)))
-    whole = f"curate run{inputs or ' PHOTOS'} --out {q(str(run_dir))}"
-    first = next(s for s in BY_NAME[command].needs if s in missing or s in gone)
-    cmd = (f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm"
-           else f"curate {first} {q(str(run_dir))}")
-    what = {"sfm": "SfM", "occupancy": "the occupancy stage", "select": "the selection"}[first]
-    if first in gone:
-        raise CliError(f"{run_dir / first / gone[first][0]} is missing (a file {what} wrote"
-                       f"{f', with {len(gone[first]) - 1} more' if len(gone[first]) > 1 else ''}); run `{cmd}` to "
-                       f"write it again first (or `{whole}`)")
-    raise CliError(f"{run_dir}: {what} has not finished there; run `{cmd}` first "
-                   f"(or `{whole}` to finish the whole run)")
-
-
 def _stage(args, run_dir: Path) -> int:
     """Run the stage ``args.command`` of a run folder with its saved options (overridden by the flags given,
     which are saved); then redo the cheap stages computed from it and the report, and name the evaluation
     when it is now out of date (:func:`curate.pipeline.refresh_after`)."""
     from curate.core.graph import BY_NAME, RunContext
     from curate.pipeline import refresh_after, save_run_config
+    from curate.pipeline import check_needs
     base, rec = saved_config(run_dir)
-    _check_needs(args.command, run_dir, rec)
+    try:
+        check_needs(args.command, run_dir, rec)
+    except FileNotFoundError as e:
+        raise CliError(str(e))
     cfg = run_config(args, base)
     if cfg != base:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
@@ -543,6 +421,7 @@ def cmd_stage(args) -> int:
 @_claims("out", ("photos", "poses"), writes=("sfm",))
 def cmd_sfm(args) -> int:
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.stage import read_stage
     cfg = run_config(args)
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
@@ -550,7 +429,7 @@ def cmd_sfm(args) -> int:
         res = BY_NAME["sfm"].run(RunContext(cfg, Path(args.out), args.force, args.photos, args.poses))
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
-    st = json.loads((res.path / "stage.json").read_text()).get("stats", {})
+    st = (read_stage(res.path) or {}).get("stats", {})
     print(f"sfm: {res.summary}" + (f" of {st['n_kept']} kept photos" if "n_kept" in st else "")
           + (f", {st['n_points']} points" if "n_points" in st and "points" not in res.summary else "")
           + ("" if res.ran else " (unchanged: skipped)") + f" in {res.seconds:.1f}s -> {res.path}")
@@ -610,7 +489,8 @@ def cmd_run(args) -> int:
         out = run(cfg, args.photos, args.out, poses=args.poses, force=args.force, adopt=args.adopt)
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
-    print_verdict(json.loads(Path(out).read_text()), Path(args.out))
+    from curate.core.reads import read_json
+    print_verdict(read_json(out), Path(args.out))     # the report just written: read once (curate.core.reads)
     return 0
 
 

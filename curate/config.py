@@ -30,7 +30,7 @@ class RunConfig:
     """With --budget auto: how much held-out PSNR, in dB, the chosen photos may lose against all
     photos (as predicted).
 
-    The predictor's measured error is in docs/selection-evidence.md (``budget_auto``)."""
+    The predictor's measured error is in docs/investigations/selection.md (``budget_auto``)."""
     budget_check: bool = True
     """With --budget auto and the evaluation: train the same field on two more budgets of the
     evaluation's split (half and twice its own) to measure how the loss falls on this capture, and

@@ -9,6 +9,7 @@ not change and redoes everything downstream of a change. The run-folder contract
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from pathlib import Path
@@ -20,7 +21,7 @@ from curate.core.stage import StageResult
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunConfig", "run", "save_run_config"]
+__all__ = ["RunConfig", "run", "save_run_config", "saved_config"]
 
 
 def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> None:
@@ -30,6 +31,22 @@ def save_run_config(cfg: RunConfig, run_dir: Path, photos=None, poses=None) -> N
         return str(Path(p).absolute()) if p else None
     write_json_atomic(RunPaths(run_dir).run_json, {"config": config_dict(cfg), "photos": absolute(photos),
                                                    "poses": absolute(poses), "versions": versions()})
+
+
+def saved_config(run_dir: Path) -> tuple[RunConfig, dict]:
+    """(the RunConfig saved in ``RUN/run.json`` by :func:`save_run_config`, the whole record): the base of every
+    stage command. ``FileNotFoundError`` when the folder has none, ``ValueError`` when it is not one of this curate."""
+    from curate.config import upgrade_config
+    from curate.core.stage import config_from_dict
+    p = RunPaths(run_dir).run_json
+    if not p.is_file():
+        raise FileNotFoundError(f"{run_dir}: not a run folder of `curate run` (run.json missing)")
+    try:
+        rec = json.loads(p.read_text())
+        return config_from_dict(RunConfig, upgrade_config(rec["config"],
+                                                          (rec.get("versions") or {}).get("curate"))), rec
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{p}: not a run record of this curate version ({e})") from None
 
 
 def _start(name: str) -> None:
@@ -51,7 +68,6 @@ def check_same_capture(run_dir: Path, photos, poses) -> None:
     same photos moved to another folder (the same file names), or the same pose file's content elsewhere, are
     the same capture: not refused (the stages that read the moved files are redone). ``run.json`` records the
     inputs as absolute paths (:func:`save_run_config`), so a run resumed from another directory is the same."""
-    import json
     run_dir = Path(run_dir)
     try:
         rec = json.loads(RunPaths(run_dir).run_json.read_text())
@@ -123,10 +139,9 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
 def check_budget(budget: str, run_dir: Path) -> None:
     """ValueError unless ``budget`` leaves something to choose among the run's registered photos
     (checked before the occupancy stage, which may train)."""
-    import json
-    from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
-    from curate.select.stage import budget_of_run
-    n = len(json.loads(RunPaths(run_dir).cameras.read_text())["cameras"])
+    from curate.core.budget import AUTO, budget_of_run, check_fits, parse_budget, resolve_budget
+    from curate.core.run import load_cameras
+    n = len(load_cameras(run_dir))
     text, said = budget_of_run(budget, run_dir)
     b = parse_budget(text)
     if b == AUTO:
@@ -134,6 +149,37 @@ def check_budget(budget: str, run_dir: Path) -> None:
             raise ValueError(f"budget {said}: {n} registered photos leave nothing to choose")
     else:
         check_fits(said, resolve_budget(b, n), n)
+
+
+def check_needs(command: str, run_dir: Path, rec: dict) -> None:
+    """Before the stage command ``command`` (``curate select RUN``, ...): ``FileNotFoundError`` naming the curate
+    command to run when a stage it reads has not finished, or when a file that stage wrote is missing (up to date
+    means the files are there: :func:`curate.core.stage.up_to_date`). ``rec``: the run's ``run.json`` (its
+    inputs, for the command that finishes the run)."""
+    import shlex
+    from curate.core.graph import BY_NAME
+    from curate.core.runfolder import check_outputs
+    from curate.core.stage import finished_record, read_stage
+    missing = [s for s in BY_NAME[command].needs if finished_record(run_dir, s) is None]
+    gone = {s: check_outputs(run_dir / s, (read_stage(run_dir / s) or {}).get("files"), BY_NAME[s].spare).missing
+            for s in BY_NAME[command].needs if s not in missing}
+    gone = {s: m for s, m in gone.items() if m}
+    if not missing and not gone:
+        return
+    q = shlex.quote
+    inputs = "".join(f" {q(v)}" if k == "photos" else f" --poses {q(v)}"
+                     for k in ("photos", "poses") if (v := rec.get(k)))
+    whole = f"curate run{inputs or ' PHOTOS'} --out {q(str(run_dir))}"
+    first = next(s for s in BY_NAME[command].needs if s in missing or s in gone)
+    cmd = (f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm"
+           else f"curate {first} {q(str(run_dir))}")
+    what = {"sfm": "SfM", "occupancy": "the occupancy stage", "select": "the selection"}[first]
+    if first in gone:
+        raise FileNotFoundError(f"{run_dir / first / gone[first][0]} is missing (a file {what} wrote"
+                                f"{f', with {len(gone[first]) - 1} more' if len(gone[first]) > 1 else ''}); run "
+                                f"`{cmd}` to write it again first (or `{whole}`)")
+    raise FileNotFoundError(f"{run_dir}: {what} has not finished there; run `{cmd}` first "
+                            f"(or `{whole}` to finish the whole run)")
 
 
 def refresh_after(ctx: RunContext, stage: str) -> list[StageResult]:

@@ -1,6 +1,6 @@
 """How dear a direct solve of a global bundle adjustment would be, for prefixes of a finished model
-(issue 36, part 5: choose each global adjustment's solver from the model's shape; docs/sfm.md,
-"Which solver for a global adjustment past 1,000 photos").
+(issue 36, part 5: choose each global adjustment's solver from the model's shape;
+docs/investigations/sfm.md#global-ba-solver).
 
 A direct solve factors the reduced camera system: one block row per photo, a block wherever two
 photos see a common point. Its cost is the fill of that factor under a fill-reducing ordering

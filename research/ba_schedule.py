@@ -1,5 +1,5 @@
 """The incremental mapper on a finished run's matches, again: CPU and wall seconds, model sizes, pose
-error and the time of each global refinement, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
+error and the time of each global refinement, one JSON line (docs/investigations/sfm.md#mapping-past-1000).
 
     python3 -m research.ba_schedule RUN TRUTH KIND [OPTION=VALUE ...]
     python3 -m research.ba_schedule RUN TRUTH KIND --curate [--first N] [--direct-ba N] [FIELD=VALUE ...]

@@ -14,11 +14,11 @@ import json
 from pathlib import Path
 
 from curate.core.budget import AUTO, parse_budget, resolve_budget
-from curate.occupancy.stage import load_node_grid
+from curate.core.run import load_node_grid
 from curate.select.auto_budget import choose_for_pool
 from curate.select.config import SelectConfig
 from curate.select.methods import capture_kind
-from curate.select.stage import budget_of_run
+from curate.core.budget import budget_of_run
 from curate.select.visibility import build_pair_index
 from curate.sfm.io import load_sfm
 

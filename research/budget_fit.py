@@ -61,7 +61,7 @@ def subset_spacing(c: np.ndarray, a: np.ndarray, depths: np.ndarray, subset, chu
 
 def pool_of(run: Path, pool: list[int]):
     """(pool cameras, kind, c, a, depths) of a run folder's ``pool``, as ``--budget auto`` sees it."""
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.select.auto_budget import pool_views
     from curate.select.config import EnergyConfig
     from curate.select.methods import capture_kind

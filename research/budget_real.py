@@ -57,7 +57,8 @@ def measure(scene: str, run: Path, out: Path, ev, fractions, every: int, folds: 
     from curate.core.stats import holdout_split
     from curate.evaluate.units import Unit, eval_cameras, run_units
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid, occupancy
+    from curate.core.run import load_node_grid
+    from curate.occupancy.stage import occupancy
     from curate.select.auto_budget import pool_views
     from curate.select.config import SelectConfig
     from curate.select.methods import capture_kind

@@ -1,5 +1,5 @@
 """Two ways to map a large pool without the whole-pool incremental mapper's growing global adjustments:
-measured, not adopted (docs/sfm.md, "Mapping past 1,000 photos").
+measured, not adopted (docs/investigations/sfm.md#mapping-past-1000).
 
 **Chunks of the capture order** (:func:`map_chunks`): the pool, in the order of its names, is cut into
 chunks of ``size`` photos, neighbours sharing ``overlap``; the incremental mapper on the whole pool,

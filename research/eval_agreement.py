@@ -56,7 +56,7 @@ def setting(text: str) -> tuple[int, int]:
 
 def evaluate(run: Path, side: int, iters: int, folds: int) -> dict:
     """The product's evaluation of ``run`` at (side, iters) over its first ``folds`` folds -> summary.json."""
-    from curate.cli import saved_config
+    from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
     cfg, _ = saved_config(run)

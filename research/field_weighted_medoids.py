@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     from curate.select.config import MedoidsConfig
     from curate.select.medoids import embed, medoids_select, path_weights, view_depths, view_distance
     from curate.field.metrics import render_image
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.sfm.io import image_paths, load_sfm
     from curate.select.config import SelectConfig
     from curate.core.stats import holdout_split, paired_difference

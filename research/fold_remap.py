@@ -1,6 +1,6 @@
-"""A folded incremental model mapped again by the global mapper (measured, not adopted: docs/sfm.md, "A walk
-down a hall and back"): on a finished run whose incremental model's path jumps and does not come back
-(``curate.sfm.continuity.jumps_along``), the global mapper on a copy of the same matches, the jumps of its own
+"""A folded incremental model mapped again by the global mapper (measured, not adopted:
+docs/investigations/sfm.md#hall-and-back): on a finished run whose incremental model's path jumps and does not come
+back (``curate.sfm.continuity.jumps_along``), the global mapper on a copy of the same matches, the jumps of its own
 path, and both models' pose errors against the rendered truth, one JSON line. The variant tried was
 "keep the global model when its path does not jump and it holds as many photos": on the walk down a hall
 and back the global model was far the better one (38 frames over 5 deg against 1,556) and its path still

@@ -306,7 +306,7 @@ def prepare(scene: str, out: Path, ev, train: bool = True, data: Path | None = N
     run = out / scene
     cfg = RunConfig(evaluate=ev)
     cfg = _replace(cfg, refine=_replace(cfg.refine, field="always"))
-    # the harness's protocol (docs/selection-evidence.md) imports the poses alone: no triangulated points
+    # the harness's protocol (docs/investigations/selection.md) imports the poses alone: no triangulated points
     import_poses(_replace(cfg.sfm, triangulate="off"), scene_poses(scene, out, data), run)
     if train:
         pool = holdout_split(len(load_sfm(run).cameras), ev.holdout_every)[0].tolist()
@@ -318,7 +318,7 @@ def node_grid(run: Path, cams):
     """The run's selection nodes; without an occupancy stage (``--proxy-only``), every node
     of a 32^3 grid over the scene box (printed)."""
     from curate.core.grid import NodeGrid
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.core.stage import read_stage
     from curate.field.train import default_box
     if read_stage(run / "occupancy") is not None:

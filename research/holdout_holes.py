@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     from curate.core.budget import parse_budget, resolve_budget
     from curate.select.medoids import (PATH_ORDER_MIN, MedoidsConfig, embed, medoids_select, path_order_share,
                                 path_weights, view_depths, view_distance)
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.sfm.io import load_sfm
     from curate.select.config import SelectConfig
     from curate.select.select import select

@@ -2,8 +2,8 @@
 functions; TYPE_CHECKING blocks left out), import circles (strongly connected components of modules) and the
 packages that import each other.
 
-``python -m research.import_map [ROOT]`` (default: this checkout) prints one JSON line; docs/architecture.md,
-"Layers", holds the table before and after issue 51's second pass.
+``python -m research.import_map [ROOT]`` (default: this checkout) prints one JSON line; docs/architecture.md#layers
+holds the table before and after issue 51's second pass.
 """
 
 from __future__ import annotations

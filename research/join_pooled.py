@@ -3,7 +3,7 @@
 `--mapper auto` keeps a part of COLMAP's global model only where :func:`curate.sfm.parts.join_parts` ties it
 to the largest part: 2 of its frames, each posed again from 30 matches to points the kept frames see. On the
 rendered office room in two sessions the global model was right within 3.3 deg and its parts were refused, each
-frame having 0-3 such matches (docs/sfm-investigations.md, "The join rule on captures with known truth").
+frame having 0-3 such matches (docs/investigations/sfm.md#join-rule).
 :func:`verify_part` (here: measured, not adopted) pools them: the part, rigid, posed again from all its frames'
 matches.
 

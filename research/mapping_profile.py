@@ -1,5 +1,5 @@
 """Where the incremental mapper's time goes: seconds in each of pycolmap's mapper steps over the first
-registrations of a finished run's matches, one JSON line (docs/sfm.md, "Mapping past 1,000 photos").
+registrations of a finished run's matches, one JSON line (docs/investigations/sfm.md#mapping-past-1000).
 
     python3 -m research.mapping_profile RUN POOL REGISTRATIONS [FIELD=VALUE ...]
 

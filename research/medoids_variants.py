@@ -1,4 +1,4 @@
-"""View medoids with the knobs that were measured and not adopted (docs/selection-evidence.md).
+"""View medoids with the knobs that were measured and not adopted (docs/investigations/selection.md).
 
 The product's :func:`curate.select.medoids.medoids_select` is the adopted k-medoids (mean view
 distance, path weights). The variants the harness measured against it live here: a cost power

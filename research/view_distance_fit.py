@@ -67,7 +67,7 @@ def main(argv=None) -> int:
 
     from research.harness import UNIT_KEY                 # the harness's unit folder names
     from curate.select.medoids import embed, view_depths
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.select.config import SelectConfig
     from curate.sfm.io import load_sfm
     from curate.select.visibility import build_pair_index

@@ -73,17 +73,17 @@ def main(argv=None) -> int:
     ap.add_argument("--iters", type=int, default=0, help="0: the evaluation's default")
     ap.add_argument("--eval-size", type=int, default=0, help="0: the evaluation's default")
     a = ap.parse_args(argv)
-    from curate.cli import saved_config
+    from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.stage import current_key, stage_key
     from curate.core.stats import folds_paired, holdout_split
     from curate.evaluate.folds import FOLD_SEED, Fold, eval_budget, fold_order
     from curate.select.methods import resolve_method
-    from curate.select.stage import read_selection
+    from curate.core.run import read_selection
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import Unit, eval_cameras
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.sfm.io import image_paths, load_sfm
     run = Path(a.run)
     cfg, _ = saved_config(run)

@@ -129,7 +129,7 @@ def test_the_default_budget_follows_the_kind_of_capture(tmp_path):
     from curate.config import RunConfig
     from curate.core.budget import DEFAULT, by_kind, parse_budget
     from curate.core.transforms_json import write_transforms
-    from curate.select.stage import budget_of_pool
+    from curate.core.budget import budget_of_pool
     assert RunConfig().budget == DEFAULT and parse_budget("Default") == DEFAULT
     assert by_kind("default", "walk") == "15%" and by_kind("default", "object") == "auto"
     assert by_kind("40", "object") == "40" and by_kind("15%", "object") == "15%"   # a budget given stays

@@ -97,7 +97,7 @@ def test_the_frames_off_the_path_leave_the_model_and_the_warning_says_so(tmp_pat
     from curate.sfm.continuity import drop_off_path
     from curate.sfm.model import reconstruction_from_cameras
     from curate.core.images import PhotoRecord
-    from curate.sfm.stage import split_warning
+    from curate.sfm.warn import split_warning
     t, c = walk(60)
     c[20:24] += [2.0, 2.0, 0.0]
     names = tuple(f"walk_{x:010.3f}.jpg" for x in t) + ("IMG_1.jpg", "IMG_2.jpg", "IMG_3.jpg", "IMG_4.jpg")
@@ -161,7 +161,7 @@ def test_a_folded_take_is_named_in_a_warning_and_nothing_is_left_out(tmp_path):
     from curate.sfm.continuity import drop_off_path, jumps_along
     from curate.sfm.model import reconstruction_from_cameras
     from curate.core.images import PhotoRecord
-    from curate.sfm.stage import path_warning
+    from curate.sfm.warn import path_warning
     t, c = walk(60)
     c[30:] += [3.0, 0.0, 0.0]
     names = tuple(f"walk_{x:010.3f}.jpg" for x in t)
@@ -209,7 +209,7 @@ def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_n
     from curate.sfm.continuity import drop_off_path, jumps_along
     from curate.sfm.model import reconstruction_from_cameras
     from curate.core.images import PhotoRecord
-    from curate.sfm.stage import path_warning
+    from curate.sfm.warn import path_warning
     t, c = walk(60)
     c[30:] += [3.0, 0.0, 0.0]
     for numbered, names in ((True, [f"frame_{i:05d}.jpg" for i in range(60)]),

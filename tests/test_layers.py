@@ -79,3 +79,15 @@ def test_the_checks_see_imports_inside_functions_and_circles(tmp_path):
     assert edges["curate.core.a"] == {"curate.cli"} and edges["curate.core.b"] == {"curate.core.c"}
     assert _layer("curate.cli") > _layer("curate.core.a")          # what the layer test refuses
     assert circles(mods, edges) == [["curate.core.b", "curate.core.c"]]
+
+
+def test_no_stage_imports_another_stages_module():
+    """Issue 60: a stage reads another stage's results through the run's reader (:mod:`curate.core.run`, the SfM
+    package's ``io`` and ``warn``), never through that stage's module; only the pipeline, the batch and the command
+    line, which sequence the stages, import them."""
+    from curate.core.graph import STAGES
+    stages = {s.runs.split(":")[0] for s in STAGES}
+    sequencers = ("pipeline", "batch", "cli", "__main__")
+    bad = [f"{m} imports {t}" for m, targets in _imports(_modules()).items() for t in targets
+           if t in stages and m.split(".")[1] not in sequencers and m.split(".")[1] != t.split(".")[1]]
+    assert not bad, "\n".join(bad)

@@ -1,5 +1,5 @@
 """curate.sfm.mapping: the fill of a direct solve, and the solver it picks for a global adjustment past
-1,000 photos (issue 36, part 5; docs/sfm.md, "Which solver for a global adjustment past 1,000 photos")."""
+1,000 photos (issue 36, part 5; docs/investigations/sfm.md#global-ba-solver)."""
 import numpy as np
 import pytest
 

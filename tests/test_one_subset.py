@@ -202,7 +202,7 @@ def test_the_budget_advice_says_what_was_measured_and_exported_beside_the_law_an
 
 def test_coverage_counts_what_the_chosen_see_of_what_the_capture_sees():
     from types import SimpleNamespace
-    from curate.select.stage import coverage
+    from curate.select.record import coverage
     # 4 nodes: node 0 seen by cams 0,1; node 1 by cam 1; node 2 by cam 2; node 3 by none
     idx = SimpleNamespace(cam=np.array([0, 1, 1, 2]), indptr=np.array([0, 2, 3, 4, 4]), n_nodes=4, n_cams=3)
     c = coverage(idx, [0, 1])

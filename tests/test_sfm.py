@@ -644,7 +644,7 @@ def test_a_part_bent_only_at_its_end_disagrees():
 def test_the_warning_says_which_parts_the_global_model_could_not_tie(tmp_path):
     """When the global model is kept pruned, the end-of-run warning says why photos are missing: the
     parts it bends, the parts too few points tie to the rest, the frames that failed their own check."""
-    from curate.sfm.stage import split_warning
+    from curate.sfm.warn import split_warning
     (tmp_path / "sfm").mkdir()
     lost = [f"walk2_{0.1 * i:010.3f}.jpg" for i in range(15)]
     glob = {"model_sizes": [93, 17], "pruned_to": 76, "joins": [{"photos": 15, "frames_passed": 0, "joined": False}],

@@ -13,7 +13,7 @@ from curate.sfm.config import TAKE_MIN_FRACTION, SfmConfig
 from curate.core.images import PhotoRecord
 from curate.sfm.prep import (assign_takes, choose_matcher, cross_take_pairs, take_counts, take_name, takes_not_joined,
                              takes_of)
-from curate.sfm.stage import split_warning, take_warning
+from curate.sfm.warn import split_warning, take_warning
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk" / "images"
 

@@ -7,14 +7,15 @@ Light (no heavy imports): the CLI, the pipeline and the benchmark scripts share 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from curate.core.paths import RunPaths
+from curate.core.reads import read_json
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
+    from curate.core.cameras import Cameras
 
 
 AUTO = "auto"
@@ -88,6 +89,30 @@ def check_fits(said: str, n_budget: int, n_pool: int, what: str = "registered ph
         raise ValueError(f"budget {said} is {n_budget} of the {n_pool} {what}: choose at least 2")
 
 
+KIND_WORDS = {"walk": "a walk-through", "object": "an object capture"}
+"""How a report names each kind of capture (``curate.select.methods.capture_kind``)."""
+
+
+def budget_of_run(text: str, run_dir: str | Path) -> tuple[str, str]:
+    """(the budget that applies to the run's registered photos, how it reads in a report): ``default``
+    by the capture's kind (:func:`by_kind`, the kind from ``RUN/sfm/cameras.json``); any other budget as given,
+    twice."""
+    if parse_budget(text) != DEFAULT:
+        return str(text), str(text)
+    from curate.core.run import load_cameras
+    return budget_of_pool(text, load_cameras(run_dir))
+
+
+def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
+    """:func:`budget_of_run` for a pool of cameras (``curate select POSES``)."""
+    if parse_budget(text) != DEFAULT:
+        return str(text), str(text)
+    from curate.select.methods import capture_kind
+    kind = capture_kind(cams)[0]
+    b = by_kind(text, kind)
+    return b, f"{DEFAULT}: {b} ({KIND_WORDS[kind]})"
+
+
 MEASURED_FOLDS = 2
 """Hold-out folds the budget stage measures the learning curve on (:mod:`curate.evaluate.budget`)."""
 
@@ -108,7 +133,7 @@ def measured_budget(cfg: "RunConfig", run_dir: str | Path) -> dict | None:
     if not rec or rec.get("key") != measured_key(cfg, run_dir):
         return None
     try:
-        out = json.loads(RunPaths(run_dir).budget_json.read_text())
+        out = read_json(RunPaths(run_dir).budget_json)
     except (OSError, ValueError):
         return None
     chk = out.get("check") or {}

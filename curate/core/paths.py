@@ -1,4 +1,4 @@
-"""Where each result lies in a run folder: the one spelling of its layout (docs/architecture.md, "The run folder").
+"""Where each result lies in a run folder: the one spelling of its layout (docs/architecture.md#run-folder).
 
 ``RunPaths(run_dir).cameras`` is ``RUN/sfm/cameras.json``; a stage's folder is named as the stage
 (:data:`curate.core.graph.STAGES`).
@@ -147,8 +147,8 @@ def within_capture(root: str | Path, name: str, source: str | Path, entry: str) 
 
     A pose file says which photo each pose describes; a name that leaves ``root`` (``..``, an absolute path
     elsewhere, a link to something outside that is not a photo: :func:`inside`) would make curate read, and
-    export, any file the pose file points at (``../../../etc/passwd``). ``ValueError`` naming the pose file ``source`` and the ``entry``
-    (``frame 3``, ``image 12``) when it leaves; nothing is opened here."""
+    export, any file the pose file points at (``../../../etc/passwd``). ``ValueError`` naming the pose file
+    ``source`` and the ``entry`` (``frame 3``, ``image 12``) when it leaves; nothing is opened here."""
     import os
     p = Path(name)
     full = p if p.is_absolute() else Path(root) / p

@@ -62,6 +62,7 @@ from pathlib import Path
 from typing import Iterable, Iterator, NamedTuple
 
 from curate.core.paths import RunPaths
+from curate.core.reads import read_json
 
 log = logging.getLogger(__name__)
 
@@ -622,7 +623,7 @@ def check_outputs(d: str | Path, files, spare: Iterable[str] = ()) -> Outputs:
 
 def _read_record(d: Path) -> dict | None:
     try:
-        rec = json.loads((d / "stage.json").read_text())
+        rec = read_json(d / "stage.json")
     except (OSError, ValueError):
         return None
     return rec if isinstance(rec, dict) else None

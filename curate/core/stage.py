@@ -29,6 +29,7 @@ from typing import Any, Iterable, NamedTuple
 
 from curate.core.paths import RunPaths
 from curate.core.graph import BY_NAME, NAMES, READS
+from curate.core.reads import read_json
 
 STAGE_FILE = "stage.json"
 
@@ -118,12 +119,11 @@ def versions() -> dict:
 
 
 def read_stage(stage_dir: str | Path) -> dict | None:
-    p = Path(stage_dir) / STAGE_FILE
-    if not p.is_file():
-        return None
+    """The record of the stage in ``stage_dir`` (None: it has not finished), read once while the file stays the
+    same (:func:`curate.core.reads.read_json`)."""
     try:
-        rec = json.loads(p.read_text())
-    except (OSError, ValueError):          # unreadable, not JSON, not UTF-8: not a finished stage
+        rec = read_json(Path(stage_dir) / STAGE_FILE)
+    except (OSError, ValueError):          # absent, unreadable, not JSON, not UTF-8: not a finished stage
         return None
     return rec if isinstance(rec, dict) else None
 
@@ -202,7 +202,7 @@ def finished_record(run_dir: str | Path, stage: str) -> dict | None:
     rec = read_stage(Path(run_dir) / stage)
     if rec is None and stage == "evaluate":
         try:
-            rec = json.loads(RunPaths(run_dir).summary.read_text())
+            rec = read_json(RunPaths(run_dir).summary)
         except (OSError, ValueError):
             return None
     return rec if isinstance(rec, dict) else None

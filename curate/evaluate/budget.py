@@ -35,7 +35,7 @@ def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
     check on. False while the run has no poses to tell the kind of capture by."""
     from curate.core.budget import AUTO, parse_budget
-    from curate.select.stage import budget_of_run
+    from curate.core.budget import budget_of_run
     if not (cfg.run_evaluation and cfg.budget_check):
         return False
     try:
@@ -54,7 +54,7 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import eval_cameras
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid
+    from curate.core.run import load_node_grid
     from curate.select.auto_budget import LOSS_MODEL, choose_for_pool, pool_views
     from curate.select.spacing import spacing_curve
     from curate.select.visibility import build_pair_index

@@ -106,8 +106,7 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.evaluate.schedule import run_folds
     from curate.evaluate.units import EVAL_OWN, clear_evaluation, eval_cameras, evaluation_folder
     from curate.field.train import default_box
-    from curate.occupancy.stage import load_node_grid
-    from curate.select.stage import read_selection
+    from curate.core.run import load_node_grid, read_selection
     from curate.sfm.io import image_paths, load_sfm
 
     t0 = time.perf_counter()

@@ -23,7 +23,7 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.core.graph import BY_NAME
     from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, required_key, stage_key
     from curate.export.subset import check_unchanged, export_subset
-    from curate.select.stage import read_selection
+    from curate.core.run import read_selection
     t0 = time.perf_counter()
     cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
     d = RunPaths(run_dir).export
@@ -41,7 +41,7 @@ def run(ctx: "RunContext") -> StageResult:
     # registers the subset again, so it is said beside the training commands, not in the warning box
     warn = points_warning(model, sfm)
     groups = connectivity_warning(model)
-    from curate.sfm.stage import import_warning
+    from curate.sfm.warn import import_warning
     # the record's warning (shown atop the report) also says when the photos and the poses did not match
     shown = "; ".join(w for w in (import_warning(run_dir), warn) if w) or None
     finish_stage(d, key, {"export": cfg.export}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",

@@ -43,7 +43,7 @@ from pathlib import Path
 
 from curate.core.paths import RunPaths
 from curate.core.runfolder import sha256_file
-from curate.core.stage import write_json_atomic
+from curate.core.stage import read_stage, write_json_atomic
 from curate.export.config import ExportConfig
 from curate.export.trainable import PLY_NAME
 from curate.sfm.io import known_original, load_sfm, original_cameras, sfm_dir
@@ -72,9 +72,8 @@ def export_names(originals: list[str], rels: list[str]) -> list[str]:
 def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
     """Folders the export must not be written into: the photo folder of the SfM stage, the originals' folders."""
     roots = {Path(o).resolve().parent for o in originals}
-    st = sfm_dir(run_dir) / "stage.json"
-    if st.is_file():
-        rec = json.loads(st.read_text())
+    rec = read_stage(sfm_dir(run_dir))
+    if rec is not None:
         for k in ("photos",):
             if rec.get(k):
                 roots.add(Path(rec[k]).resolve())

@@ -4,7 +4,6 @@ sheet and small, safe formatters. No heavy imports."""
 from __future__ import annotations
 
 import html
-import json
 import logging
 import math
 from pathlib import Path
@@ -55,9 +54,11 @@ def note(text: str) -> str:
 
 
 def read_json(path: Path) -> dict | None:
-    """The JSON file's content; None when it is missing or unreadable."""
+    """The JSON file's content; None when it is missing or unreadable (read once while it stays the same:
+    :func:`curate.core.reads.read_json`)."""
+    from curate.core.reads import read_json as read
     try:
-        return json.loads(path.read_text())
+        return read(path)
     except (OSError, ValueError):
         return None
 

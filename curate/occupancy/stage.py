@@ -45,13 +45,6 @@ def surface_band(mask: np.ndarray, k: int, outside_free: bool = False) -> np.nda
     return dilate(shell, k) if k > 0 else shell
 
 
-def load_node_grid(run_dir: Path):
-    """The selection's NodeGrid (box, resolution, node band mask) from ``RUN/occupancy``."""
-    from curate.core.grid import NodeGrid
-    z = np.load(RunPaths(run_dir).occupancy_npz)
-    return NodeGrid(z["box_min"], z["box_max"], int(z["res"]), z["nodes_mask"])
-
-
 def train_settings(cfg: "RunConfig") -> dict:
     """The refining field's training settings (part of the stage key): its own iterations and image size
     (:class:`curate.occupancy.masks.RefineConfig`), the evaluation's field and training seed."""

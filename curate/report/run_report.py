@@ -106,9 +106,9 @@ class _Run:
     @property
     def cams(self):
         if self._cams is None:
-            from curate.core.cameras import Cameras
+            from curate.core.run import load_cameras
             p = RunPaths(self.dir).cameras
-            self._cams = Cameras.load(p) if p.is_file() else False
+            self._cams = load_cameras(self.dir) if p.is_file() else False
         return self._cams or None
 
     @property
@@ -146,7 +146,7 @@ def _title(run: _Run) -> str:
 
 def _warnings(run: _Run) -> list[str]:
     """What the user must know before reading any figure (each a sentence)."""
-    from curate.sfm.stage import path_warning, split_warning
+    from curate.sfm.warn import path_warning, split_warning
     r = run.rep
     each = ((r.get("config") or {}).get("sfm") or {}).get("on_split") == "each"
     out = [w for w in (split_warning(run.dir, each=each), path_warning(run.sfm_stats),
@@ -508,7 +508,7 @@ def _skipped(run: _Run) -> str:
                        f'{rows}</table>')
     unreg = sfm.get("unregistered") or []
     if unreg:
-        from curate.sfm.stage import name_ranges
+        from curate.sfm.warn import name_ranges
         out.append(f"<p>Not registered by SfM: {len(unreg)}: {esc(name_ranges([Path(u).name for u in unreg]))}</p>")
     return "\n".join(out)
 

@@ -61,7 +61,7 @@ def run(ctx: "RunContext") -> StageResult:
     """
     from curate.core.stage import config_dict, read_stage, stale_stages, versions, write_json_atomic
     from curate.report.verdict import verdict
-    from curate.select.stage import read_selection
+    from curate.core.run import read_selection
     from curate.sfm.io import load_sfm
     t0 = time.perf_counter()
     cfg, run_dir, timings, wall = ctx.cfg, ctx.run_dir, ctx.timings, ctx.seconds

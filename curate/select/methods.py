@@ -60,7 +60,7 @@ DEFAULT_METHOD = "auto"
 
 WALK_METHOD = "path"
 """"auto" on a walk-through: frames evenly spaced along the capture path (view medoids when the
-photos are not in capture order; docs/selection-evidence.md, "A walk rule chosen on 21 walks")."""
+photos are not in capture order; docs/investigations/selection.md#walk-rule)."""
 
 OBJECT_METHOD = "energy"
 """"auto" on an object capture: the paper's energy, unchanged (README, 'Which selection
@@ -71,11 +71,11 @@ OBJECT_METHOD_MAX_PHOTOS = 150
 """"auto" on an object capture of more photos than this runs :data:`WALK_METHOD`: on the two object captures
 of about 300 photos measured (a real plant, 292 photos, and the rendered photo-textured orbit of a coffee table
 in a room, 300), at 14-15% the paper's energy was below random and path spacing ahead of it
-(docs/selection-evidence.md, "Objects of a few hundred photos"); the energy's evidence is three real objects of
-47-67 photos. 150 lies between the two, where nothing was measured."""
+(docs/investigations/selection.md#objects); the energy's evidence is three real objects of 47-67 photos. 150
+lies between the two, where nothing was measured."""
 
 PATH_WEIGHTS = True
-"""Default of ``MedoidsConfig.path_weights`` (docs/selection-evidence.md)."""
+"""Default of ``MedoidsConfig.path_weights`` (docs/investigations/selection.md)."""
 
 _SELECT = "curate.select.select"
 

@@ -12,8 +12,7 @@ The look-at depths are scaled by ``PathConfig.look_scale`` (0.5): a turn of the 
 for half as much against a step of the walker as in view medoids' distance. On rendered walks,
 frame pairs that differ by a step overlap less, and carry more parallax, than pairs that differ
 by a turn of the same view distance; the scale was chosen on 21 walks against 1 and against
-view medoids, and confirmed on 7 more and on the office (docs/selection-evidence.md, "A walk
-rule chosen on 21 walks").
+view medoids, and confirmed on 7 more and on the office (docs/investigations/selection.md#walk-rule).
 
 With frames already chosen (``initial``), they cut the path into pieces, and the new frames
 go where the largest spacing is then smallest (:func:`targets`). When the views are not in

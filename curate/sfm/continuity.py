@@ -4,7 +4,7 @@ walk and back, found by the frames' agreement with their neighbours in capture o
 A video is a continuous path: between two frames a tenth of a second apart the camera moves a hand's
 breadth. An incremental model can still register a stretch of a take in the wrong place, a piece hinged on
 a few wrong matches whose frames agree with each other and with the points they see: only the path finds
-it (the case that showed it, office.mp4 in two takes: docs/sfm-investigations.md).
+it (the case that showed it, office.mp4 in two takes: docs/investigations/sfm.md).
 
 :func:`off_path` works on one take's registered frames in time order and flags an *island*: a run
 of frames entered by a jump and left by the next jump (a step at a speed over :data:`JUMP_FACTOR`
@@ -17,7 +17,7 @@ candidates) is a gap in time the speed allows for. Neither is an island.
 :func:`path_jumps` finds what is left once islands are out: a jump with no way back, at over
 :data:`FOLD_FACTOR` times the speed of the steps around it. A model folded at such a step holds every
 frame, and the frames on each side agree with their neighbours; which side is wrong the path cannot
-say, so nothing is left out: the user is told (``curate.sfm.stage.path_warning``).
+say, so nothing is left out: the user is told (``curate.sfm.warn.path_warning``).
 
 :func:`drop_off_path` and :func:`jumps_along` apply both to the takes of a mapper's models.
 """

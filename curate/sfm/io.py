@@ -7,7 +7,6 @@ mapping working-copy cameras back to the original photos.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import NamedTuple
 
@@ -15,6 +14,8 @@ import numpy as np
 
 from curate.core.paths import RunPaths
 from curate.core.cameras import Cameras
+from curate.core.reads import kept, read_json
+from curate.core.run import load_cameras
 
 SFM_DIR = "sfm"
 
@@ -31,16 +32,22 @@ def sfm_dir(run_dir: str | Path) -> Path:
 
 
 def load_sfm(run_dir: str | Path) -> SfmResult:
-    """Cameras, sparse points, normalisation and photo records of a finished SfM/import stage."""
+    """Cameras, sparse points, normalisation and photo records of a finished SfM/import stage, each file read once
+    while it stays the same (:mod:`curate.core.run`: the cameras and points are shared, read-only)."""
     d = sfm_dir(run_dir)
     if not (d / "stage.json").is_file():
         raise FileNotFoundError(f"{d}: SfM has not finished in this run folder (no stage.json); run `curate sfm "
                                 f"PHOTOS --out {Path(run_dir)}` or `curate run PHOTOS --out {Path(run_dir)}` first")
-    cams = Cameras.load(d / "cameras.json")
-    pts = np.load(d / "points.npy") if (d / "points.npy").is_file() else np.zeros((0, 3), np.float32)
-    norm = json.loads((d / "normalization.json").read_text())
-    recs = json.loads((d / "images.json").read_text())
-    return SfmResult(cams, pts.astype(np.float32).reshape(-1, 3), norm, recs)
+    cams = load_cameras(run_dir)
+    pts = kept(d / "points.npy", "points", _points) if (d / "points.npy").is_file() else np.zeros((0, 3), np.float32)
+    return SfmResult(cams, pts, read_json(d / "normalization.json"), read_json(d / "images.json"))
+
+
+def _points(path: Path) -> np.ndarray:
+    """[P, 3] float32 points of ``points.npy``, read-only (shared by every reader: :func:`curate.core.reads.kept`)."""
+    pts = np.load(path).astype(np.float32).reshape(-1, 3)
+    pts.flags.writeable = False
+    return pts
 
 
 def load_points_rgb(run_dir: str | Path) -> np.ndarray | None:

@@ -1,6 +1,5 @@
 """COLMAP's incremental mapper run step by step, each global bundle adjustment's solver chosen from the
-model's shape (the measurements: docs/sfm-investigations.md, "Which solver for a global adjustment past 1,000
-photos").
+model's shape (the measurements: docs/investigations/sfm.md#global-ba-solver).
 
 ``pycolmap.incremental_mapping`` builds its global adjustments' options in C++ with Ceres' solver left
 at COLMAP's choice: a sparse direct solve (Cholesky of the reduced camera system) up to 1,000 photos in

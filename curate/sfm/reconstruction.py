@@ -22,7 +22,7 @@ MAPPING_THREADS = 1
 """Threads of the mappers and their bundle adjustments, whatever ``SfmConfig.num_threads`` says. Ceres sums a
 multi-threaded adjustment in the order its threads finish: the same matches mapped twice on two threads gave poses
 0.09 deg apart (office.mp4 at half its frame rate), and a difference that small decides which frame registers next
-on a capture that is close to splitting (docs/sfm.md, "The same input, the same model")."""
+on a capture that is close to splitting (docs/sfm.md#same-model)."""
 
 
 def seeded_pipeline_options(cfg: SfmConfig):
@@ -47,8 +47,8 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     takes: docs/sfm.md).
 
     The global adjustments are most of the incremental mapper's time on a long capture (the rendered
-    1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool (docs/sfm.md,
-    "Mapping past 1,000 photos")."""
+    1,000-frame walk: 79% of its mapping) and what makes it grow faster than the pool
+    (docs/investigations/sfm.md#mapping-past-1000)."""
     opts = seeded_pipeline_options(cfg)
     opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
     opts.ba_refine_principal_point = False

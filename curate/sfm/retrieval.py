@@ -4,7 +4,7 @@ every run (loop detection, retrieval matching and the pairs between takes, :mod:
 COLMAP's vocabulary tree (``pycolmap.VisualIndex``, faiss k-means inside) is not seeded: three builds on the
 same descriptors, with one thread or two, gave three trees, so the pairs loop detection matched, and the model
 after them, changed from run to run (office.mp4 at half its frame rate: about 300 of 1,672 pairs differed
-between two runs of the same matching; docs/sfm-investigations.md, "The same input, the same model").
+between two runs of the same matching; docs/sfm.md#same-model).
 Here the words are a two-level k-means (seeded: ``branching[0]`` words, each split into ``branching[1]``) on an
 even sample of the capture's descriptors (:func:`curate.sfm.features.tree_sample`);
 each photo is a tf-idf histogram of its descriptors' words, and photos are ranked by cosine similarity, ties

@@ -22,7 +22,7 @@ from pathlib import Path
 
 def run_one(run: Path, out: Path, keep_saved: bool) -> float:
     """The product's evaluation of ``run``'s sibling in ``out``; returns its wall seconds."""
-    from curate.cli import saved_config
+    from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
     from curate.evaluate.config import EvalConfig

@@ -1,0 +1,123 @@
+"""The house (issue 60): how often one `curate run` reads the same files of its run folder.
+
+Every read of a file is counted by wrapping ``open`` (``builtins.open`` and ``io.open``: ``Path.read_text``,
+``Path.read_bytes``, ``np.load`` and ``json.load(open(...))`` all go through it) while ``curate run`` runs in this
+process on the project's sample walk (known poses, a small grid; ``--workers 1`` trains in this process too).
+
+Before the run's reader (:mod:`curate.core.run`, :mod:`curate.core.reads`), at 4ba89d6, this run read
+``sfm/cameras.json`` 8 times and ``sfm/stage.json`` 15 times (33 reads of stage records in all) without the
+evaluation, 9 and 17 (53) with one fold; now twice (once to checksum it for the SfM record, once to parse it) and
+once, each record at most twice."""
+
+from __future__ import annotations
+
+import builtins
+import io
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from curate import cli
+
+SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+WATCHED = ("sfm/cameras.json", "sfm/stage.json")
+
+
+def _count_reads(monkeypatch, run: Path) -> Counter:
+    """Start counting every read of a file under ``run``; returns the live counter {path relative to run: reads}."""
+    reads: Counter = Counter()
+    real = io.open
+    root = str(run.resolve())
+
+    def counting_open(file, mode="r", *args, **kwargs):
+        if isinstance(file, (str, Path)) and not any(c in mode for c in "wax+"):
+            p = str(Path(file).resolve()) if not isinstance(file, int) else ""
+            if p.startswith(root + "/"):
+                reads[p[len(root) + 1:]] += 1
+        return real(file, mode, *args, **kwargs)
+    monkeypatch.setattr(builtins, "open", counting_open)
+    monkeypatch.setattr(io, "open", counting_open)
+    return reads
+
+
+def _run(tmp_path, monkeypatch, *extra: str) -> Counter:
+    run = tmp_path / "run"
+    run.mkdir()
+    argv = ["run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--out", str(run),
+            "--budget", "12", "--res", "8", "--triangulate", "off", "--method", "stride", *extra]
+    reads = _count_reads(monkeypatch, run)
+    assert cli.main(argv) == 0
+    monkeypatch.undo()
+    return reads
+
+
+def _check(reads: Counter) -> None:
+    records = {k: n for k, n in reads.items() if k.endswith("stage.json")}
+    print({k: reads[k] for k in WATCHED}, "stage records:", sum(records.values()), dict(reads))
+    assert reads["sfm/cameras.json"] <= 2 and reads["sfm/stage.json"] <= 1, dict(reads)
+    assert max(records.values()) <= 2, records
+
+
+def test_one_run_without_evaluation_reads_the_sfm_result_and_each_record_once_or_twice(tmp_path, monkeypatch):
+    _check(_run(tmp_path, monkeypatch, "--no-evaluate"))
+
+
+def test_one_evaluated_run_reads_the_sfm_result_and_each_record_once_or_twice(tmp_path, monkeypatch):
+    _check(_run(tmp_path, monkeypatch, "--folds", "1", "--workers", "1", "--iters", "5", "--eval-size", "16",
+                "--random-seeds", "1"))
+
+
+def test_a_kept_file_is_read_again_once_it_changed(tmp_path):
+    """:func:`curate.core.reads.kept` parses a file once while it stays the same, and again after a rewrite: by a
+    rename (curate's writes), in place, or to the same size."""
+    import json
+    import os
+    from curate.core.reads import kept, read_json
+    from curate.core.stage import read_stage, write_json_atomic
+    parsed = []
+
+    def parse(p):
+        parsed.append(p)
+        return p.read_text()
+    f = tmp_path / "a.json"
+    f.write_text('{"k": 1}')
+    assert kept(f, "t", parse) == kept(f, "t", parse) == '{"k": 1}' and len(parsed) == 1
+    write_json_atomic(f, {"k": 2})
+    assert read_json(f) == {"k": 2} and json.loads(kept(f, "t", parse)) == {"k": 2} and len(parsed) == 2
+    f.write_text('{"k": 3}')                                         # in place, the same size as the first
+    assert read_json(f) == {"k": 3}
+    st = os.stat(f)
+    f.write_text('{"k": 4}')
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))                 # even with the modification time put back
+    assert read_json(f) == {"k": 4}                                  # (the change time moved)
+    rec = read_json(f)
+    rec["k"] = 5                                                     # what a caller gets is its own
+    assert read_json(f) == {"k": 4}
+    (tmp_path / "stage").mkdir()
+    assert read_stage(tmp_path / "stage") is None
+    write_json_atomic(tmp_path / "stage" / "stage.json", [1])
+    assert read_stage(tmp_path / "stage") is None                    # not a record
+    write_json_atomic(tmp_path / "stage" / "stage.json", {"key": "a"})
+    assert read_stage(tmp_path / "stage") == {"key": "a"}
+
+
+def test_the_shared_cameras_and_grid_are_read_only(tmp_path):
+    """The cameras and the node grid every stage of a run shares cannot be changed by one of them."""
+    import numpy as np
+    from curate.core.cameras import Cameras, look_at
+    from curate.core.run import load_cameras, load_node_grid
+    from curate.core.paths import RunPaths
+    paths = RunPaths(tmp_path)
+    paths.sfm.mkdir()
+    paths.occupancy.mkdir()
+    Cameras(look_at(np.eye(3), np.zeros((3, 3))), 100.0, 100.0, 50.0, 40.0, 100, 80).save(paths.cameras)
+    np.savez_compressed(paths.occupancy_npz, box_min=-np.ones(3), box_max=np.ones(3), res=4,
+                        nodes_mask=np.ones((4, 4, 4), bool))
+    cams, grid = load_cameras(tmp_path), load_node_grid(tmp_path)
+    assert cams is load_cameras(tmp_path) and grid is load_node_grid(tmp_path)
+    with pytest.raises(ValueError, match="read-only"):
+        cams.c2w[0, 0, 3] = 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        grid.mask[0, 0, 0] = False
+    assert cams[[0, 1]].c2w.flags.writeable                           # a subset is the caller's own
