@@ -48,20 +48,34 @@ def _link(src, dst) -> None:
         shutil.copy2(src, dst)
 
 
-def setting(text: str) -> tuple[int, int]:
-    """'160x400' -> (max_side 160, iters 400)."""
-    a, b = text.lower().split("x")
-    return int(a), int(b)
+def setting(text: str) -> tuple[int, int, dict]:
+    """'160x400' -> (max_side 160, iters 400, {}); '160x400+batch_rays=2048+n_inner=48' also sets those fields of
+    the evaluation's FieldConfig (numbers as numbers)."""
+    head, *sets = text.split("+")
+    a, b = head.lower().split("x")
+    over = {}
+    for kv in sets:
+        k, v = kv.split("=")
+        over[k] = json.loads(v)
+    return int(a), int(b), over
 
 
-def evaluate(run: Path, side: int, iters: int, folds: int) -> dict:
-    """The product's evaluation of ``run`` at (side, iters) over its first ``folds`` folds -> summary.json."""
+def tag_of(text: str) -> str:
+    """A setting as a folder name."""
+    return text.replace("+", "_").replace("=", "")
+
+
+def evaluate(run: Path, side: int, iters: int, folds: int, field: dict | None = None, methods=None) -> dict:
+    """The product's evaluation of ``run`` at (side, iters) and ``field`` (FieldConfig overrides) over its first
+    ``folds`` folds -> summary.json."""
     from curate.cli import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
     cfg, _ = saved_config(run)
-    cfg = replace(cfg, evaluate=replace(cfg.evaluate, max_side=side, iters=iters, folds=folds,
-                                        methods=("selection", "random", "fvs", "stride", "all"), random_seeds=1))
+    ev = cfg.evaluate
+    cfg = replace(cfg, evaluate=replace(ev, max_side=side, iters=iters, folds=folds,
+                                        methods=methods or ("selection", "random", "fvs", "stride", "all"),
+                                        random_seeds=1, field=replace(ev.field, **(field or {}))))
     with runfolder.claimed(run, writes=("evaluate",)):
         res = BY_NAME["evaluate"].run(RunContext(cfg, run))
     print(res.line(), flush=True)
@@ -69,8 +83,15 @@ def evaluate(run: Path, side: int, iters: int, folds: int) -> dict:
 
 
 def unit_seconds(run: Path) -> float:
-    """Median CPU-bound seconds of one training (its stage record's wall seconds, one single-threaded training)."""
-    secs = [json.loads(p.read_text()).get("seconds", 0) for p in (run / "evaluate").glob("f*/stage.json")]
+    """Median CPU seconds of one training (its ``metrics.json``'s ``cpu_seconds``: the worker's process time over
+    training and scoring; a unit of an older curate: its stage record's wall seconds)."""
+    secs = []
+    for p in (run / "evaluate").glob("f*/metrics.json"):
+        m = json.loads(p.read_text())
+        if m.get("copied_from"):
+            continue
+        secs.append(m["cpu_seconds"] if m.get("cpu_seconds") is not None else
+                    json.loads((p.parent / "stage.json").read_text()).get("seconds", 0))
     return float(np.median(secs)) if secs else float("nan")
 
 
@@ -87,22 +108,23 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="run folders (SfM, occupancy and selection done)")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--settings", default="240x800,160x400,160x250", help="SIDExITERS, comma list; the first is "
-                    "the reference")
+    ap.add_argument("--settings", default="240x800,160x400,160x250", help="SIDExITERS[+field=value...], comma "
+                    "list; the first is the reference")
     ap.add_argument("--folds", type=int, default=2)
     a = ap.parse_args(argv)
-    sets = [setting(s) for s in a.settings.split(",")]
+    texts = a.settings.split(",")
     out = Path(a.out)
     rows = []
     for run in map(Path, a.runs):
         name = run.name
         summ, secs = {}, {}
-        for side, iters in sets:
-            tag = f"{side}x{iters}"
+        for text in texts:
+            side, iters, over = setting(text)
+            tag = tag_of(text)
             sib = sibling(run, out / f"{name}@{tag}")
-            summ[tag] = evaluate(sib, side, iters, a.folds)
+            summ[tag] = evaluate(sib, side, iters, a.folds, over)
             secs[tag] = unit_seconds(sib)
-        ref = f"{sets[0][0]}x{sets[0][1]}"
+        ref = tag_of(texts[0])
         print(f"\n{name}: {summ[ref]['protocol']['n_folds']} folds, "
               f"{len(summ[ref]['protocol']['holdout'])} held-out photos")
         print(f"{'rival':8s} {'setting':9s} {'mean':>7s} {'interval':>16s} {'decision':>9s} {'r':>6s} "
