@@ -23,7 +23,7 @@ from curate import __version__
 from curate.core.paths import RunPaths
 from curate.core.options import HelpFormatter, Opt, add_options, apply_options, given
 from curate.select.methods import METHODS, method_help
-from curate.sfm.config import CAMERA_MODES, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
+from curate.sfm.config import CAMERA_MODES, GUIDED, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
 from curate.export.config import MODES, UNDISTORT
 from curate.field.config import TRAINERS
 from curate.simulate.choices import Scene, SimOccupancy
@@ -247,7 +247,7 @@ SFM = [Opt("--max-size", "sfm.max_image_size", parse=int),
        Opt("--drop-blurry", "sfm.drop_blurry"),
        Opt("--keep-duplicates", "sfm.drop_duplicates", const=False, help="keep near-duplicate photos"),
        Opt("--sift-peak-threshold", "sfm.sift_peak_threshold", parse=float),
-       Opt("--guided-matching", "sfm.guided_matching"),
+       Opt("--guided-matching", "sfm.guided_matching", choices=GUIDED),
        Opt("--no-dense", "sfm.dense", const="off", help="skip dense MVS even with CUDA"),
        Opt("--on-split", "sfm.on_split", choices=ON_SPLIT),
        Opt("--max-frames", "sfm.video.max_frames", parse=int),
@@ -497,21 +497,30 @@ def _select_run_folder(args) -> int:
 
 
 def _check_needs(command: str, run_dir: Path, rec: dict) -> None:
-    """CliError naming the curate command to run when a stage ``command`` reads has not finished."""
+    """CliError naming the curate command to run when a stage ``command`` reads has not finished, or when a file it
+    wrote is missing (up to date means the files are there: :func:`curate.core.stage.up_to_date`)."""
     import shlex
     from curate.core.graph import BY_NAME
-    from curate.core.stage import finished_record
+    from curate.core.runfolder import check_outputs
+    from curate.core.stage import finished_record, read_stage
     missing = [s for s in BY_NAME[command].needs if finished_record(run_dir, s) is None]
-    if not missing:
+    gone = {s: check_outputs(run_dir / s, (read_stage(run_dir / s) or {}).get("files"), BY_NAME[s].spare).missing
+            for s in BY_NAME[command].needs if s not in missing}
+    gone = {s: m for s, m in gone.items() if m}
+    if not missing and not gone:
         return
     q = shlex.quote
     inputs = "".join(f" {q(v)}" if k == "photos" else f" --poses {q(v)}"
                      for k in ("photos", "poses") if (v := rec.get(k)))
     whole = f"curate run{inputs or ' PHOTOS'} --out {q(str(run_dir))}"
-    first = missing[0]
+    first = next(s for s in BY_NAME[command].needs if s in missing or s in gone)
     cmd = (f"curate sfm{inputs or ' PHOTOS'} --out {q(str(run_dir))}" if first == "sfm"
            else f"curate {first} {q(str(run_dir))}")
     what = {"sfm": "SfM", "occupancy": "the occupancy stage", "select": "the selection"}[first]
+    if first in gone:
+        raise CliError(f"{run_dir / first / gone[first][0]} is missing (a file {what} wrote"
+                       f"{f', with {len(gone[first]) - 1} more' if len(gone[first]) > 1 else ''}); run `{cmd}` to "
+                       f"write it again first (or `{whole}`)")
     raise CliError(f"{run_dir}: {what} has not finished there; run `{cmd}` first "
                    f"(or `{whole}` to finish the whole run)")
 
@@ -594,6 +603,10 @@ def cmd_suggest(args) -> int:
         res = suggest(cfg, Path(args.run), args.force, progress=not args.json)
     except (FileNotFoundError, ValueError, RuntimeError) as e:
         raise CliError(str(e))
+    except OSError as e:     # a full disk met by a library that names no file: the stage's folder
+        if e.filename is None and e.errno is not None:
+            raise OSError(e.errno, e.strerror or str(e), str(Path(args.run) / "suggest")) from None
+        raise
     if args.json:
         print(json.dumps({"out": str(res.path), "ran": res.ran, "suggestions": str(res.path / "suggestions.json"),
                           "page": str(res.path / "suggest.html"), "seconds": round(res.seconds, 2)}))
@@ -861,6 +874,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"curate {args.command}: {word}", file=sys.stderr)
         return code
     except OSError as e:
+        if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS) and e.filename:
+            print(f"curate {args.command}: error: {denied(e)}", file=sys.stderr)
+            return 2
         if e.errno != errno.ENOSPC:
             return _internal_error(args.command, e)
         print(f"curate {args.command}: error: the disk is full: no space left writing {e.filename or 'a file'}; "
@@ -869,6 +885,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except Exception as e:  # noqa: BLE001 - an internal error: one line, the trace in a file
         return _internal_error(args.command, e)
+
+
+def denied(e: OSError) -> str:
+    """What a permission error says: the file, or the folder above it that cannot be entered or read, and why."""
+    import os
+    p = Path(e.filename)
+    if e.errno == errno.EROFS:
+        return f"{p}: the file system is read-only: curate cannot write there; choose another --out"
+    blocked = next((d for d in reversed(p.parents) if os.path.isdir(d) and not os.access(d, os.R_OK | os.X_OK)), None)
+    if blocked is not None:
+        return (f"{blocked}: cannot read this folder (permission denied): give it back read permission "
+                f"(chmod u+rwx {blocked}), then run again")
+    how = "cannot write it" if os.path.exists(p) and os.access(p, os.R_OK) else "cannot read it"
+    return f"{p}: permission denied ({how}): give it back the permission (chmod u+rw {p}), then run again"
 
 
 def _internal_error(command: str, e: BaseException) -> int:

@@ -15,7 +15,15 @@ Every case builds its own sandbox (``OUT/cases/<case>/``, copies of ``data_sampl
    anything left there is a violation;
 4. no ``.html`` file in the sandbox contains the raw markup ``<script>alert(1)</script>`` or
    ``"><img src=x onerror=alert(1)>`` (cases put them in file and folder names);
-5. the case's expectation: ``error`` (exit != 0), ``ok`` (exit 0) or ``any`` (only the invariants).
+5. the case's expectation: ``error`` (exit != 0), ``ok`` (exit 0) or ``any`` (only the invariants);
+6. nothing of the command's session is left once it exited (a worker, multiprocessing's resource tracker, a
+   process not yet reaped), plus the case's own checks (a deleted output written again, the user's file kept,
+   no file from outside the capture exported, the error of a full disk naming a file of the run folder).
+
+Issue 61's cases (families uptodate, userfiles, workers, cameras, colmapfiles, names, unreadable, disk) run a
+mode-000 case as a user would (as root: ``capsh`` drops the power to read any file) and a full disk on a tmpfs of
+its own (root only; elsewhere that case is a setup failure). A failed case is counted by kind
+(:func:`kind_of`: security, data loss, silent wrong, hang, unclear); the summary gives the clean share.
 
 Signal cases interrupt a pose import with triangulation (or a short COLMAP SfM run) with SIGTERM / SIGHUP (to
 the PID) or SIGINT (to the process group, as Ctrl-C does) after 1, 3 or 6 s and expect: exit != 0, exactly one
@@ -28,6 +36,7 @@ Run from the project root (at most 2 cases at a time; results in OUT/results.jso
 
     .venv/bin/python -m research.adversarial --out /tmp/adv
     .venv/bin/python -m research.adversarial --out /tmp/adv --only pose-   # rerun the cases whose name has it
+    .venv/bin/python -m research.adversarial --out /tmp/adv --families disk,workers --src /tmp/frozen  # a copy
 """
 
 from __future__ import annotations
@@ -80,6 +89,12 @@ class Ctx:
         self.checks: list[Callable[[], list[str]]] = []
         self.signal: tuple | None = None          # (signum, delay_s) for a signal case
         self.exact = True                         # a signal case compares export bytes (else names only)
+        self.cwd: Path | None = None              # where the command runs (default: the sandbox)
+        self.unprivileged = False                 # run it as a user would: mode 000 means unreadable (unpriv_prefix)
+        self.after: list[Callable[[], None]] = []  # clean-up once the case is checked (unmount a full disk)
+        self.sig: tuple | None = None             # (signum, delay): stop the command so (no export compared)
+        self.last: dict = {}                      # the command's result, for the checks
+        self.full_disk = False                    # its error must say the disk is full
 
     def cap(self, n: int = 12, name: str = "cap", start: int = 0) -> Path:
         """A copy of n sample frames in DIR/name/images and a matching DIR/name/transforms.json."""
@@ -137,9 +152,36 @@ def _unignore_signals() -> None:
             signal.signal(s, signal.default_int_handler if s == signal.SIGINT else signal.SIG_DFL)
 
 
-def exec_curate(argv, cwd: Path, tmp: Path, timeout: float = TIMEOUT, sig: tuple | None = None) -> dict:
-    """Run ``python -m curate ARGV``; sig=(signum, delay): send it after delay s. Returns rc, stdout, stderr."""
-    cmd = ["nice", "-n", "10", PY, "-m", "curate", *map(str, argv)]
+def unpriv_prefix() -> list[str]:
+    """A prefix that runs a command as a user would as far as file modes go: as root (this project's machines),
+    root's power to read and search any file dropped (``capsh``), so that ``chmod 000`` means unreadable; [] as a
+    user. SetupError where root cannot drop it."""
+    if os.geteuid() != 0:
+        return []
+    if not shutil.which("capsh"):
+        raise SetupError("running as root without capsh: a mode-000 file cannot be made unreadable")
+    return ["capsh", "--drop=cap_dac_override,cap_dac_read_search", "--", "-c", 'exec "$0" "$@"']
+
+
+def session_left(sid: int) -> list[str]:
+    """The processes of session ``sid`` still in the process table (a zombie counts: nothing reaped it)."""
+    out = []
+    for pid in os.listdir("/proc"):
+        if pid.isdigit():
+            try:
+                if os.getsid(int(pid)) == sid:
+                    out.append(Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()[:80]
+                               or f"{pid} (exited, not reaped)")
+            except OSError:
+                continue
+    return out
+
+
+def exec_curate(argv, cwd: Path, tmp: Path, timeout: float = TIMEOUT, sig: tuple | None = None,
+                prefix: list[str] = ()) -> dict:
+    """Run ``python -m curate ARGV``; sig=(signum, delay): send it after delay s. Returns rc, stdout, stderr and
+    ``left``: the processes of its session still there once it exited (each then killed: this call started them)."""
+    cmd = [*prefix, "nice", "-n", "10", PY, "-m", "curate", *map(str, argv)]
     tmp.mkdir(parents=True, exist_ok=True)
     cwd.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, TMPDIR=str(tmp), PYTHONUNBUFFERED="1", **({"PYTHONPATH": SRC[0]} if SRC else {}))
@@ -162,7 +204,12 @@ def exec_curate(argv, cwd: Path, tmp: Path, timeout: float = TIMEOUT, sig: tuple
         out, err = p.communicate()
         res["timed_out"] = True
     res.update(rc=p.returncode, stdout=out.decode("utf-8", "replace"), stderr=err.decode("utf-8", "replace"),
-               seconds=round(time.time() - t0, 1))
+               seconds=round(time.time() - t0, 1), left=session_left(p.pid))
+    if res["left"]:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)      # the session this call started
+        except ProcessLookupError:
+            pass
     return res
 
 
@@ -268,7 +315,31 @@ class Case:
     build: Callable[[Ctx], list]      # builds the sandbox, returns curate's argv (may register checks)
 
 
+def unmount_under(d: Path) -> None:
+    """Unmount what a case mounted under ``d`` (its full disk), deepest first."""
+    try:
+        mounts = [ln.split()[1] for ln in Path("/proc/mounts").read_text().splitlines()]
+    except OSError:
+        return
+    for m in sorted((m for m in mounts if m == str(d) or m.startswith(str(d) + "/")), key=len, reverse=True):
+        subprocess.run(["umount", "-l", m], check=False, capture_output=True)
+
+
 def run_case(case: Case, out: Path) -> dict:
+    """:func:`_run_case`, then the case's clean-up (``Ctx.after``) whatever happened."""
+    unmount_under(out / "cases" / case.name)
+    holder: list[Ctx] = []
+    try:
+        return _run_case(case, out, holder)
+    finally:
+        for undo in (holder[0].after if holder else []):
+            try:
+                undo()
+            except Exception:  # noqa: BLE001 - a clean-up that fails leaves the rest to do
+                pass
+
+
+def _run_case(case: Case, out: Path, holder: list) -> dict:
     cdir, tmp = out / "cases" / case.name, out / "tmp" / case.name
     for d in (cdir, tmp):
         if d.exists():
@@ -278,6 +349,7 @@ def run_case(case: Case, out: Path) -> dict:
             shutil.rmtree(d)
         d.mkdir(parents=True)
     ctx = Ctx(out / "base", cdir, tmp)
+    holder.append(ctx)
     res = {"case": case.name, "family": case.family, "expect": case.expect, "rc": None, "ok": False,
            "violations": [], "stderr_tail": ""}
     t0 = time.time()
@@ -292,15 +364,29 @@ def run_case(case: Case, out: Path) -> dict:
     if ctx.signal:
         r, v = signal_case(ctx, argv)
     else:
-        r = exec_curate(argv, cdir, tmp)
+        r = exec_curate(argv, ctx.cwd or cdir, tmp, prefix=unpriv_prefix() if ctx.unprivileged else [], sig=ctx.sig)
         v = scan_output(r)
+        if ctx.sig and not r["signalled"]:
+            v.append(f"finished (exit {r['rc']}) before the signal at {ctx.sig[1]}s: lengthen the command")
+        if ctx.full_disk and r["rc"] != 0 and not any("the disk is full" in ln and ": error:" in ln and
+                                                      any(str(d) in ln for d in ctx.runs) for ln in lines(r["stderr"])):
+            v.append(f"unclear: the error does not say the disk is full, naming a file of the run folder: "
+                     f"{tail(r['stderr'], 1)}")
         errs = sum(": error:" in ln for ln in lines(r["stderr"]))
-        if r["rc"] not in (0, None) and errs != 1 and not r["timed_out"]:
+        stopped = sum(ln.startswith("curate ") and ln.rstrip().endswith(("interrupted", "terminated",
+                                                                          "terminated (hang-up)"))
+                      for ln in lines(r["stderr"]))
+        if ctx.sig and r["signalled"] and stopped != 1:
+            v.append(f"{stopped} 'curate ...: interrupted/terminated' lines after the signal (expected 1)")
+        if r["rc"] not in (0, None) and errs != 1 and not r["timed_out"] and not ctx.sig:
             v.append(f"failed (exit {r['rc']}) with {errs} ': error:' lines (expected 1)")
         if case.expect == E and r["rc"] == 0:
             v.append("expected an error, exited 0")
         if case.expect == O and r["rc"] != 0:
             v.append(f"expected success, exited {r['rc']}")
+    if r.get("left"):
+        v.append(f"processes left after it exited: {r['left'][:3]}")
+    ctx.last = r
     for chk in ctx.checks:
         v += chk()
     v += diff_snapshots(before, snapshot(cdir, ctx.runs), runs_rel, "sandbox")
@@ -1102,6 +1188,453 @@ SIGNALS = [(f"poses-{signal.Signals(s).name.lower()}-at-{t}s", _signal(s, t), E)
     for s, t in ((signal.SIGTERM, 3), (signal.SIGINT, 6), (signal.SIGHUP, 4))]
 
 
+# ------------------------------------------------------------------ issue 61: hostile inputs and edits, round three
+def _quick(c: Ctx, triangulate: bool = False, cap: Path | None = None, name: str = "run") -> tuple[Path, Path]:
+    """(capture, finished run folder): a fast pose import (points triangulated when asked)."""
+    cap = cap or c.cap()
+    return cap, c.finished(cap, name, triangulate=triangulate)
+
+
+def _evaluated(c: Ctx) -> tuple[Path, Path]:
+    cap, run = _quick(c)
+    c.curate("evaluate", run, *EVAL_FAST)
+    return cap, run
+
+
+def _restored(path_of, what: str):
+    """A check: the output the user deleted is there again after the command."""
+    def chk(p: Path) -> list[str]:
+        return [] if p.exists() else [f"silent wrong: {what} ({p.name}) is still missing after the command"]
+    return lambda: chk(path_of())
+
+
+def _same_bytes(p: Path, what: str, kind: str = "data loss"):
+    want = p.read_bytes()
+
+    def chk() -> list[str]:
+        try:
+            return [] if p.read_bytes() == want else [f"{kind}: {what} was changed"]
+        except FileNotFoundError:
+            return [f"{kind}: {what} was removed"]
+    return chk
+
+
+def _deleted(where: str, rel: str, argv_of, triangulate: bool = False, evaluated: bool = False):
+    """A finished run folder whose RUN/<where>/<rel> (a glob: its first match) the user deleted; then
+    ``argv_of(c, cap, run)``: the file must be there again."""
+    def build(c: Ctx):
+        cap, run = _evaluated(c) if evaluated else _quick(c, triangulate)
+        victim = sorted((run / where).glob(rel))[0]
+        if victim.is_dir():
+            shutil.rmtree(victim)
+        else:
+            victim.unlink()
+        c.checks.append(_restored(lambda: victim, f"the deleted {where}/{rel}"))
+        return argv_of(c, cap, run)
+    return build
+
+
+def _input_deleted(c: Ctx):
+    """The selection the export reads was deleted: `curate export RUN --mode copy` must name it and what writes it."""
+    _, run = _quick(c)
+    p = run / "select" / "selection.json"
+    p.unlink()
+    c.checks.append(lambda: [] if f"{p} is missing" in c.last.get("stderr", "") and "curate select" in
+                    c.last.get("stderr", "") else ["unclear: the error does not name the missing selection.json"])
+    return ["export", run, "--mode", "copy"]
+
+
+def _export_cmd(*extra):
+    return lambda c, cap, run: ["export", run, *extra]
+
+
+def _rerun(c: Ctx, cap: Path, run: Path) -> list:
+    return c.fast(cap, run)
+
+
+def _edited_same(rel: str):
+    """The user edits RUN/export/<rel>; `curate export RUN` with the same options keeps the edit and names it."""
+    def build(c: Ctx):
+        _, run = _quick(c)
+        p = sorted((run / "export").glob(rel))[0]
+        if p.is_symlink() or p.stat().st_nlink > 1:
+            p.unlink()
+            p.write_bytes(jpeg_bytes(7))
+        else:
+            p.write_text(p.read_text().replace("{", "{ ", 1))
+        c.checks.append(_same_bytes(p, f"the user's edited export/{p.relative_to(run / 'export')}"))
+        return ["export", run]
+    return build
+
+
+def _users_file(where: str, argv_of, name: str = "notes.txt", evaluated: bool = False):
+    """The user's own file in a finished stage folder; then a re-run of that stage: it must survive."""
+    def build(c: Ctx):
+        cap, run = _evaluated(c) if evaluated else _quick(c)
+        p = run / where / name
+        p.write_text("the user's own notes\n")
+        c.checks.append(_same_bytes(p, f"the user's {where}/{name}"))
+        return argv_of(c, cap, run)
+    return build
+
+
+def _after_kill(stages: tuple[str, ...], name: str):
+    """What a SIGKILL half-way through ``stages`` leaves (their folders with curate's files, no record), and a file
+    the user put there afterwards; then the same `curate run`: it resumes, the user's file stays."""
+    def build(c: Ctx):
+        cap, run = _quick(c)
+        for s in stages:
+            (run / s / "stage.json").unlink()
+            if s == "export":
+                (run / s / "export.json").unlink()
+                (run / s / "transforms.json").write_text("{half")
+        p = run / stages[-1] / name
+        p.write_text("mine\n")
+        c.checks.append(_same_bytes(p, f"the user's {stages[-1]}/{name}"))
+        c.checks.append(lambda: [] if json.loads((run / "export" / "transforms.json").read_text()).get("frames")
+                        else ["silent wrong: the resumed export's transforms.json has no frames"])
+        return c.fast(cap, run)
+    return build
+
+
+def _export_json_edited(*extra):
+    def build(c: Ctx):
+        _, run = _quick(c)
+        p = run / "export" / "export.json"
+        p.write_text(p.read_text().replace("{", "{\n ", 1))
+        c.checks.append(_same_bytes(p, "the user's edit of export/export.json"))
+        return ["export", run, *extra]
+    return build
+
+
+def _unreadable_edit(c: Ctx):
+    """The user edits the export's transforms.json, then makes it unreadable (chmod 000); a re-export in copy mode
+    must not replace it (curate cannot prove it is its own)."""
+    unpriv_prefix()
+    _, run = _quick(c)
+    p = run / "export" / "transforms.json"
+    p.write_text(p.read_text().replace("{", "{ ", 1))
+    want = p.read_bytes()
+    os.chmod(p, 0)
+    c.unprivileged = True
+    c.checks.append(lambda: [] if p.exists() and (os.chmod(p, 0o644) or p.read_bytes() == want)
+                    else ["data loss: the user's unreadable edited transforms.json was replaced"])
+    return ["export", run, "--mode", "copy"]
+
+
+def _unreadable_folder(rel: str, cmd_of):
+    def build(c: Ctx):
+        unpriv_prefix()
+        cap, run = _quick(c)
+        d = (run / rel) if not rel.startswith("@") else None
+        if d is None:                                   # --poses MODEL whose sparse/0 the user cannot read
+            model = c.dir / "scene"
+            (model / "sparse").mkdir(parents=True)
+            shutil.copytree(c.base / "colmap", model / "sparse" / "0")
+            shutil.copytree(cap / "images", model / "images")
+            d = model / "sparse" / "0"
+            argv = ["run", "--poses", model, *FAST, "--out", c.out("run2")]
+        else:
+            argv = cmd_of(run)
+        os.chmod(d, 0)
+        c.unprivileged = True
+        c.after.append(lambda: os.chmod(d, 0o755))
+        return argv
+    return build
+
+
+def _eval_cmd(*extra):
+    return lambda c, cap, run: ["evaluate", run, *EVAL_FAST[:-2], "--workers", "2", *extra]
+
+
+def _evaluate_after(setup):
+    """An evaluation with two workers after ``setup(c, run)``; the generic check: nothing of it left running."""
+    def build(c: Ctx):
+        _, run = _quick(c)
+        setup(c, run)
+        return ["evaluate", run, *EVAL_FAST[:-2], "--workers", "2"]
+    return build
+
+
+def _interrupted(sig):
+    def setup(c: Ctx, run: Path) -> None:
+        r = exec_curate(["evaluate", run, "--iters", "400", "--folds", "2", "--eval-size", "32", "--workers", "2"],
+                        c.dir, c.tmp, sig=(sig, 6))
+        left = r.get("left") or []
+        c.checks.append(lambda: [f"processes of the interrupted evaluation left: {left[:3]}"] if left else [])
+        if r["rc"] == 0:
+            raise SetupError("the evaluation to interrupt finished before the signal")
+    return setup
+
+
+def _signalled_evaluation(sig, delay=6.0, run_whole=False):
+    """The evaluation (or a whole evaluated `curate run`) stopped by ``sig``: exit != 0 and nothing left running."""
+    def build(c: Ctx):
+        cap, run = _quick(c)
+        c.sig = (sig, delay)
+        if run_whole:
+            return ["run", cap / "images", "--poses", cap / "transforms.json", "--triangulate", "off", "--budget", "4",
+                    "--iters", "400", "--folds", "2", "--eval-size", "32", "--workers", "2", "--out", c.out("run2")]
+        return ["evaluate", run, "--iters", "400", "--folds", "2", "--eval-size", "32", "--workers", "2"]
+    return build
+
+
+def _angle(a):
+    def m(d):
+        d.pop("fl_x", None)
+        d.pop("fl_y", None)
+        d.pop("camera_angle_y", None)
+        d["camera_angle_x"] = a
+        return d
+    return m
+
+
+def _centre_of(k, x):
+    def m(d):
+        d["frames"][k]["transform_matrix"][0][3] = x
+        return d
+    return m
+
+
+def _camjson(mutate):
+    """A cameras.json of the capture (a finished import's sfm/cameras.json beside the photos) with one value no
+    camera has."""
+    def build(c: Ctx):
+        cap, run = _quick(c, name="src")
+        d = json.loads((run / "sfm" / "cameras.json").read_text())
+        mutate(d["cameras"][3])
+        (cap / "cameras.json").write_text(json.dumps(d))
+        return ["run", cap / "images", "--poses", cap / "cameras.json", *FAST, "--out", c.out()]
+    return build
+
+
+def _binary_model(mutate):
+    """The capture's COLMAP model written in binary (with points) and broken by ``mutate(model)``."""
+    def build(c: Ctx):
+        cap = c.cap()
+        model = c.dir / "model"
+        model.mkdir()
+        import pycolmap
+        pycolmap.Reconstruction(str(c.base / "colmap")).write(str(model))
+        mutate(model)
+        return ["run", cap / "images", "--poses", model, *FAST, "--out", c.out()]
+    return build
+
+
+def _cut(name, keep):
+    def m(model: Path):
+        data = (model / name).read_bytes()
+        (model / name).write_bytes(data[:keep(len(data))])
+    return m
+
+
+def _latin1(c: Ctx, cap: Path):
+    os.link(cap / "images" / "frame_0003.jpg", os.path.join(os.fsencode(cap / "images"), b"caf\xe9.jpg"))
+
+    def chk() -> list[str]:
+        run = c.runs[0]
+        try:
+            recs = json.loads((run / "sfm" / "images.json").read_text())["photos"]
+        except (OSError, ValueError):
+            return []
+        return [] if any(r["rel"] == "caf\\xe9.jpg" and r["status"] == "skipped" for r in recs) \
+            else ["silent wrong: the photo named in Latin-1 is not listed as skipped"]
+    c.checks.append(chk)
+
+
+def _full_disk(argv_of, fresh_run: bool = False, triangulate: bool = False, room: int = 16384):
+    """The run folder on a small file system (tmpfs; root only) filled before the command but for ``room`` bytes
+    (the lock and the small records fit; the stage's outputs do not): one line saying the disk is full and naming
+    the file; once space is freed the same command succeeds."""
+    def build(c: Ctx):
+        if os.geteuid() != 0 or not shutil.which("mount"):
+            raise SetupError("a full disk needs root (a tmpfs of its own)")
+        disk = c.dir / "disk"
+        disk.mkdir()
+        r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48m", "tmpfs", str(disk)], capture_output=True)
+        if r.returncode != 0:
+            raise SetupError(f"cannot mount a tmpfs: {r.stderr.decode()[-200:]}")
+        c.after.append(lambda: subprocess.run(["umount", "-l", str(disk)], check=False, capture_output=True))
+        cap = c.cap()
+        run = disk / "run"
+        if not fresh_run:
+            c.runs.append(run)
+            argv = c.fast(cap, run)
+            if triangulate:
+                argv[argv.index("off")] = "auto"
+            c.curate(*argv)
+        else:
+            c.runs.append(run)
+        filler = disk / "filler"
+        c.runs.append(filler)                # freed by the check below: not compared as the user's
+        with open(filler, "wb") as f:
+            try:
+                while True:
+                    f.write(b"\0" * (1 << 16))
+                    f.flush()
+            except OSError:
+                pass
+        os.truncate(filler, max(filler.stat().st_size - room, 0))
+        argv = argv_of(c, cap, run)
+
+        def then() -> list[str]:
+            filler.unlink()
+            again = exec_curate(argv, c.dir, c.tmp)
+            return [] if again["rc"] == 0 else [f"once space was freed the same command exited {again['rc']}: "
+                                                f"{tail(again['stderr'], 1)}"]
+        c.checks.append(then)
+        c.full_disk = True
+        return argv
+    return build
+
+
+ISSUE61 = [  # (name, family, expect, build)
+    # a pose file that reaches outside the capture (item 1): run from the photo folder, without a photo folder
+    ("pose-colmap-etc-passwd-from-photo-folder", "poses", E, None),
+    # up to date means the files are there (item 2)
+    ("export-deleted-image", "uptodate", O, _deleted("export", "images/*", _export_cmd())),
+    ("export-deleted-transforms", "uptodate", O, _deleted("export", "transforms.json", _export_cmd())),
+    ("export-deleted-model-images-bin", "uptodate", O, _deleted("export", "sparse/0/images.bin", _export_cmd())),
+    ("export-deleted-ply", "uptodate", O, _deleted("export", "sparse_pc.ply", _export_cmd(), triangulate=True)),
+    ("export-deleted-images-folder", "uptodate", O, _deleted("export", "images", _export_cmd())),
+    ("export-deleted-images-txt-rerun", "uptodate", O, _deleted("export", "images.txt", _rerun)),
+    ("export-deleted-image-copy-mode", "uptodate", O, _deleted("export", "images/*", _export_cmd("--mode", "copy"))),
+    ("select-deleted-selection", "uptodate", O, _deleted("select", "selection.json",
+                                                         lambda c, cap, run: ["select", run])),
+    ("select-deleted-nodes-rerun", "uptodate", O, _deleted("select", "nodes.npz", _rerun)),
+    ("occupancy-deleted-grid-rerun", "uptodate", O, _deleted("occupancy", "occupancy.npz", _rerun)),
+    ("sfm-deleted-cameras-rerun", "uptodate", O, _deleted("sfm", "cameras.json", _rerun)),
+    ("sfm-deleted-model-rerun", "uptodate", O, _deleted("sfm", "sparse/0", _rerun)),
+    ("sfm-deleted-points-rerun", "uptodate", O, _deleted("sfm", "points.npy", _rerun)),
+    ("evaluate-deleted-metrics", "uptodate", O, _deleted("evaluate", "f00_selection/metrics.json",
+                                                         lambda c, cap, run: ["evaluate", run, *EVAL_FAST],
+                                                         evaluated=True)),
+    ("evaluate-deleted-summary", "uptodate", O, _deleted("evaluate", "summary.json",
+                                                         lambda c, cap, run: ["evaluate", run, *EVAL_FAST],
+                                                         evaluated=True)),
+    ("select-deleted-selection-then-export", "uptodate", E, _input_deleted),
+    ("export-edited-image-same-options", "uptodate", O, _edited_same("images/*")),
+    ("export-edited-transforms-same-options", "uptodate", O, _edited_same("transforms.json")),
+    # the user's files in a stage folder (item 3)
+    ("export-notes-force", "userfiles", O, _users_file("export", _export_cmd("--force"))),
+    ("export-notes-mode-change", "userfiles", O, _users_file("export", _export_cmd("--mode", "copy"))),
+    ("export-readme-downscale", "userfiles", O, _users_file("export", _export_cmd("--downscale", "2"),
+                                                            "README-mine.txt")),
+    ("select-notes-rebudget", "userfiles", O,
+     _users_file("select", lambda c, cap, run: ["select", run, "--budget", "5"], "my-selection-notes.txt")),
+    ("occupancy-notes-force", "userfiles", O, _users_file("occupancy", lambda c, cap, run: ["occupancy", run,
+                                                                                            "--force"])),
+    ("sfm-notes-run-force", "userfiles", O, _users_file("sfm", lambda c, cap, run: [*c.fast(cap, run), "--force"])),
+    ("evaluate-notes-force", "userfiles", O, _users_file("evaluate", lambda c, cap, run: ["evaluate", run, *EVAL_FAST,
+                                                                                          "--force"], evaluated=True)),
+    ("export-readme-after-kill", "userfiles", O, _after_kill(("select", "export"), "README-mine.txt")),
+    ("select-notes-after-kill", "userfiles", O, _after_kill(("select",), "my-selection-notes.txt")),
+    ("export-json-edited-mode-change", "userfiles", E, _export_json_edited("--mode", "copy")),
+    ("export-json-edited-same-options", "userfiles", O, _export_json_edited()),
+    ("export-transforms-edited-unreadable", "userfiles", E, _unreadable_edit),
+    # no worker outlives the command (item 4): every case checks that nothing of its session is left
+    ("evaluate-folds-1-two-workers", "workers", O, lambda c: ["evaluate", _quick(c)[1], *EVAL_FAST[:-2],
+                                                               "--workers", "2"]),
+    ("evaluate-tiny-minutes-two-workers", "workers", O,
+     lambda c: ["evaluate", _quick(c)[1], "--iters", "20", "--eval-size", "32", "--workers", "2", "--eval-minutes",
+                "0.01"]),
+    ("evaluate-after-select-redone", "workers", O, _evaluate_after(lambda c, run: c.curate("select", run, "--budget",
+                                                                                          "5"))),
+    ("evaluate-resumed-after-sigint", "workers", O, _evaluate_after(_interrupted(signal.SIGINT))),
+    ("evaluate-resumed-after-sighup", "workers", O, _evaluate_after(_interrupted(signal.SIGHUP))),
+    ("evaluate-sigterm", "workers", E, _signalled_evaluation(signal.SIGTERM)),
+    ("evaluate-sigint", "workers", E, _signalled_evaluation(signal.SIGINT)),
+    ("evaluate-sighup", "workers", E, _signalled_evaluation(signal.SIGHUP)),
+    ("run-sighup-during-evaluation", "workers", E, _signalled_evaluation(signal.SIGHUP, 12, run_whole=True)),
+    # poses checked as cameras (item 5)
+    ("pose-camera-angle-pi", "cameras", E, pose_dict_case(_angle(3.141592653589793))),
+    ("pose-camera-angle-zero", "cameras", E, pose_dict_case(_angle(0.0))),
+    ("pose-flx-tiny", "cameras", E, pose_dict_case(_set(fl_x=1e-3, fl_y=1e-3))),
+    ("pose-k1-1e10", "cameras", E, pose_dict_case(_set(k1=1e10, camera_model="OPENCV"))),
+    ("pose-k1-nan", "cameras", E, pose_dict_case(_set(k1=float("nan"), camera_model="OPENCV"))),
+    ("pose-k1-folding", "cameras", E, pose_dict_case(_set(k1=-3.0, camera_model="OPENCV"))),
+    ("pose-p1-huge", "cameras", E, pose_dict_case(_set(p1=5.0, camera_model="OPENCV"))),
+    ("pose-centre-1e300-one", "cameras", E, pose_dict_case(_centre_of(4, 1e300))),
+    ("pose-centre-far-one", "cameras", E, pose_dict_case(_centre_of(4, 1e9))),
+    ("pose-c2w-nan-one", "cameras", E, pose_dict_case(_first(lambda f: _mat(f, lambda m: [[float("nan")] + r[1:]
+                                                                                         for r in m[:3]] + [m[3]])))),
+    ("camjson-fx-zero", "cameras", E, _camjson(lambda cam: cam.update(fx=0.0))),
+    ("camjson-c2w-nan", "cameras", E, _camjson(lambda cam: cam["c2w"][0].__setitem__(0, float("nan")))),
+    ("camjson-width-negative", "cameras", E, _camjson(lambda cam: cam.update(width=-320))),
+    ("camjson-k1-1e10", "cameras", E, _camjson(lambda cam: cam.update(dist=[1e10, 0, 0, 0]))),
+    ("colmap-fx-zero", "cameras", E, _colmap(_edit_line("cameras.txt", lambda w: w[:4] + ["0"] + w[5:]))),
+    ("colmap-centre-1e300", "cameras", E, _colmap(_edit_line("images.txt", lambda w: w[:5] + ["1e300"] + w[6:]))),
+    ("colmap-radial-1e10", "cameras", E, _colmap(_edit_line("cameras.txt", lambda w: w[:1] + ["SIMPLE_RADIAL"] + w[2:5]
+                                                            + w[6:8] + ["1e10"]))),
+    # COLMAP's reader (item 6)
+    ("colmap-bin-ok", "colmapfiles", O, _binary_model(lambda m: None)),
+    ("colmap-bin-empty-points3d", "colmapfiles", E, _binary_model(lambda m: (m / "points3D.bin").write_bytes(b""))),
+    ("colmap-bin-truncated-images", "colmapfiles", E, _binary_model(_cut("images.bin", lambda n: n // 2))),
+    ("colmap-bin-truncated-cameras", "colmapfiles", E, _binary_model(_cut("cameras.bin", lambda n: 10))),
+    ("colmap-bin-truncated-points3d", "colmapfiles", E, _binary_model(_cut("points3D.bin", lambda n: n // 3))),
+    ("colmap-bin-trailing-bytes", "colmapfiles", E,
+     _binary_model(lambda m: (m / "images.bin").write_bytes((m / "images.bin").read_bytes() + b"\0" * 7))),
+    ("colmap-bin-huge-count", "colmapfiles", E,
+     _binary_model(lambda m: (m / "points3D.bin").write_bytes(b"\xff" * 8 + (m / "points3D.bin").read_bytes()[8:]))),
+    ("colmap-text-nan-translation", "colmapfiles", E,
+     _colmap(_edit_line("images.txt", lambda w: w[:5] + ["nan"] + w[6:]))),
+    ("colmap-text-duplicate-names", "colmapfiles", E, _colmap(lambda m: _dup_name(m))),
+    # file names that are not UTF-8 (item 6)
+    ("photos-latin1-name-import", "names", O, _pose_run(_latin1)),
+    ("photos-latin1-name-sfm", "names", O, _sfm_run(lambda c, cap: _latin1(c, cap))),
+    # unreadable folders (item 6)
+    ("export-folder-unreadable", "unreadable", E, _unreadable_folder("export", lambda run: ["export", run, "--mode",
+                                                                                          "copy"])),
+    ("export-sparse0-unreadable", "unreadable", E, _unreadable_folder("export/sparse/0", lambda run: [
+        "export", run, "--mode", "copy"])),
+    ("select-folder-unreadable", "unreadable", E, _unreadable_folder("select", lambda run: ["select", run, "--budget",
+                                                                                          "5"])),
+    ("poses-model-sparse0-unreadable", "unreadable", E, _unreadable_folder("@model", None)),
+    # a full disk in any stage (item 6)
+    ("disk-full-export-copy", "disk", E, _full_disk(lambda c, cap, run: ["export", run, "--mode", "copy", "--force"])),
+    ("disk-full-to-the-last-byte", "disk", E, _full_disk(lambda c, cap, run: ["select", run, "--budget", "5"], room=0)),
+    ("disk-full-export-downscale", "disk", E, _full_disk(lambda c, cap, run: ["export", run, "--downscale", "2,4",
+                                                                             "--force"])),
+    ("disk-full-select", "disk", E, _full_disk(lambda c, cap, run: ["select", run, "--budget", "5"])),
+    ("disk-full-occupancy", "disk", E, _full_disk(lambda c, cap, run: ["occupancy", run, "--force"])),
+    ("disk-full-evaluate", "disk", E, _full_disk(lambda c, cap, run: ["evaluate", run, *EVAL_FAST])),
+    ("disk-full-report", "disk", E, _full_disk(lambda c, cap, run: ["report", run, "--force"])),
+    ("disk-full-suggest", "disk", E, _full_disk(lambda c, cap, run: ["suggest", run, *SUGGEST_FAST],
+                                                triangulate=True)),
+    ("disk-full-run-import", "disk", E, _full_disk(lambda c, cap, run: c.fast(cap, run), fresh_run=True)),
+    ("disk-full-run-triangulate", "disk", E, _full_disk(
+        lambda c, cap, run: [*c.fast(cap, run)[:c.fast(cap, run).index("off")], "auto",
+                             *c.fast(cap, run)[c.fast(cap, run).index("off") + 1:]], fresh_run=True)),
+]
+
+
+def _dup_name(model: Path) -> None:
+    """images.txt with the second image renamed as the first."""
+    ls = (model / "images.txt").read_text().splitlines()
+    rows = [k for k, ln in enumerate(ls) if ln and not ln.startswith("#")]
+    first = ls[rows[0]].split()[-1]
+    w = ls[rows[2]].split()
+    ls[rows[2]] = " ".join(w[:-1] + [first])
+    (model / "images.txt").write_text("\n".join(ls) + "\n")
+
+
+def _passwd_from_photo_folder(c: Ctx):
+    """The sweep's security finding: images.txt names ../../../../../etc/passwd; `cd photos && curate run --poses
+    ../model ... --export-mode copy --out ../run` copied /etc/passwd into the export."""
+    cap = c.cap()
+    model = c.dir / "model"
+    shutil.copytree(c.base / "colmap", model)
+    _edit_line("images.txt", lambda w: w[:-1] + ["../../../../../etc/passwd"])(model)
+    c.cwd = cap / "images"
+    run = c.out()
+    c.checks.append(lambda: [f"security: {p} was exported" for p in run.rglob("*passwd*")] if run.exists() else [])
+    return ["run", "--poses", "../../model", "--budget", "11", "--no-evaluate", "--undistort", "off", "--export-mode",
+            "copy", "--triangulate", "off", "--out", "../../run"]
+
+
+ISSUE61[0] = (ISSUE61[0][0], ISSUE61[0][1], ISSUE61[0][2], _passwd_from_photo_folder)
+
+
 # ------------------------------------------------------------------ all cases
 def all_cases() -> list[Case]:
     cs = [Case(f"run-{n}", "flags", e, flag_run_case(f)) for n, f, e in FLAG_RUN]
@@ -1118,15 +1651,40 @@ def all_cases() -> list[Case]:
     cs += [Case(n, "rundirs", e, b) for n, b, e in RUNDIRS]
     cs += [Case(n, "videos", e, b) for n, b, e in VIDEOS]
     cs += [Case(n, "signals", e, b) for n, b, e in SIGNALS]
+    cs += [Case(n, fam, e, b) for n, fam, e, b in ISSUE61]
     names = [c.name for c in cs]
     assert len(names) == len(set(names)), "duplicate case names"
     return cs
+
+
+KINDS = ("security", "data loss", "silent wrong", "hang", "unclear")
+"""How a failed case is counted, the worst first (:func:`kind_of`)."""
+
+
+def kind_of(r: dict) -> str | None:
+    """What a failed case is (None: clean): ``security`` (a file from outside the capture exported, markup in a
+    page), ``data loss`` (a file of the user's changed or removed, anything written outside the run folder),
+    ``silent wrong`` (exit 0 where an error was due, a result missing or wrong after a success), ``hang`` (timed
+    out, a process or the lock left behind), else ``unclear`` (a trace, an internal error, no one-line error)."""
+    if r["ok"]:
+        return None
+    v = " | ".join(r["violations"])
+    if "security:" in v or "raw markup" in v:
+        return "security"
+    if "data loss:" in v or "sandbox:" in v or "user's --out file" in v or "was replaced or removed" in v:
+        return "data loss"
+    if "silent wrong:" in v or "expected an error, exited 0" in v or "differs from an uninterrupted" in v:
+        return "silent wrong"
+    if "timed out" in v or "processes" in v or "lock is still held" in v or "lock was not emptied" in v:
+        return "hang"
+    return "unclear"
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("/tmp/adv"))
     ap.add_argument("--only", default=None, help="run the cases whose name contains SUBSTRING")
+    ap.add_argument("--families", default=None, help="run the cases of these families (comma-separated)")
     ap.add_argument("--jobs", type=int, default=2, choices=(1, 2))
     ap.add_argument("--list", action="store_true", help="list the cases and exit")
     ap.add_argument("--src", type=Path, default=None,
@@ -1134,7 +1692,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.src:
         SRC.append(str(args.src.resolve()))
-    cases = [c for c in all_cases() if not args.only or args.only in c.name]
+    fams = set(args.families.split(",")) if args.families else None
+    cases = [c for c in all_cases() if (not args.only or args.only in c.name) and (fams is None or c.family in fams)]
     if args.list:
         for c in cases:
             print(c.family, c.expect, c.name)
@@ -1146,7 +1705,7 @@ def main(argv=None) -> int:
     build_base(out / "base")
     path = out / "results.jsonl"
     kept = {}
-    if args.only and path.exists():     # a partial rerun replaces its cases' lines, keeps the others
+    if (args.only or fams) and path.exists():     # a partial rerun replaces its cases' lines, keeps the others
         for ln in path.read_text().splitlines():
             r = json.loads(ln)
             kept[r["case"]] = r
@@ -1160,6 +1719,7 @@ def main(argv=None) -> int:
             except Exception as e:        # noqa: BLE001 - a harness bug in one case must not stop the sweep
                 r = {"case": c.name, "family": c.family, "expect": c.expect, "rc": None, "ok": False,
                      "violations": [f"harness error: {type(e).__name__}: {e}"], "stderr_tail": ""}
+            r["kind"] = kind_of(r)
             results.append(r)
             kept[r["case"]] = r
             print(("PASS " if r["ok"] else "FAIL ") + r["case"] + ("" if r["ok"] else f"  {r['violations']}"),
@@ -1172,8 +1732,11 @@ def main(argv=None) -> int:
         f = fam.setdefault(r["family"], {"cases": 0, "passed": 0, "failed": 0})
         f["cases"] += 1
         f["passed" if r["ok"] else "failed"] += 1
+    kinds = {k: sum(kind_of(r) == k for r in results) for k in KINDS}
     print(json.dumps({"cases": len(results), "passed": sum(r["ok"] for r in results),
-                      "failed": sum(not r["ok"] for r in results), "families": fam,
+                      "failed": sum(not r["ok"] for r in results), "kinds": kinds,
+                      "clean_pct": round(100 * sum(r["ok"] for r in results) / max(len(results), 1), 1),
+                      "families": fam,
                       "failed_cases": sorted(r["case"] for r in results if not r["ok"]),
                       "wall_s": round(time.time() - t0), "curate": SRC[0] if SRC else str(ROOT)}))
     return 0

@@ -152,26 +152,34 @@ def describe(run: Path, truth_json: Path | None, office: Path | None) -> dict:
     return out
 
 
+def small_angle_deg(M: np.ndarray) -> float:
+    """The angle of the rotation ``M`` in degrees, exact near zero (2 asin(|M - I| / 2 sqrt 2)), where the trace's
+    arccos loses its precision: matrices rounded to 6 decimals read as 0.07 deg apart by the trace."""
+    return float(np.degrees(2 * np.arcsin(min(1.0, np.linalg.norm(M - np.eye(3)) / (2 * np.sqrt(2))))))
+
+
 def pose_spread(runs: list[dict]) -> dict:
-    """The largest difference of each common frame's pose between the first run and each other, once one
-    similarity aligns their centres: rotation in degrees, centre as a share of the first run's extent."""
-    from curate.core.cameras import rotation_angle_deg
+    """The largest difference of each common frame's pose between the first run and each other: the raw largest
+    difference of their camera-to-world matrices, and, once the runs' frames are aligned (one rotation, from
+    the frames' orientations; one similarity for the centres), the rotation in degrees and the centre as a share
+    of the first run's extent."""
     from research.align import umeyama
     ref = runs[0]["c2w"]
-    worst_r, worst_c = 0.0, 0.0
+    raw, worst_r, worst_c = 0.0, 0.0, 0.0
     for r in runs[1:]:
         common = sorted(set(ref) & set(r["c2w"]))
         if len(common) < 3:
             continue
         A = np.array([ref[n] for n in common])
         B = np.array([r["c2w"][n] for n in common])
-        s, R, t = umeyama(B[:, :, 3], A[:, :, 3])
-        cb = s * B[:, :, 3] @ R.T + t
+        raw = max(raw, float(np.abs(A - B).max()))
+        U, _, Vt = np.linalg.svd(np.einsum("kij,klj->il", A[:, :, :3], B[:, :, :3]))
+        R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt       # A_rot ~ R B_rot
+        worst_r = max(worst_r, max(small_angle_deg((R @ B[k, :, :3]) @ A[k, :, :3].T) for k in range(len(common))))
+        s, Rc, t = umeyama(B[:, :, 3], A[:, :, 3])
         ext = float(np.linalg.norm(A[:, :, 3].max(0) - A[:, :, 3].min(0))) or 1.0
-        worst_c = max(worst_c, float(np.linalg.norm(cb - A[:, :, 3], axis=1).max()) / ext)
-        for k in range(len(common)):
-            worst_r = max(worst_r, float(rotation_angle_deg((R @ B[k, :, :3]) @ A[k, :, :3].T)))
-    return {"rot_deg_max": round(worst_r, 4), "centre_max": round(worst_c, 5)}
+        worst_c = max(worst_c, float(np.linalg.norm(s * B[:, :, 3] @ Rc.T + t - A[:, :, 3], axis=1).max()) / ext)
+    return {"c2w_max_abs": round(raw, 7), "rot_deg_max": round(worst_r, 4), "centre_max": round(worst_c, 5)}
 
 
 def table(logs: list[Path]) -> list[dict]:

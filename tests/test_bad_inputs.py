@@ -113,8 +113,8 @@ POSES = {
     "rotation_sheared": (_matrix(_shear), "orthonormal"),
     "reflection": (_matrix(lambda m: m @ np.diag([1.0, 1.0, -1.0, 1.0])), "reflection"),
     "bottom_row": (_matrix(lambda m: np.vstack([m[:3], [0, 0, 0, 2]])), "bottom row"),
-    "focal_zero": (_fl(0.0), "fx"),
-    "focal_negative": (_fl(-50.0), "fx"),
+    "focal_zero": (_fl(0.0), "fl_x"),
+    "focal_negative": (_fl(-50.0), "fl_x"),
     "focal_text": (_fl("wide"), "frame 3"),
     "no_intrinsics": (_del("fl_x"), "fl_x"),
     "duplicate_files": (_dup, "more than one frame"),
@@ -376,3 +376,84 @@ def test_the_databases_space_is_estimated_at_its_real_size_not_far_beyond():
     assert 96e6 < database_bytes(75, "exhaustive", cfg) < 5 * 96e6      # photos with features near the cap
     assert 77e6 < database_bytes(373, "sequential", cfg) < 2**30        # small frames: fewer features than the cap
     assert database_bytes(1000, "exhaustive", cfg) < 10 * 2**30          # was 49 GB
+
+
+def test_a_full_disk_while_a_training_saves_its_field_names_the_file(tmp_path, capsys, monkeypatch):
+    """Issue 61: a full disk during the evaluation ended in torch's "[enforce fail at inline_container.cc:672]",
+    an internal error; it is the one line of every full disk, naming the field being written, exit 2."""
+    import errno
+    import io
+    from curate.field import model
+    from test_export import ring, write_photos
+    from curate.core.transforms_json import write_transforms
+    cams = ring(12)
+    write_photos(tmp_path / "cap", cams)
+    write_transforms(tmp_path / "cap" / "transforms.json", cams)
+    run = tmp_path / "run"
+    assert cli.main(["run", str(tmp_path / "cap" / "photos"), "--poses", str(tmp_path / "cap" / "transforms.json"),
+                     "--out", str(run), "--no-evaluate", "--budget", "4", "--res", "8", "--triangulate", "off",
+                     "--method", "medoids"]) == 0
+
+    class Full(io.BytesIO):
+        def write(self, b):
+            raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(model, "open", lambda p, mode="r": Full(), raising=False)
+    capsys.readouterr()
+    assert cli.main(["evaluate", str(run), "--folds", "1", "--workers", "1", "--iters", "5", "--eval-size", "16",
+                     "--random-seeds", "1"]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("curate ")]
+    assert len(err) == 1 and "the disk is full" in err[0] and "field.pt" in err[0] and str(run / "evaluate") in err[0]
+    assert "inline_container" not in err[0]
+
+
+def test_a_colmap_model_cut_short_by_a_full_disk_is_an_error_not_an_empty_model(tmp_path, monkeypatch):
+    """COLMAP's writer leaves empty cameras.bin and images.bin on a full disk and says nothing (an export without
+    cameras, exit 0): the model is read back after writing, and one cut short is a full disk naming the folder."""
+    import errno
+    import shutil
+    from test_export import ring
+    from curate.sfm.model import reconstruction_from_cameras, write_model
+    rec = reconstruction_from_cameras(ring(5))
+    write_model(rec, tmp_path / "ok")                                   # a whole model: read back, nothing said
+
+    class CutShort:
+        def write_binary(self, path):
+            rec.write_binary(path)
+            for f in ("cameras.bin", "images.bin"):
+                (Path(path) / f).write_bytes(b"")
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=0))
+    with pytest.raises(OSError) as e:
+        write_model(CutShort(), tmp_path / "full")
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(tmp_path / "full")
+
+
+def test_a_full_disk_when_the_run_folder_is_claimed_or_locked_names_it_and_blocks_nothing(tmp_path, capsys,
+                                                                                          monkeypatch):
+    """A full disk while curate marks a new run folder left a half-written marker that made the next run, once space
+    was freed, refuse the folder as one curate did not create; while it writes the lock, it said only "no space
+    left writing a file". Both name the file, leave nothing, and the same command then works."""
+    import errno
+    from curate.core import runfolder
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    argv = ["run", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--budget", "4",
+            "--no-evaluate", "--res", "8", "--triangulate", "off", "--method", "medoids"]
+    real_write, real_pwrite = runfolder.Path.write_text, runfolder.os.pwrite
+
+    def full(self, *a, **k):
+        if runfolder.MARKER in self.name:
+            real_write(self, "{")                       # the disk fills half-way through the marker
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(self, *a, **k)
+    monkeypatch.setattr(runfolder.Path, "write_text", full)
+    run = tmp_path / "new" / "run"
+    assert cli.main([*argv, "--out", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "the disk is full" in err and str(run) in err and not (tmp_path / "new").exists()
+    monkeypatch.setattr(runfolder.Path, "write_text", real_write)
+    monkeypatch.setattr(runfolder.os, "pwrite", lambda *a: (_ for _ in ()).throw(OSError(errno.ENOSPC, "full")))
+    assert cli.main([*argv, "--out", str(run)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ": error:" in ln]
+    assert len(err) == 1 and "the disk is full" in err[0] and str(run / runfolder.LOCK) in err[0], err
+    monkeypatch.setattr(runfolder.os, "pwrite", real_pwrite)
+    assert cli.main([*argv, "--out", str(run)]) == 0

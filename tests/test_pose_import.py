@@ -390,8 +390,16 @@ def _secret(tmp_path) -> Path:
     return s
 
 
+def _text_secret(tmp_path) -> Path:
+    s = tmp_path / "elsewhere" / "passwd"
+    s.parent.mkdir(exist_ok=True)
+    s.write_text("root:x:0:0:root:/root:/bin/bash\n")
+    return s
+
+
 def _no_secret_exported(run: Path) -> None:
-    assert not (run / "export").exists() or not any("secret" in p.name for p in (run / "export").rglob("*"))
+    assert not (run / "export").exists() or not any("secret" in p.name or p.name == "passwd"
+                                                     for p in (run / "export").rglob("*"))
 
 
 @pytest.mark.parametrize("kind", ["txt", "bin"])
@@ -426,9 +434,9 @@ def test_a_transforms_json_naming_a_file_outside_its_folder_is_refused_naming_th
     root, _ = capture(tmp_path / "cap")
     secret = _secret(tmp_path)
     data = json.loads((root / "transforms.json").read_text())
-    if how == "link":
+    if how == "link":    # a link to a file that is not a photo (a link to a photo elsewhere is a photo: below)
         (root / "images" / "img_04.png").unlink()
-        (root / "images" / "img_04.png").symlink_to(secret)
+        (root / "images" / "img_04.png").symlink_to(_text_secret(tmp_path))
     else:
         data["frames"][4]["file_path"] = os.path.relpath(secret, root) if how == "climbs" else str(secret)
     (root / "transforms.json").write_text(json.dumps(data))
@@ -467,7 +475,7 @@ def test_with_a_photo_folder_a_pose_finds_its_photo_only_inside_it(tmp_path, cap
     assert not any("secret" in (r.get("original") or "") and r["status"] == "kept" for r in rec["photos"])
     _no_secret_exported(run)
     (root / "images" / "img_06.png").unlink()
-    (root / "images" / "img_06.png").symlink_to(secret)
+    (root / "images" / "img_06.png").symlink_to(_text_secret(tmp_path))
     assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out",
                  str(tmp_path / "run2"), *FAST]) == 2
     err = one_line_error(capsys)
@@ -488,3 +496,185 @@ def test_a_bare_colmap_model_never_finds_its_photos_in_the_working_directory(tmp
     assert "images.json: no photo was found for the pose of 'img_" in err and "curate run PHOTOS --poses" in err
     assert not (run / "export" / "images").exists()
     assert main(["run", str(root / "images"), "--poses", str(model), "--out", str(tmp_path / "run2"), *FAST]) == 0
+
+
+# ------------------------------------------------------------------ poses checked as cameras (issue 61, item 5)
+def _frame(k, v, which=2):
+    def m(d):
+        d["frames"][which][k] = v
+    return m
+
+
+def _angle(a):
+    """The focal length given as a field of view only: camera_angle_x = ``a``."""
+    def m(d):
+        for f in [d] + d["frames"]:
+            f.pop("fl_x", None)
+            f.pop("fl_y", None)
+        d["camera_angle_x"] = a
+    return m
+
+
+def _centre(x):
+    def m(d):
+        d["frames"][4]["transform_matrix"][0][3] = x
+    return m
+
+
+def _nan_pose(d):
+    d["frames"][5]["transform_matrix"][1][1] = float("nan")
+
+
+TRANSFORMS_NOT_A_CAMERA = {            # the sweep's cases: each exported a wrong result or failed later unnamed
+    "camera_angle_x = pi": (_angle(np.pi), "camera_angle_x", None),
+    "camera_angle_x = 0": (_angle(0.0), "camera_angle_x", None),
+    "fl_x tiny": (_frame("fl_x", 1e-3), "fl_x", 2),
+    "k1 = 1e10": (_frame("k1", 1e10), "k1 k2", 2),
+    "k1 = NaN": (_frame("k1", float("nan")), "k1 k2 p1 p2", 2),
+    "a centre at 1e300": (_centre(1e300), "transform_matrix", 4),
+    "a centre far from the others": (_centre(1e9), "transform_matrix", 4),
+    "NaN c2w": (_nan_pose, "transform_matrix", 5),
+}
+
+
+@pytest.mark.parametrize("case", list(TRANSFORMS_NOT_A_CAMERA))
+def test_a_transforms_json_pose_no_camera_has_is_one_line_naming_the_file_the_frame_and_the_field(
+        tmp_path, capsys, case):
+    """Issue 61: camera_angle_x = pi exported fl_x = 9.8e-15; k1 = 1e10 an all-black undistorted export; a camera at
+    x = 1e300 numpy overflows and 9% coverage, all with exit 0; k1 = NaN failed only in the export without naming
+    the pose file; camera_angle_x = 0 was an internal error. Each is refused at import, one line naming the file,
+    the frame and the field, before anything is written."""
+    root, _ = capture(tmp_path / "cap")
+    tj = root / "transforms.json"
+    d = json.loads(tj.read_text())
+    for f in d["frames"]:          # per-frame intrinsics, as nerfstudio writes them, so one frame can be wrong
+        f.update({k: d[k] for k in ("fl_x", "fl_y", "cx", "cy", "w", "h") if k in d})
+    mutate, field, frame = TRANSFORMS_NOT_A_CAMERA[case]
+    mutate(d)
+    tj.write_text(json.dumps(d))
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(tj), "--out", str(run), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert str(tj) in err and field in err and "internal error" not in err, err
+    if frame is not None:
+        assert f"frame {frame} ('images/img_{frame:02d}.png')" in err, err
+    assert not run.exists()
+
+
+def _camera_entry(k, v, i=3):
+    def m(d):
+        d["cameras"][i][k] = v
+    return m
+
+
+def _cameras_json_nan(d):
+    d["cameras"][3]["c2w"][0][0] = float("nan")
+
+
+@pytest.mark.parametrize("mutate, field", [(_camera_entry("fx", 0.0), "fx = 0.0"),
+                                           (_cameras_json_nan, "c2w holds NaN"),
+                                           (_camera_entry("width", -64), "width = -64")])
+def test_a_cameras_json_value_no_camera_has_names_the_file_the_camera_and_the_field(tmp_path, capsys, mutate, field):
+    """fx = 0, a NaN c2w, width < 0 in a cameras.json: the message named the field but not the file or the camera."""
+    root, _ = capture(tmp_path / "cap")
+    cj = root / "cameras.json"
+    d = json.loads(cj.read_text())
+    mutate(d)
+    cj.write_text(json.dumps(d))
+    assert main(["run", str(root / "images"), "--poses", str(cj), "--out", str(tmp_path / "run"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert str(cj) in err and "camera 3 ('images/img_03.png')" in err and field in err, err
+
+
+def _colmap_text(root: Path, rec) -> Path:
+    d = root / "text_model"
+    d.mkdir()
+    rec.write_text(str(d))
+    return d
+
+
+def _edit(path: Path, row: int, fn) -> None:
+    """Apply ``fn`` to the words of the ``row``-th data line of a COLMAP text file."""
+    lines = path.read_text().splitlines()
+    rows = [k for k, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    lines[rows[row]] = " ".join(fn(lines[rows[row]].split()))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _cut(name, keep):
+    def m(model):
+        p = model / name
+        p.write_bytes(p.read_bytes()[:keep(len(p.read_bytes()))])
+    return m
+
+
+COLMAP_BROKEN = {   # (text model?, mutation, what the one line must say)
+    "empty points3D.bin": (False, lambda m: (m / "points3D.bin").write_bytes(b""), "points3D.bin: empty"),
+    "truncated images.bin": (False, _cut("images.bin", lambda n: n // 2), "images.bin: says it holds 12 images"),
+    "truncated cameras.bin": (False, _cut("cameras.bin", lambda n: 10), "cameras.bin: says it holds 1 cameras"),
+    "truncated points3D.bin": (False, _cut("points3D.bin", lambda n: 4), "points3D.bin: cut short"),
+    "NaN quaternion": (True, lambda m: _edit(m / "images.txt", 2, lambda w: w[:1] + ["nan"] * 4 + w[5:]),
+                       "images.txt: image 'img_02.png': its pose"),
+    "duplicate names": (True, lambda m: _edit(m / "images.txt", 4, lambda w: w[:-1] + ["img_00.png"]),
+                        "images.txt: 1 image name(s) appear more than once, e.g. 'img_00.png'"),
+    "fx = 0": (True, lambda m: _edit(m / "cameras.txt", 0, lambda w: w[:4] + ["0"] + w[5:]),
+               "fx of its camera in cameras.txt = 0.0 is not a usable value"),
+    "width < 0": (True, lambda m: _edit(m / "cameras.txt", 0, lambda w: w[:2] + ["-64"] + w[3:]),
+                  "cameras.txt: line 4: camera 1: WIDTH x HEIGHT = -64 x 48"),
+}
+
+
+@pytest.mark.parametrize("case", list(COLMAP_BROKEN))
+def test_a_broken_colmap_model_is_one_line_naming_the_file_and_what_is_wrong(tmp_path, capsys, case):
+    """Issue 61: COLMAP's reader said `std::bad_alloc` for an empty points3D.bin (curate then ended as if
+    signalled), "unordered_map::at" for a truncated images.bin, its own source line for a NaN quaternion, and read
+    a truncated cameras.bin on as zeros; duplicate names and fx = 0 were not named. Each is one line naming the
+    file (and the line, image or byte) and what is wrong, exit 2, before COLMAP reads the model."""
+    from curate.sfm.model import pycolmap_reconstruction
+    root, _ = capture(tmp_path / "cap")
+    text, mutate, said = COLMAP_BROKEN[case]
+    model = _colmap_text(root, pycolmap_reconstruction(root / "sparse" / "0")) if text else root / "sparse" / "0"
+    mutate(model)
+    assert main(["run", str(root / "images"), "--poses", str(model), "--out", str(tmp_path / "run"), *FAST]) == 2
+    err = one_line_error(capsys)
+    assert f"{model}/" in err and said in err and "internal error" not in err, err
+
+
+# ------------------------------------------------------------------ file names that are not UTF-8 (issue 61, item 6)
+def test_a_photo_whose_name_is_not_utf8_is_skipped_and_listed_never_fatal(tmp_path, capsys):
+    """One photo named in Latin-1 bytes (``caf\\xe9.png``) stopped the whole run with "'utf-8' codec can't encode
+    character '\\udce9'": the import and SfM's ingest skip it, list it with why, and go on."""
+    import shutil as sh
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.ingest import ingest
+    from curate.sfm.prep import input_key
+    root, _ = capture(tmp_path / "cap")
+    odd = os.path.join(os.fsencode(root / "images"), b"caf\xe9.png")
+    sh.copyfile(root / "images" / "img_03.png", odd)
+    run = tmp_path / "run"
+    assert main(["run", str(root / "images"), "--poses", str(root / "transforms.json"), "--out", str(run), *FAST]) == 0
+    recs = json.loads((run / "sfm" / "images.json").read_text())["photos"]
+    said = [r for r in recs if r["rel"] == "caf\\xe9.png"]
+    assert len(said) == 1 and said[0]["status"] == "skipped" and "not UTF-8" in said[0]["reason"], said
+    assert "caf\\xe9.png" in (run / "report.html").read_text()
+    assert len(json.loads((run / "sfm" / "cameras.json").read_text())["cameras"]) == 12
+    input_key(SfmConfig(), root / "images")                       # SfM: the photos' key, then the ingest
+    recs = ingest(root / "images", tmp_path / "work", 64, progress=False)
+    said = [r for r in recs if r.rel == "caf\\xe9.png"]
+    assert len(said) == 1 and said[0].status == "skipped" and "not UTF-8" in said[0].reason
+    assert sum(r.status == "kept" for r in recs) == 12
+
+
+def test_a_folder_of_links_to_photos_elsewhere_is_the_users_capture(tmp_path, capsys):
+    """A batch or a dataset tool (DVC, git-annex) keeps photos as links into a store: a link that leads out of the
+    folder to a photo is the folder's photo, with the photo folder given or not."""
+    root, _ = capture(tmp_path / "store")
+    links = tmp_path / "cap"
+    (links / "images").mkdir(parents=True)
+    for f in sorted((root / "images").iterdir()):
+        (links / "images" / f.name).symlink_to(f)
+    shutil.copy(root / "transforms.json", links / "transforms.json")
+    for k, photos in enumerate(([], [str(links / "images")])):
+        assert main(["run", *photos, "--poses", str(links / "transforms.json"), "--out", str(tmp_path / f"r{k}"),
+                     *FAST]) == 0, capsys.readouterr().err
+        assert len(load_sfm(tmp_path / f"r{k}").cameras) == 12

@@ -269,18 +269,23 @@ def test_clear_tree_rules(tmp_path):
 
     run = rf.claim(tmp_path / "run")
     d = run / "select"
-    assert begin_stage(d, "k1") is False
+    owns = ("*.json", "*.npz", "sub/*")
+    assert begin_stage(d, "k1", owns=owns) is False
     (d / "a.json").write_text("{}")
     (d / "sub").mkdir()
     (d / "sub" / "b.bin").write_bytes(b"2")
-    finish_stage(d, "k1", {}, time.perf_counter())
-    assert json.loads((d / "stage.json").read_text())["files"] == ["a.json", "sub/b.bin"]
-    assert begin_stage(d, "k1") is True  # fresh: untouched
-    assert begin_stage(d, "k2") is False  # recorded files only: cleared
+    finish_stage(d, "k1", {}, time.perf_counter(), owns=owns)
+    assert sorted(json.loads((d / "stage.json").read_text())["files"]) == ["a.json", "sub/b.bin"]
+    assert begin_stage(d, "k1", owns=owns) is True  # fresh: untouched
+    assert begin_stage(d, "k2", owns=owns) is False  # recorded files only: cleared
     assert sorted(p.name for p in d.iterdir()) == [rf.STAGE_MARKER]
-    # killed half-way (marker, no record): curate's scratch, cleared
+    # killed half-way (marker, no record): what matches the stage's names is curate's scratch, cleared; the
+    # user's own file is kept
     (d / "partial.npz").write_bytes(b"3")
-    assert begin_stage(d, "k3") is False and not (d / "partial.npz").exists()
+    (d / "notes.txt").write_bytes(b"mine")
+    assert begin_stage(d, "k3", owns=owns) is False and not (d / "partial.npz").exists()
+    assert (d / "notes.txt").read_bytes() == b"mine"
+    (d / "notes.txt").unlink()
     # a folder curate did not create (no marker, no record) inside a run folder: refused
     (run / "export").mkdir()
     (run / "export" / "photo.jpg").write_bytes(b"4")

@@ -73,6 +73,42 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
 
+def test_mapping_runs_on_one_thread_whatever_the_threads_asked(monkeypatch, tmp_path):
+    """Ceres sums a multi-threaded adjustment in the order its threads finish: the same matches mapped twice on
+    two threads gave poses 0.09 deg apart, and the mappers decide on such differences. Matching and extraction
+    keep the threads asked for."""
+    from curate.sfm import matching, reconstruction
+    got: dict = {}
+    monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(inc=kw["options"]) or {})
+    monkeypatch.setattr(pycolmap, "global_mapping", lambda *a, **kw: got.update(glob=kw["options"]) or {})
+    for threads in (-1, 2, 8):
+        cfg = small_cfg(num_threads=threads)
+        reconstruction.map_incremental(cfg, tmp_path / "db", tmp_path, tmp_path / "m", 10, progress=False)
+        reconstruction.map_global(cfg, tmp_path / "db", tmp_path, tmp_path / "g")
+        assert got["inc"].num_threads == 1 and got["glob"].num_threads == got["glob"].mapper.num_threads == 1
+        assert matching._options(cfg, "sequential")[0].num_threads == threads
+
+
+@pytest.mark.parametrize("asked, sequence, on", [("auto", True, True), ("auto", False, False), ("on", False, True),
+                                                 ("off", True, False), (True, False, True), (False, True, False)])
+def test_guided_matching_is_on_for_a_sequence_of_frames_by_default(asked, sequence, on):
+    """office.mp4 with a second cut out at a turn mapped as 205 + 166 frames (the 205 placed 32 deg off) without
+    it, 361 of 361 with it: on for a video's frames or numbered photos, whatever the matcher (41 frames are
+    matched exhaustively). A run folder of curate 0.2 said true or false: on or off."""
+    from curate.core.images import PhotoRecord
+    from curate.sfm.prep import choose_guided
+    names = [f"frame_{i:04d}.jpg" for i in range(5)] if sequence else ["kitchen.jpg", "sofa.jpg", "door.jpg"]
+    kept = [PhotoRecord(original=n, rel=n, working=n) for n in names]
+    cfg = small_cfg(guided_matching=asked)
+    assert cfg.guided_matching in ("auto", "on", "off") and choose_guided(cfg, kept) is on
+    video = [PhotoRecord(original="a", rel="a", working=f"walk_{t:010.3f}.jpg") for t in (3.0, 1.0)]
+    for r in video:
+        r.extra["video"] = "/x/walk.mp4"
+    assert choose_guided(small_cfg(), video)
+    with pytest.raises(ValueError, match="guided matching"):
+        small_cfg(guided_matching="sometimes")
+
+
 def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
     """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
     adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before.
@@ -248,6 +284,36 @@ def test_global_mapper_is_seeded(monkeypatch, tmp_path):
     sfm.map_global(small_cfg(seed=5, min_num_matches=20), tmp_path / "db", tmp_path, tmp_path / "g")
     o = got["options"]
     assert o.random_seed == 5 and o.mapper.random_seed == 5 and o.min_num_matches == 20
+    assert o.mapper.rotation_averaging.random_seed == 5 and o.mapper.global_positioning.random_seed == 5
+
+
+def test_visual_words_are_the_same_every_run_and_rank_a_photos_look_alikes_first():
+    """COLMAP's vocabulary tree is not seeded (three builds, three trees): loop detection matched other pairs on
+    every run. The capture's own words are: the same descriptors give the same words, vectors and ranking."""
+    from curate.sfm import retrieval
+    rng = np.random.default_rng(3)
+    centres = rng.normal(size=(6, 128)).astype(np.float32) * 3      # three "places", two kinds of texture each
+    desc = []
+    for i in range(12):                                             # photos 0-3 place 0, 4-7 place 1, 8-11 place 2
+        place = i // 4
+        pick = rng.choice([2 * place, 2 * place + 1], 300)
+        desc.append(centres[pick] + rng.normal(size=(300, 128)).astype(np.float32))
+    names = [f"f{i:02d}.jpg" for i in range(12)]
+
+    def index(seed):
+        from curate.sfm.features import tree_sample
+        sample = tree_sample(iter(desc), 12, 2000, np.random.default_rng(seed))
+        top, leaves, off = retrieval.train(sample, seed, (8, 4))
+        hist = np.stack([np.bincount(retrieval.words(d, top, leaves, off), minlength=int(off[-1])) for d in desc])
+        return retrieval.Index(top, leaves, off, names, retrieval.tfidf(hist))
+
+    a, b = index(0), index(0)
+    assert np.array_equal(a.vectors, b.vectors) and a.n_words == b.n_words
+    ranks = dict(retrieval.ranked(a, names, k=3))
+    assert ranks == dict(retrieval.ranked(b, names, k=3))
+    for i, n in enumerate(names):
+        assert {int(c[1:3]) // 4 for c in ranks[n]} == {i // 4}, (n, ranks[n])   # its own place's photos first
+    assert np.all(np.isfinite(retrieval.tfidf(np.zeros((3, 5)))))                   # photos without words: no NaN
 
 
 def test_vocabulary_tree_sample_is_bounded_and_even():
@@ -667,3 +733,27 @@ def test_retrieval_maps_again_only_when_the_model_leaves_photos_out_and_keeps_th
     assert stats["retrieval_second_round"]["model_sizes_after"] == [19]
     again["m"] = {0: _NamedModel(names[:10])}                                 # mapped again, worse: the first is kept
     assert colmap._second_round(SfmConfig(), tmp_path / "db", tmp_path, tmp_path, names, split, {}) is split
+
+
+# ------------------------------------------------------------------ the same input, the same model (issue 58)
+@pytest.mark.slow
+def test_a_video_that_turns_fast_stays_one_model_and_three_runs_give_the_same_model(tmp_path):
+    """41 frames of office.mp4 at half its frame rate, across a turn where consecutive frames share 63 verified
+    inliers: without guided matching the incremental mapper split them (35, 21 and 3 frames) and the capture
+    rested on the global mapper; with it (the default for a sequence of frames) it maps them in one model. Three
+    runs, the last on one thread, register the same frames with the same poses: the capture's own visual words
+    are seeded and the mappers run on one thread."""
+    from research.takes import _decode, write_video
+    frames = _decode(need("office") / "office.mp4")
+    write_video([frames[i] for i in range(40, 122, 2)], tmp_path / "cap" / "walk.mp4")
+    del frames
+    cams, stats = [], []
+    for k, threads in enumerate((-1, -1, 1)):
+        run_sfm(SfmConfig(progress=False, num_threads=threads), tmp_path / "cap" / "walk.mp4", tmp_path / f"run{k}")
+        cams.append(load_sfm(tmp_path / f"run{k}").cameras)
+        stats.append(json.loads((tmp_path / f"run{k}" / "sfm" / "stage.json").read_text())["stats"])
+    assert stats[0]["mapper"] == "incremental" and "mappers_tried" not in stats[0], stats[0].get("mappers_tried")
+    assert stats[0]["model_sizes"] == [41] and len(cams[0]) == 41
+    for c in cams[1:]:
+        assert c.names == cams[0].names
+        assert np.abs(c.c2w - cams[0].c2w).max() < 1e-9 and np.array_equal(c.fx, cams[0].fx)

@@ -30,13 +30,20 @@ import numpy as np
 _CV_GL_FLIP = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
-def _as_f64(a, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
+def _as_f64(a, shape_tail: tuple[int, ...], name: str, names: Sequence[str] = ()) -> np.ndarray:
     arr = np.asarray(a, dtype=np.float64)
     if arr.shape[1:] != shape_tail or arr.ndim != len(shape_tail) + 1:
         raise ValueError(f"{name}: expected shape [N, {', '.join(map(str, shape_tail))}], got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or inf")
+    bad = np.flatnonzero(~np.isfinite(arr.reshape(len(arr), int(np.prod(shape_tail)))).all(1))
+    if len(bad):
+        raise ValueError(f"{_which(bad[0], names)}: {name} holds NaN or infinite values")
     return arr
+
+
+def _which(i: int, names: Sequence[str]) -> str:
+    """How a message names camera ``i``: its index, and its name when it has one."""
+    i = int(i)
+    return f"camera {i} ({names[i]!r})" if i < len(names) and names[i] else f"camera {i}"
 
 
 @dataclass(frozen=True)
@@ -66,23 +73,30 @@ class Cameras:
         if c2w.ndim == 3 and c2w.shape[1:] == (3, 4):
             bottom = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (c2w.shape[0], 1, 4))
             c2w = np.concatenate([c2w, bottom], axis=1)
-        c2w = _as_f64(c2w, (4, 4), "c2w")
+        label = tuple(self.names)
+        c2w = _as_f64(c2w, (4, 4), "c2w", label)
         n = c2w.shape[0]
         vals = {}
         for k in ("fx", "fy", "cx", "cy"):
             v = np.broadcast_to(np.asarray(getattr(self, k), dtype=np.float64), (n,)).copy()
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"{k}: contains NaN or inf")
+            bad = np.flatnonzero(~np.isfinite(v) | ((v <= 0) if k in ("fx", "fy") else False))
+            if len(bad):
+                raise ValueError(f"{_which(bad[0], label)}: {k} = {v[bad[0]]} is not a usable value"
+                                 + (" (a focal length is > 0)" if k in ("fx", "fy") else ""))
             vals[k] = v
-        if np.any(vals["fx"] <= 0) or np.any(vals["fy"] <= 0):
-            raise ValueError("focal lengths must be positive")
         for k in ("width", "height"):
-            v = np.broadcast_to(np.asarray(getattr(self, k)), (n,)).astype(np.int64)
-            if np.any(v <= 0):
-                raise ValueError(f"{k} must be positive")
-            vals[k] = v
+            raw = np.broadcast_to(np.asarray(getattr(self, k), dtype=np.float64), (n,))
+            bad = np.flatnonzero(~np.isfinite(raw) | (raw < 1))
+            if len(bad):
+                raise ValueError(f"{_which(bad[0], label)}: {k} = {raw[bad[0]]} is not a usable value (an image "
+                                 "is at least 1 pixel)")
+            vals[k] = raw.astype(np.int64)
         dist = np.zeros((n, 4)) if self.dist is None else np.broadcast_to(
             np.asarray(self.dist, dtype=np.float64), (n, 4)).copy()
+        bad = np.flatnonzero(~np.isfinite(dist).all(1))
+        if len(bad):
+            raise ValueError(f"{_which(bad[0], label)}: the distortion (k1 k2 p1 p2) {dist[bad[0]].tolist()} holds NaN "
+                             "or infinite values")
         names = tuple(self.names) if len(self.names) else ("",) * n
         if len(names) != n:
             raise ValueError(f"names: expected {n}, got {len(names)}")
@@ -216,7 +230,9 @@ class Cameras:
     def save(self, path) -> None:
         import json
         from pathlib import Path
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+        from curate.core.stage import writing
+        with writing(path):
+            Path(path).write_text(json.dumps(self.to_dict(), indent=1))
 
     @staticmethod
     def load(path) -> "Cameras":
@@ -343,34 +359,116 @@ ROTATION_TOL = 1e-3
 """:func:`check_poses`: largest allowed |R^T R - I| entry of a camera rotation."""
 
 
-def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str) -> None:
-    """ValueError, naming ``source`` and the frame, unless every camera is usable.
+MAX_FOV_DEG = 170.0
+""":func:`check_poses`: the widest field of view (degrees, across the width or the height) a perspective camera
+may have; 180 is none (``camera_angle_x = pi`` made a focal length of 1e-14 pixels)."""
+MIN_FOV_DEG = 0.05
+""":func:`check_poses`: the narrowest (the longest telephoto is about 1 degree)."""
+MAX_RADIAL = 5.0
+""":func:`check_poses`: the radial distortion may stretch or shrink a ray's distance from the image centre at most
+this many times, anywhere in the image (``k1 = 1e10`` exported an all-black undistorted image)."""
+MAX_TANGENTIAL = 0.1
+""":func:`check_poses`: largest |p1| and |p2| (a real lens has under 0.01)."""
+MAX_COORD = 1e12
+""":func:`check_poses`: largest coordinate of a camera centre (a centre at 1e300 overflowed every distance)."""
+MAX_SPREAD = 1e6
+""":func:`check_poses`: a camera farther from the others' median centre than this many times their median
+distance from it is a broken pose, not a camera of the capture."""
+
+FIELDS = {"c2w": "c2w", "centre": "c2w's translation", "fx": "fx", "fy": "fy", "cx": "cx", "cy": "cy",
+          "width": "width", "height": "height", "dist": "dist (k1 k2 p1 p2)", "k1 k2": "k1 k2",
+          "p1 p2": "p1 p2"}
+"""How :func:`check_poses` names each field in its messages (a reader passes its file's own names)."""
+
+
+def radial_range(k1: float, k2: float, r_max: float) -> tuple[float, float, bool]:
+    """(smallest, largest) radial factor ``1 + k1 r^2 + k2 r^4`` over ``0 <= r <= r_max`` (normalised image
+    radius), and whether the distorted radius ``r * factor`` keeps increasing there (a lens that folds the image
+    back on itself has no inverse)."""
+    r = np.linspace(0.0, max(float(r_max), 0.0), 257)
+    with np.errstate(all="ignore"):
+        f = 1 + k1 * r ** 2 + k2 * r ** 4
+        d = 1 + 3 * k1 * r ** 2 + 5 * k2 * r ** 4
+    ok = bool(np.all(np.isfinite(f)) and np.all(d > 0))
+    return float(np.min(f)), float(np.max(f)), ok
+
+
+def check_poses(c2w, fx, fy, cx, cy, width, height, labels, source: str, dist=None,
+                fields: dict | None = None) -> None:
+    """ValueError, one line naming ``source``, the frame and the field, unless every camera is one a camera can be.
 
     ``c2w`` [N, 4, 4] camera-to-world: finite, rotation orthonormal within :data:`ROTATION_TOL` with
-    determinant +1 (not scaled, sheared or mirrored), bottom row [0, 0, 0, 1]; intrinsics ``fx fy``
-    finite and > 0, ``cx cy`` finite, ``width height`` >= 1. ``labels`` [N]: how to name each frame
-    (its file path)."""
+    determinant +1 (not scaled, sheared or mirrored), bottom row [0, 0, 0, 1], centre within :data:`MAX_COORD` and
+    not :data:`MAX_SPREAD` times farther from the others than they are from each other; intrinsics ``fx fy`` finite
+    and > 0 with a field of view between :data:`MIN_FOV_DEG` and :data:`MAX_FOV_DEG`, ``cx cy`` finite,
+    ``width height`` >= 1; ``dist`` [N, 4] (k1 k2 p1 p2) finite, the radial part within :data:`MAX_RADIAL` and
+    never folding the image (:func:`radial_range`), the tangential within :data:`MAX_TANGENTIAL`. ``labels`` [N]:
+    how to name each frame (its file path); ``fields``: how the file names a field (:data:`FIELDS`'s keys)."""
+    name = {**FIELDS, **(fields or {})}
     c2w = np.asarray(c2w, np.float64)
     arrays = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "width": width, "height": height}
     n = len(c2w)
-    for i in range(n):
-        what = (f"{source}: frame {i} ({labels[i]!r})" if labels is not None and i < len(labels)
+    dist = np.zeros((n, 4)) if dist is None else np.broadcast_to(np.asarray(dist, np.float64), (n, 4))
+
+    def what(i: int) -> str:
+        return (f"{source}: frame {i} ({labels[i]!r})" if labels is not None and i < len(labels)
                 else f"{source}: frame {i}")
+
+    def value(k: str, i: int) -> float:
+        v = arrays[k]
+        return float(np.asarray(v, np.float64).reshape(-1)[i] if np.ndim(v) else v)
+    for i in range(n):
         m = c2w[i]
         if not np.all(np.isfinite(m)):
-            raise ValueError(f"{what}: the pose holds NaN or infinite values")
+            raise ValueError(f"{what(i)}: {name['c2w']}: the pose holds NaN or infinite values")
         if np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-6:
-            raise ValueError(f"{what}: the pose's bottom row is {m[3].tolist()}, not [0, 0, 0, 1]")
+            raise ValueError(f"{what(i)}: {name['c2w']}: the pose's bottom row is {m[3].tolist()}, not [0, 0, 0, 1]")
         R = m[:3, :3]
         err = float(np.max(np.abs(R.T @ R - np.eye(3))))
         if err > ROTATION_TOL:
-            raise ValueError(f"{what}: the rotation is not orthonormal (|R^T R - I| = {err:.3g}: scaled or sheared)")
+            raise ValueError(f"{what(i)}: {name['c2w']}: the rotation is not orthonormal (|R^T R - I| = {err:.3g}: "
+                             "scaled or sheared)")
         if np.linalg.det(R) < 0:
-            raise ValueError(f"{what}: the rotation is a reflection (determinant -1)")
-        for k, v in arrays.items():
-            x = float(np.asarray(v, np.float64).reshape(-1)[i] if np.ndim(v) else v)
+            raise ValueError(f"{what(i)}: {name['c2w']}: the rotation is a reflection (determinant -1)")
+        if np.max(np.abs(m[:3, 3])) > MAX_COORD:
+            raise ValueError(f"{what(i)}: {name['centre']}: the camera centre {m[:3, 3].tolist()} lies beyond "
+                             f"{MAX_COORD:g}: not a position a camera can have")
+        for k in arrays:
+            x = value(k, i)
             if not np.isfinite(x) or (k in ("fx", "fy") and x <= 0) or (k in ("width", "height") and x < 1):
-                raise ValueError(f"{what}: {k} = {x} is not a usable value")
+                raise ValueError(f"{what(i)}: {name[k]} = {x} is not a usable value")
+        for f, side in (("fx", "width"), ("fy", "height")):
+            fov = float(np.degrees(2 * np.arctan(0.5 * value(side, i) / value(f, i))))
+            if not MIN_FOV_DEG <= fov <= MAX_FOV_DEG:
+                raise ValueError(f"{what(i)}: {name[f]} = {value(f, i):.6g} gives a field of view of {fov:.3g} "
+                                 f"degrees across the {side}: a perspective camera has between {MIN_FOV_DEG:g} and "
+                                 f"{MAX_FOV_DEG:g}")
+        d = dist[i]
+        if not np.all(np.isfinite(d)):
+            raise ValueError(f"{what(i)}: {name['dist']} = {d.tolist()} holds NaN or infinite values")
+        if np.any(d[:2] != 0):
+            r_max = float(np.hypot(max(value("cx", i), value("width", i) - value("cx", i)) / value("fx", i),
+                                   max(value("cy", i), value("height", i) - value("cy", i)) / value("fy", i)))
+            lo, hi, ok = radial_range(d[0], d[1], r_max)
+            if not ok or hi > MAX_RADIAL or lo < 1 / MAX_RADIAL:
+                why = ("folds the image back on itself" if not ok else
+                       f"scales the distance from the centre by {hi if hi > MAX_RADIAL else lo:.3g} at the image's "
+                       f"edge (a lens stays within 1/{MAX_RADIAL:g} and {MAX_RADIAL:g})")
+                raise ValueError(f"{what(i)}: {name['k1 k2']} = {d[0]:.6g} {d[1]:.6g}: this radial distortion {why}")
+        if np.max(np.abs(d[2:])) > MAX_TANGENTIAL:
+            raise ValueError(f"{what(i)}: {name['p1 p2']} = {d[2]:.6g} {d[3]:.6g}: tangential distortion beyond "
+                             f"{MAX_TANGENTIAL:g} is not a lens's")
+    if n >= 3:
+        centres = c2w[:, :3, 3]
+        mid = np.median(centres, axis=0)
+        dev = np.linalg.norm(centres - mid, axis=1)
+        spread = float(np.median(dev))
+        far = np.flatnonzero(dev > MAX_SPREAD * spread) if spread > 0 else np.zeros(0, int)
+        if len(far):
+            i = int(far[np.argmax(dev[far])])
+            raise ValueError(f"{what(i)}: {name['centre']}: the camera centre {centres[i].tolist()} is "
+                             f"{dev[i] / spread:.3g} times farther from the others than they are from each other: "
+                             "a broken pose, not a camera of this capture")
 
 
 def rotation_angle_deg(R: np.ndarray) -> np.ndarray:

@@ -70,6 +70,13 @@ class Stage:
     """The entries of the run folder it writes (default: its folder)."""
     record: str = ""
     """The file, relative to the run folder, whose presence says it finished (default ``NAME/stage.json``)."""
+    owns: tuple[str, ...] | None = None
+    """Glob patterns (relative to its folder; ``*`` crosses ``/``) of every file it writes there: what its
+    record lists and all a re-run may remove. A file the user puts into the folder that matches none is kept
+    (:func:`curate.core.runfolder.sort_files`); one that matches is refused, never written over."""
+    spare: tuple[str, ...] = ()
+    """Patterns of files it writes that nothing reads again (a log, COLMAP's database): their absence does not
+    make it out of date."""
 
     def __post_init__(self) -> None:
         if not self.writes:
@@ -78,8 +85,14 @@ class Stage:
             object.__setattr__(self, "record", f"{self.name}/stage.json")
 
     def run(self, ctx: RunContext) -> "StageResult":
-        """Run the stage (its function imported now)."""
-        return _function(self.runs)(ctx)
+        """Run the stage (its function imported now). An ``OSError`` that names no file (a full disk met by a
+        library) is raised again naming the stage's folder."""
+        try:
+            return _function(self.runs)(ctx)
+        except OSError as e:
+            if e.filename is None and e.errno is not None:
+                raise OSError(e.errno, e.strerror or str(e), str(Path(ctx.run_dir) / self.writes[0])) from None
+            raise
 
     def applies(self, cfg: "RunConfig", run_dir: str | Path) -> bool:
         """The stage is part of this run (its :attr:`when`)."""
@@ -95,17 +108,32 @@ def _function(ref: str) -> Callable:
     return getattr(importlib.import_module(module), name)
 
 
+UNIT_OWNS = ("metrics.json", "renders/*", "field.pt", "train.json", ".progress")
+"""What one training of the evaluation writes in its folder (``RUN/evaluate/<unit>``)."""
+
 STAGES: tuple[Stage, ...] = (
-    Stage("sfm", "curate.sfm.stage:run", "photos to cameras"),
-    Stage("occupancy", "curate.occupancy.stage:run", "where the scene is", reads=("sfm",), needs=("sfm",)),
+    Stage("sfm", "curate.sfm.stage:run", "photos to cameras",
+          owns=("images/*", "sparse/*", "mapper/*", "dense/*", "triangulation/*", "database.db", "database.db-*",
+                "vocab_tree.bin", "retrieval_second_round.txt", "cross_take_pairs.txt", "cameras.json",
+                "transforms.json", "images.json", "normalization.json", "points.npy", "points_rgb.npy",
+                "points_error.npy", "colmap.log"),
+          spare=("database.db", "database.db-*", "colmap.log", "vocab_tree.bin", "retrieval_second_round.txt",
+                 "cross_take_pairs.txt")),
+    Stage("occupancy", "curate.occupancy.stage:run", "where the scene is", reads=("sfm",), needs=("sfm",),
+          owns=("occupancy.npz", "field.pt", "train.json")),
     Stage("budget", "curate.evaluate.budget:run", "measuring how many photos this capture needs",
-          reads=("occupancy",), needs=("sfm", "occupancy"), when="curate.evaluate.budget:wanted"),
+          reads=("occupancy",), needs=("sfm", "occupancy"), when="curate.evaluate.budget:wanted",
+          owns=("budget.json",)),
     Stage("select", "curate.select.stage:run", "choosing photos", reads=("occupancy", "budget"),
-          needs=("sfm", "occupancy"), cheap=True),
+          needs=("sfm", "occupancy"), cheap=True, owns=("selection.json", "nodes.npz")),
     Stage("evaluate", "curate.evaluate.stage:run", "training on the subsets", reads=("select",),
-          needs=("sfm", "occupancy", "select"), when="curate.evaluate.stage:wanted"),
+          needs=("sfm", "occupancy", "select"), when="curate.evaluate.stage:wanted",
+          owns=("summary.json", "gt/*") + tuple(f"*/{g}" for g in UNIT_OWNS)),
     Stage("export", "curate.export.stage:run", "writing the export", reads=("select",), needs=("sfm", "select"),
-          cheap=True),
+          cheap=True, owns=("images/*", "images_2/*", "images_4/*", "images_8/*", "sparse/0/cameras.bin",
+                            "sparse/0/images.bin", "sparse/0/points3D.bin", "sparse/0/rigs.bin", "sparse/0/frames.bin",
+                            "distorted/images/*", "distorted/sparse/0/*.bin", ".curate-undistort-*",
+                            "transforms.json", "images.txt", "export.json", "sparse_pc.ply")),
     Stage("report", "curate.report.stage:run", "writing the report", needs=("sfm", "occupancy", "select"),
           cheap=True, writes=("report.json", "report.html"), record="report.json"),
 )

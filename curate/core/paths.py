@@ -127,29 +127,35 @@ class RunPaths:
 
 
 def inside(path: str | Path, root: str | Path) -> bool:
-    """Whether ``path`` lies in the folder ``root``, by name (``..`` resolved without following links) and
-    with every link on the way followed."""
+    """Whether ``path`` stays in the folder ``root``: it lies there by name (``..`` resolved without following
+    links), and with every link on the way followed it still lies there or is a photo (a file with an image
+    extension: a folder of links to the photos, as a batch or a dataset tool makes, is the user's capture; a
+    link to ``/etc/passwd`` or to a folder of other files is not)."""
     import os
     p, r = Path(os.path.abspath(path)), Path(os.path.abspath(root))
     if not p.is_relative_to(r):
         return False
-    return Path(os.path.realpath(p)).is_relative_to(Path(os.path.realpath(r)))
+    real = Path(os.path.realpath(p))
+    if real.is_relative_to(Path(os.path.realpath(r))):
+        return True
+    from curate.core.images import IMAGE_EXTS
+    return real.suffix.lower() in IMAGE_EXTS and real.is_file()
 
 
 def within_capture(root: str | Path, name: str, source: str | Path, entry: str) -> Path:
     """``root / name``: the file a pose file's entry names, resolved against the capture's folder ``root``.
 
     A pose file says which photo each pose describes; a name that leaves ``root`` (``..``, an absolute path
-    elsewhere, a link whose target lies outside) would make curate read, and export, any file the pose file
-    points at (``../../../etc/passwd``). ``ValueError`` naming the pose file ``source`` and the ``entry``
-    (``frame 3``, ``image 12``) when it leaves; nothing is opened here."""
+    elsewhere, a link to something outside that is not a photo: :func:`inside`) would make curate read, and
+    export, any file the pose file points at (``../../../etc/passwd``). ``ValueError`` naming the pose file
+    ``source`` and the ``entry`` (``frame 3``, ``image 12``) when it leaves; nothing is opened here."""
     import os
     p = Path(name)
     full = p if p.is_absolute() else Path(root) / p
     lexical = Path(os.path.abspath(full)).is_relative_to(Path(os.path.abspath(root)))
     if inside(full, root) or (lexical and not full.exists()):   # a link to nothing reads nothing: "missing" later
         return full
-    why = (f"a link that leads to {os.path.realpath(full)}" if lexical else
+    why = (f"a link that leads to {os.path.realpath(full)}, not a photo" if lexical else
            "an absolute path elsewhere" if p.is_absolute() else "a path that climbs out of it")
     raise ValueError(f"{source}: {entry} names {name!r}, outside the capture's folder {root} ({why}); curate "
                      "reads only photos inside it: give the photo folder (curate run PHOTOS --poses ...), or "

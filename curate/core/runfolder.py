@@ -53,6 +53,7 @@ import json
 import logging
 import os
 import socket
+import stat
 import sys
 import threading
 import time
@@ -122,8 +123,19 @@ def _write_marker(out: Path, adopted: list[str] | None) -> None:
     if adopted is not None:
         rec["adopted"] = adopted
     tmp = out / f"{MARKER}.tmp{os.getpid()}"
-    tmp.write_text(json.dumps(rec, indent=1))
+    try:
+        tmp.write_text(json.dumps(rec, indent=1))
+    except OSError:
+        tmp.unlink(missing_ok=True)   # a full disk leaves no half-written marker that would block the next claim
+        raise
     os.replace(tmp, out / MARKER)
+
+
+def _why(e: OSError) -> str:
+    import errno
+    if e.errno == errno.ENOSPC:
+        return "the disk is full (no space left on device); free some space, then run again"
+    return str(e.strerror or e)
 
 
 def claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: bool = False,
@@ -185,7 +197,7 @@ def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: boo
         try:
             _write_marker(o, entries if entries else None)
         except OSError as e:
-            raise RunFolderError(f"cannot write the run folder {raw}: {e.strerror or e}") from None
+            raise RunFolderError(f"cannot write the run folder {raw}: {_why(e)}") from None
         marked = True
         if entries:
             log.warning("%s: adopted (%d entries of yours kept, never written)", raw, len(entries))
@@ -197,7 +209,13 @@ def _claim(out: str | Path, inputs: Iterable[str | Path | None] = (), adopt: boo
             o.mkdir(parents=True, exist_ok=True)
             _write_marker(o, None)
         except OSError as e:
-            raise RunFolderError(f"cannot create the run folder {raw}: {e.strerror or e}") from None
+            d = o                        # what this call created goes again (empty folders only)
+            while d.is_dir() and not any(d.iterdir()):
+                d.rmdir()
+                if d == created:
+                    break
+                d = d.parent
+            raise RunFolderError(f"cannot create the run folder {raw}: {_why(e)}") from None
     made = _Made(created, marked)
     if not os.access(o, os.W_OK | os.X_OK):
         raise RunFolderError(f"cannot write the run folder {raw}: read-only")
@@ -420,9 +438,15 @@ class RunLock:
             info = {"pid": os.getpid(), "start_time": proc_start_time(os.getpid()), "host": socket.gethostname(),
                     "command": self.command, "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "token": self.token}
             data = json.dumps(info).encode()
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, data, 0)
-            os.fsync(fd)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, data, 0)
+                os.fsync(fd)
+            except OSError as e:      # a full disk: the lock named, released
+                if fcntl is not None:
+                    fcntl.flock(fd, fcntl.LOCK_UN)
+                os.close(fd)
+                raise OSError(e.errno, e.strerror, str(path)) from None
             _held[self.run_dir] = [fd, self.token, 1]
             return self
 
@@ -492,8 +516,14 @@ def check_holder(run_dir: str | Path, token: str | None) -> None:
 
 # ------------------------------------------------------------------ clearing
 def _walk(d: Path) -> Iterator[Path]:
-    """Every non-directory entry under ``d`` (links are entries: never followed)."""
-    for e in os.scandir(d):
+    """Every non-directory entry under ``d`` (links are entries: never followed). A folder curate cannot read
+    is a :class:`RunFolderError` naming it."""
+    try:
+        entries = list(os.scandir(d))
+    except PermissionError as e:
+        raise RunFolderError(f"{d}: cannot read this folder ({e.strerror}): curate needs to see what it wrote "
+                             "there; give it back read permission (chmod u+rwx), then run again") from None
+    for e in entries:
         p = Path(e.path)
         if e.is_dir(follow_symlinks=False):
             yield from _walk(p)
@@ -506,69 +536,246 @@ def _is_tmp(name: str) -> bool:
     return bool(base) and tail.isdigit()
 
 
-def foreign_files(d: str | Path, own: Iterable[str] = ()) -> list[Path]:
-    """Files under the folder ``d`` curate did not write (see the module docstring); [] when all are curate's.
+def sha256_file(p: str | Path) -> str:
+    """SHA-256 of the bytes of the file ``p``."""
+    import hashlib
+    h = hashlib.sha256()
+    with open(p, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
-    ``own``: glob patterns (relative to ``d``) of files the caller writes there outside any stage record.
-    """
+
+def file_state(p: str | Path, known: dict | None = None) -> dict:
+    """What a stage record keeps of one file it wrote: a symbolic link's target (``link``), else its ``size``,
+    modification time (``mtime_ns``), ``inode`` and ``sha256``. ``known``: the same file's earlier state; its
+    checksum is reused when size and time are unchanged (a finished unit's files are not read again)."""
+    p = Path(p)
+    st = os.lstat(p)
+    if stat.S_ISLNK(st.st_mode):
+        return {"link": os.readlink(p)}
+    if (known and known.get("size") == st.st_size and known.get("mtime_ns") == st.st_mtime_ns
+            and known.get("sha256")):
+        digest = known["sha256"]
+    else:
+        digest = sha256_file(p)
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "inode": [st.st_dev, st.st_ino], "sha256": digest}
+
+
+def is_changed(p: str | Path, was: dict | str) -> bool:
+    """True when the file ``p`` (present) is no longer what curate wrote (``was``: :func:`file_state`, or a
+    bare SHA-256 as an export of curate 0.3 recorded it): a link that leads elsewhere or became a file, a file
+    that became a link, or other bytes. Same size and time: unchanged. The same file (inode) with more than one
+    name: a hard link curate made to an original, unchanged (the original is the user's to edit). A file that
+    cannot be read is taken as changed: curate cannot prove it is its own."""
+    p = Path(p)
+    if isinstance(was, str):
+        was = {"sha256": was}
+    try:
+        st = os.lstat(p)
+    except OSError:
+        return False
+    if "link" in was:
+        try:
+            return not stat.S_ISLNK(st.st_mode) or os.readlink(p) != was["link"]
+        except OSError:
+            return True
+    if not stat.S_ISREG(st.st_mode):
+        return True
+    if "size" in was and st.st_size == was["size"] and st.st_mtime_ns == was.get("mtime_ns"):
+        return False
+    if was.get("inode") == [st.st_dev, st.st_ino] and st.st_nlink > 1:
+        return False
+    if "size" in was and st.st_size != was["size"]:
+        return True
+    try:
+        return sha256_file(p) != was.get("sha256")
+    except OSError:
+        return True
+
+
+class Outputs(NamedTuple):
+    """How the files a stage record lists (``files``) stand now (:func:`check_outputs`)."""
+
+    missing: list[str]
+    """Listed files that are gone (relative paths)."""
+    changed: list[str]
+    """Listed files that are there but are no longer what curate wrote (the user's edits)."""
+
+
+def check_outputs(d: str | Path, files, spare: Iterable[str] = ()) -> Outputs:
+    """:class:`Outputs` of the stage folder ``d`` against its record's ``files`` (a dict of :func:`file_state`;
+    a list, from an earlier curate: presence only). ``spare``: patterns of files whose absence does not count
+    (a log, COLMAP's database: nothing reads them again)."""
     d = Path(d)
-    if not d.is_dir() or d.is_symlink():
-        return [d] if d.exists() or d.is_symlink() else []
-    own = tuple(own)
-    rec = None
+    missing, changed = [], []
+    items = files.items() if isinstance(files, dict) else ((f, None) for f in (files or ()))
+    for rel, was in items:
+        p = d / rel
+        if not os.path.lexists(p):
+            if not any(fnmatch.fnmatch(rel, g) for g in spare):
+                missing.append(rel)
+        elif was is not None and is_changed(p, was):
+            changed.append(rel)
+    return Outputs(missing, changed)
+
+
+def _read_record(d: Path) -> dict | None:
     try:
         rec = json.loads((d / "stage.json").read_text())
     except (OSError, ValueError):
-        rec = None
-    listed = set(rec.get("files") or ()) if isinstance(rec, dict) else set()
-    scratch = (d / STAGE_MARKER).is_file() and rec is None
-    out = []
-    nested: dict[Path, bool] = {}
+        return None
+    return rec if isinstance(rec, dict) else None
+
+
+class Sorted(NamedTuple):
+    """The files under a stage folder, by whose they are (:func:`sort_files`)."""
+
+    curates: list[Path]
+    """Curate's: listed in the record and unchanged, its bookkeeping, or (no record yet) its names."""
+    kept: list[Path]
+    """The user's: neither listed nor among the names the stage writes. Never removed."""
+    blocking: list[tuple[Path, str]]
+    """(file, why) that forbid clearing: a file curate wrote and the user changed, or a file of the user's
+    where the stage writes (it would be written over)."""
+
+
+def sort_files(d: str | Path, owns: Iterable[str] | None = None) -> Sorted:
+    """Sort every file under the stage folder ``d``.
+
+    ``owns``: glob patterns (relative to ``d``) of the files the stage writes (None: every file of a folder
+    curate created and left without a record is its scratch, as before curate 0.3). A file listed in the
+    record (``files`` of ``stage.json``) is curate's unless it was changed since; in a folder that carries the
+    ``.curate-stage`` marker but no record (a stage killed half-way) the files matching ``owns`` are curate's
+    scratch; a nested stage folder (``evaluate/<unit>``) follows its own record. Anything else is the
+    user's: kept, unless it matches ``owns`` (the stage would write over it: blocking). A folder curate did
+    not create (no marker, no record) is all the user's and blocks."""
+    d = Path(d)
+    rec = _read_record(d)
+    scratch = rec is None and (d / STAGE_MARKER).is_file()
+    if owns is None:   # the names the stage said it writes, in its record or (killed half-way) its marker
+        owns = (rec if rec is not None else read_stage_marker(d) if scratch else {}).get("owns")
+    owns = None if owns is None else tuple(owns)
+    files = (rec or {}).get("files")
+    listed = set(files) if isinstance(files, (dict, list)) else set()
+    ours = rec is not None or scratch
+    out = Sorted([], [], [])
+    nested: dict[Path, Sorted] = {}
+
+    def matches(rel: str) -> bool:
+        return owns is None or any(fnmatch.fnmatch(rel, g) for g in owns)
     for p in _walk(d):
         rel = p.relative_to(d).as_posix()
-        if scratch or rel in listed or p.name in BOOKKEEPING and p.parent == d or _is_tmp(p.name):
+        if p.name in BOOKKEEPING and p.parent == d or _is_tmp(p.name):
+            out.curates.append(p)
             continue
-        if any(fnmatch.fnmatch(rel, g) for g in own):
-            continue
-        # a nested stage folder (evaluate/<unit>) follows its own record
         sub = next((q for q in p.relative_to(d).parents if q != Path(".") and (d / q / STAGE_MARKER).is_file()), None)
-        if sub is not None:
+        if sub is not None and rel not in listed:
             if sub not in nested:
-                nested[sub] = not foreign_files(d / sub, ())
-            if nested[sub]:
-                continue
-        out.append(p)
+                inner = sort_files(d / sub)
+                nested[sub] = inner
+                out.curates.extend(inner.curates)
+                out.kept.extend(inner.kept)
+                out.blocking.extend(inner.blocking)
+            continue
+        if rel in listed:
+            was = files.get(rel) if isinstance(files, dict) else None
+            if was is not None and is_changed(p, was):
+                out.blocking.append((p, "changed"))
+            else:
+                out.curates.append(p)
+        elif not ours:
+            out.blocking.append((p, "foreign"))
+        elif scratch and matches(rel):
+            out.curates.append(p)
+        elif owns is not None and not matches(rel):
+            out.kept.append(p)
+        else:
+            out.blocking.append((p, "foreign"))
     return out
 
 
-def clear_tree(d: str | Path, own: Iterable[str] = ()) -> None:
-    """Remove the folder ``d`` of a claimed run folder when every file in it is curate's; else remove nothing.
+def read_stage_marker(d: str | Path) -> dict:
+    """The ``.curate-stage`` marker of the stage folder ``d``: when the stage began and ``owns``, the names it
+    writes ({} for a marker of curate 0.2, which held only the time)."""
+    try:
+        rec = json.loads((Path(d) / STAGE_MARKER).read_text())
+    except (OSError, ValueError):
+        return {}
+    return rec if isinstance(rec, dict) else {}
 
-    Raises :class:`RunFolderError` when ``d`` is not inside a claimed run folder, or holds
-    a file curate did not write (named in the message). Links are removed, never followed.
-    """
+
+def write_stage_marker(d: str | Path, owns: Iterable[str] | None) -> None:
+    """Mark ``d`` as a stage folder curate created, with the names the stage writes (:func:`sort_files`)."""
+    rec = {"begun": time.strftime("%Y-%m-%dT%H:%M:%S"), "owns": None if owns is None else list(owns)}
+    (Path(d) / STAGE_MARKER).write_text(json.dumps(rec) + "\n")
+
+
+def changed_said(p: Path, d: Path, verb: str = "wrote") -> str:
+    """The line that refuses to clear a stage folder over the user's edit of ``p``."""
+    return (f"{p} was changed since curate {verb} it: curate does not remove or write over it; move it out of {d} "
+            "(or keep the result as it is), then run again")
+
+
+def clear_tree(d: str | Path, own: Iterable[str] | None = None) -> list[Path]:
+    """Remove what curate wrote under the folder ``d`` of a claimed run folder (:func:`sort_files`); keep the
+    user's files and return them (the caller says so). Nothing at all is removed, and :class:`RunFolderError`
+    names the file, when ``d`` is not inside a claimed run folder, when a file curate wrote was changed since
+    (the user's edit), or when a file curate did not write lies where the stage writes.
+    Links are removed, never followed. Folders left empty go; ``d`` itself stays when it keeps a file."""
     d = Path(d)
     if not d.exists() and not d.is_symlink():
-        return
+        return []
     root = run_root(d.parent)
     if root is None:
         raise RunFolderError(f"refusing to clear {d}: not inside a run folder curate created (no {MARKER})")
     check_writable(d)
-    bad = foreign_files(d, own)
-    if bad:
+    if d.is_symlink() or not d.is_dir():
+        raise RunFolderError(f"refusing to clear {d}: not a folder curate created")
+    got = sort_files(d, own)
+    changed = [p for p, why in got.blocking if why == "changed"]
+    if changed:
+        raise RunFolderError(changed_said(changed[0], d))
+    if got.blocking:
+        bad = [p for p, _ in got.blocking]
         raise RunFolderError(f"refusing to clear {d}: it holds {len(bad)} file(s) curate did not write, e.g. "
                              f"{bad[0]}; move them out or choose another run folder")
     (d / "stage.json").unlink(missing_ok=True)  # the record first: a crash never leaves a stale one
-    for p in sorted(_walk(d), key=lambda q: len(q.parts), reverse=True):
+    for p in sorted(got.curates, key=lambda q: len(q.parts), reverse=True):
         p.unlink(missing_ok=True)
     for sub, _, _ in sorted(os.walk(d), key=lambda t: len(Path(t[0]).parts), reverse=True):
-        os.rmdir(sub)
+        if Path(sub) != d or not got.kept:
+            try:
+                os.rmdir(sub)
+            except OSError:       # a folder holding the user's files stays
+                pass
+    return sorted(got.kept)
 
 
-def manifest(d: str | Path) -> list[str]:
-    """Relative paths (POSIX) of every file under the stage folder ``d`` (for its ``stage.json``)."""
+def foreign_files(d: str | Path, own: Iterable[str] | None = None) -> list[Path]:
+    """The files under ``d`` a re-run would not remove: the user's, and curate's that the user changed."""
+    got = sort_files(d, own)
+    return sorted(got.kept + [p for p, _ in got.blocking])
+
+
+def manifest(d: str | Path, owns: Iterable[str] | None = None) -> dict[str, dict]:
+    """{relative path (POSIX): :func:`file_state`} of every file under the stage folder ``d`` that the stage
+    wrote (matching ``owns``; None: every file), for its ``stage.json``. Nested stage folders (the evaluation's
+    units) are left to their own records; the previous record's checksums are reused for unchanged files."""
     d = Path(d)
     if not d.is_dir():
-        return []
-    return sorted(p.relative_to(d).as_posix() for p in _walk(d)
-                  if p.name not in BOOKKEEPING and not _is_tmp(p.name))
+        return {}
+    owns = None if owns is None else tuple(owns)
+    prev = ((_read_record(d) or {}).get("files"))
+    prev = prev if isinstance(prev, dict) else {}
+    out = {}
+    for p in _walk(d):
+        rel = p.relative_to(d).as_posix()
+        if p.name in BOOKKEEPING and p.parent == d or _is_tmp(p.name):
+            continue
+        if any((d / q / STAGE_MARKER).is_file() for q in p.relative_to(d).parents if q != Path(".")):
+            continue
+        if owns is not None and not any(fnmatch.fnmatch(rel, g) for g in owns):
+            continue
+        out[rel] = file_state(p, prev.get(rel))
+    return dict(sorted(out.items()))

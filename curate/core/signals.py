@@ -8,8 +8,9 @@ exit status is 143 (130 for Ctrl-C); a re-run resumes from the stages and traini
 Python runs a signal handler only between bytecodes of the main thread, and COLMAP's extraction, matching and
 mapping are native calls that run for minutes (they release the GIL, but do not return). So every such signal
 also wakes a watcher thread (``signal.set_wakeup_fd``): when the main thread has not finished unwinding
-within :data:`GRACE_S`, the watcher ends the process itself, with the same line, the locks released
-(:func:`curate.core.runfolder.release_all`) and ``os._exit``; the workers die with their parent.
+within :data:`GRACE_S`, the watcher ends the process itself, with the same line: the training workers killed
+and reaped (:func:`curate.core.pools.end_all`), the locks released (:func:`curate.core.runfolder.release_all`),
+then ``os._exit``.
 
 pycolmap installs glog's failure handler for SIGTERM when it is imported (it prints a native stack dump, and
 during mapping it deadlocked holding the lock): :func:`install` is called again after that import
@@ -129,8 +130,9 @@ def _watch(r: int) -> None:
 
 def _force(signum: int) -> None:
     """End the process now: the main thread is inside native work and cannot unwind."""
-    from curate.core import runfolder
+    from curate.core import pools, runfolder
     try:
+        pools.end_all()          # the training workers killed and reaped: none outlives the command
         runfolder.release_all()
     finally:
         word = WORD.get(signum, "terminated")

@@ -6,26 +6,33 @@ one, the stage's outputs and its wall time. A stage whose ``stage.json`` exists 
 the same key is skipped; a stage killed half-way leaves no ``stage.json`` and is
 redone. Writes go to a temporary file and are renamed, so a record is whole or absent.
 
-``stage.json`` also lists (``files``) every file the stage wrote in its folder: a re-run
-clears those and nothing else (:func:`curate.core.runfolder.clear_tree`), and only in a
-run folder curate claimed.
+``stage.json`` also lists (``files``) every file the stage wrote in its folder, each with its size, time and
+checksum (a link: its target). **Up to date means the files are there**: a stage is skipped only when its key is
+unchanged *and* those files are there (:func:`up_to_date`); a missing one makes the stage run again, and a file
+the user changed is kept and named. A re-run clears what the record lists and nothing else
+(:func:`curate.core.runfolder.clear_tree`), only in a run folder curate claimed, and says which files of the
+user's it kept; it refuses, naming the file, to remove or write over a file of curate's that the user changed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
+import logging
 import os
 import platform
 import time
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, NamedTuple
 
 from curate.core.paths import RunPaths
 from curate.core.graph import BY_NAME, NAMES, READS
 
 STAGE_FILE = "stage.json"
+
+log = logging.getLogger(__name__)
 
 
 @dataclasses.dataclass
@@ -78,7 +85,7 @@ def hash_files(paths: Iterable[str | Path], h: "hashlib._Hash | None" = None) ->
     h = h or hashlib.sha256()
     for p in paths:
         p = Path(p)
-        h.update(p.name.encode())
+        h.update(os.fsencode(p.name))
         if p.is_file():
             h.update(str(p.stat().st_size).encode())
             with open(p, "rb") as f:
@@ -121,29 +128,71 @@ def read_stage(stage_dir: str | Path) -> dict | None:
     return rec if isinstance(rec, dict) else None
 
 
-def is_fresh(stage_dir: str | Path, key: str) -> bool:
-    """True when the stage finished earlier with the same key."""
+class Freshness(NamedTuple):
+    """Whether a finished stage can be skipped (:func:`up_to_date`)."""
+
+    fresh: bool
+    """Same key and every file of its record there: skip it."""
+    missing: list[str]
+    """Files its record lists that are gone (then it runs again)."""
+    changed: list[str]
+    """Files its record lists that the user changed (kept: never removed or written over)."""
+
+
+def up_to_date(stage_dir: str | Path, key: str, spare: Iterable[str] = ()) -> Freshness:
+    """Is the stage in ``stage_dir`` finished with ``key`` and are its outputs there? A record whose files are
+    missing (``spare`` apart: :attr:`curate.core.graph.Stage.spare`) is not up to date: the stage runs again.
+    A file the user changed does not make it out of date (their edit is kept); it is named in ``changed``."""
+    from curate.core.runfolder import check_outputs
     rec = read_stage(stage_dir)
-    return rec is not None and rec.get("key") == key
+    if rec is None or rec.get("key") != key:
+        return Freshness(False, [], [])
+    out = check_outputs(stage_dir, rec.get("files"), spare)
+    return Freshness(not out.missing, out.missing, out.changed)
 
 
-def begin_stage(stage_dir: str | Path, key: str, force: bool = False) -> bool:
-    """True when the stage finished earlier with the same ``key`` (and ``force`` is off): skip it.
+def is_fresh(stage_dir: str | Path, key: str, spare: Iterable[str] = ()) -> bool:
+    """True when the stage finished earlier with the same key and the files it wrote are there."""
+    return up_to_date(stage_dir, key, spare).fresh
 
-    Otherwise the stage's folder is emptied (its record first, so a crash in between never
-    leaves a stale record), recreated with the ``.curate-stage`` marker and False is
-    returned: run the stage, then :func:`finish_stage`. Only a folder of a claimed run
-    folder whose files are all curate's is emptied (:func:`curate.core.runfolder.clear_tree`):
-    otherwise :class:`curate.core.runfolder.RunFolderError` and nothing is removed.
+
+def _names(files: list[str], n: int = 3) -> str:
+    return ", ".join(files[:n]) + (f" and {len(files) - n} more" if len(files) > n else "")
+
+
+def begin_stage(stage_dir: str | Path, key: str, force: bool = False, owns: Iterable[str] | None = None,
+                spare: Iterable[str] = ()) -> bool:
+    """True when the stage finished earlier with the same ``key`` and its files are there (and ``force`` is
+    off): skip it (a file the user changed since is named in a warning and kept).
+
+    Otherwise (a file of its record missing, another key, ``force``) the stage's folder is cleared of what
+    curate wrote there (its record first, so a crash in between never leaves a stale one), the user's own files
+    are kept (named in a warning), the folder is (re)created with the ``.curate-stage`` marker, which records
+    ``owns`` (:attr:`curate.core.graph.Stage.owns`: the names the stage writes), and False is returned: run the
+    stage, then :func:`finish_stage` with the same ``owns``. Only a folder of a claimed run folder is cleared
+    (:func:`curate.core.runfolder.clear_tree`); a file of curate's the user changed, or a file of the user's
+    where the stage writes, is a :class:`curate.core.runfolder.RunFolderError` naming it, and nothing is removed.
     """
-    from curate.core.runfolder import STAGE_MARKER, check_writable, clear_tree
+    from curate.core.runfolder import check_writable, clear_tree, write_stage_marker
     stage_dir = Path(stage_dir)
-    if not force and is_fresh(stage_dir, key):
-        return True
+    if not force:
+        now = up_to_date(stage_dir, key, spare)
+        if now.fresh:
+            if now.changed:
+                log.warning("%s: %s changed since curate wrote %s: kept as you left %s (the rest is up to date)",
+                            stage_dir, _names(now.changed), "them" if len(now.changed) > 1 else "it",
+                            "them" if len(now.changed) > 1 else "it")
+            return True
+        if now.missing:
+            log.warning("%s: %s missing: the stage is done again", stage_dir,
+                        _names(now.missing) + (" are" if len(now.missing) > 1 else " is"))
     check_writable(stage_dir)
-    clear_tree(stage_dir)
-    stage_dir.mkdir(parents=True)
-    (stage_dir / STAGE_MARKER).write_text(time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
+    kept = clear_tree(stage_dir, owns)
+    if kept:
+        log.warning("%s: kept %d file(s) of yours there (%s): curate removes only what it wrote", stage_dir,
+                    len(kept), _names([p.relative_to(stage_dir).as_posix() for p in kept]))
+    stage_dir.mkdir(parents=True, exist_ok=True)
+    write_stage_marker(stage_dir, owns)
     return False
 
 
@@ -219,6 +268,19 @@ def refresh_command(run_dir: str | Path, stale: dict[str, str], stage: str) -> s
                        + ([f"curate {stage} {run_dir}"] if stage != root and not BY_NAME[stage].cheap else []))
 
 
+@contextlib.contextmanager
+def writing(path: str | Path):
+    """``with writing(path):`` an ``OSError`` raised inside without a file name (numpy's, PIL's, a write through a
+    file object: a full disk says only "[Errno 28] No space left on device") is raised again naming ``path``, so
+    the one line the command prints says which file could not be written."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None and e.errno is not None:
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from None
+        raise
+
+
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename: a reader
     never sees half a file."""
@@ -239,15 +301,18 @@ def write_json_atomic(path: str | Path, obj: Any) -> Path:
 
 
 def finish_stage(stage_dir: str | Path, key: str, cfg: Any, started: float, outputs: dict | None = None,
-                 seed: int | None = None, **extra: Any) -> dict:
-    """Write the stage record; call last, once every output file is in place."""
+                 seed: int | None = None, owns: Iterable[str] | None = None, **extra: Any) -> dict:
+    """Write the stage record; call last, once every output file is in place. ``owns``: the names the stage
+    writes (:attr:`curate.core.graph.Stage.owns`), as given to :func:`begin_stage`: the record lists the files
+    that match them (None: every file in the folder), each with its size, time and checksum."""
     stage_dir = Path(stage_dir)
     rec = {"key": key, "inputs": inputs_of(stage_dir.parent, stage_dir.name) if stage_dir.name in READS else {},
            "config": _record(cfg), "versions": versions(), "seed": seed,
            "seconds": round(time.perf_counter() - started, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
            "outputs": outputs or {}, **extra}
     from curate.core.runfolder import manifest
-    rec["files"] = manifest(stage_dir)  # what curate wrote here: the only files a re-run may clear
+    rec["files"] = manifest(stage_dir, owns)  # what curate wrote here: the only files a re-run may clear
+    rec["owns"] = None if owns is None else list(owns)
     write_json_atomic(Path(stage_dir) / STAGE_FILE, rec)
     return rec
 

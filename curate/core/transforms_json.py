@@ -48,6 +48,22 @@ CAMERA_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
 (no value: the same)."""
 
 
+FIELDS = {"c2w": "transform_matrix", "centre": "transform_matrix's translation", "fx": "fl_x", "fy": "fl_y",
+          "width": "w", "height": "h", "dist": "k1 k2 p1 p2"}
+"""The fields of a transforms.json, as :func:`curate.core.cameras.check_poses` names them."""
+
+
+def _angle(v, key: str) -> float:
+    """A field of view in radians (``camera_angle_x``/``_y``): ValueError naming ``key`` unless a perspective
+    camera can have it (:data:`curate.core.cameras.MIN_FOV_DEG` to :data:`~curate.core.cameras.MAX_FOV_DEG`)."""
+    from curate.core.cameras import MAX_FOV_DEG, MIN_FOV_DEG
+    a = float(v)
+    if not math.radians(MIN_FOV_DEG) <= a <= math.radians(MAX_FOV_DEG):
+        raise ValueError(f"{key} = {a:g} ({math.degrees(a) if math.isfinite(a) else a:.4g} degrees): a perspective "
+                         f"camera's field of view is between {MIN_FOV_DEG:g} and {MAX_FOV_DEG:g} degrees")
+    return a
+
+
 def read_transforms(path: str | Path, photos: str | Path | None = None, contained: bool = True
                     ) -> tuple[Cameras, list[str]]:
     """Read a transforms.json.
@@ -113,9 +129,9 @@ def read_transforms(path: str | Path, photos: str | Path | None = None, containe
                 f_x = float(get("fl_x"))
                 f_y = float(get("fl_y")) if get("fl_y") is not None else f_x
             elif get("camera_angle_x") is not None:
-                f_x = 0.5 * w / math.tan(0.5 * float(get("camera_angle_x")))
-                f_y = (0.5 * h / math.tan(0.5 * float(get("camera_angle_y"))) if get("camera_angle_y") is not None
-                       else f_x)
+                f_x = 0.5 * w / math.tan(0.5 * _angle(get("camera_angle_x"), "camera_angle_x"))
+                f_y = (0.5 * h / math.tan(0.5 * _angle(get("camera_angle_y"), "camera_angle_y"))
+                       if get("camera_angle_y") is not None else f_x)
             else:
                 raise ValueError(f"{path}: frame {i} has neither fl_x nor camera_angle_x")
             try:
@@ -135,16 +151,17 @@ def read_transforms(path: str | Path, photos: str | Path | None = None, containe
             cy.append(float(get("cy")) if get("cy") is not None else 0.5 * h)
             ws.append(int(round(w)))
             hs.append(int(round(h)))
-            dist.append([float(get(k) or 0.0) for k in ("k1", "k2", "p1", "p2")])
+            dist.append([float(get(k)) if get(k) is not None else 0.0 for k in ("k1", "k2", "p1", "p2")])
             names.append(fp)
             files.append(str(img) if img is not None else str(root / fp))
         except (TypeError, ValueError, KeyError, AttributeError, OverflowError) as e:
             if str(e).startswith(str(path)):
                 raise
-            raise ValueError(f"{path}: frame {i} ({fp!r}): {type(e).__name__}: {e}") from None
+            said = str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"
+            raise ValueError(f"{path}: frame {i} ({fp!r}): {said}") from None
 
     from curate.core.cameras import check_poses
-    check_poses(np.stack(c2w), fx, fy, cx, cy, ws, hs, names, str(path))
+    check_poses(np.stack(c2w), fx, fy, cx, cy, ws, hs, names, str(path), dist=np.array(dist), fields=FIELDS)
     dup = sorted({f for f in files if files.count(f) > 1})
     if dup:
         raise ValueError(f"{path}: {len(dup)} image file(s) appear in more than one frame, e.g. {dup[0]}")
@@ -198,7 +215,9 @@ def transforms_dict(cams: Cameras, file_paths: list[str] | None = None, extra: d
 def write_transforms(path: str | Path, cams: Cameras, file_paths: list[str] | None = None,
                      extra: dict | None = None) -> Path:
     """Write ``cams`` as a transforms.json; returns the path."""
+    from curate.core.stage import writing
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(transforms_dict(cams, file_paths, extra), indent=2))
+    with writing(path):
+        path.write_text(json.dumps(transforms_dict(cams, file_paths, extra), indent=2))
     return path

@@ -47,6 +47,7 @@ def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
 def run(ctx: "RunContext") -> StageResult:
     """Measure the learning curve of the selection's method on the first folds -> ``RUN/budget``."""
     import numpy as np
+    from curate.core.graph import BY_NAME
     from curate.core.stage import begin_stage, current_key, finish_stage, stage_key, write_json_atomic
     from curate.evaluate.check import fit_check
     from curate.evaluate.folds import curve_fold, curve_points, fold_order
@@ -63,7 +64,7 @@ def run(ctx: "RunContext") -> StageResult:
     cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
     d = RunPaths(run_dir).budget
     key = measured_key(cfg, run_dir)
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=BY_NAME["budget"].owns):
         return StageResult("budget", d, False, time.perf_counter() - t0)
     ev = cfg.evaluate
     sfm = load_sfm(run_dir)
@@ -93,6 +94,7 @@ def run(ctx: "RunContext") -> StageResult:
     write_json_atomic(d / "budget.json", {"predicted": law.to_dict(), "check": {**check.to_dict(), "n_pool": n_pool},
                                           "budget": budget})
     finish_stage(d, key, {"tolerance": cfg.budget_tolerance, "train": ev.training()}, t0,
-                 outputs={"budget": "budget.json"}, units=[u.key for f in folds for u in f.units])
+                 outputs={"budget": "budget.json"}, owns=BY_NAME["budget"].owns,
+                 units=[u.key for f in folds for u in f.units])
     return StageResult("budget", d, True, time.perf_counter() - t0,
                        f"{budget} of {len(cams)} photos to export: {check.note} (the law predicted {law.budget})")

@@ -41,23 +41,6 @@ class _Inline:
         return f
 
 
-def _kill(ex) -> None:
-    """Stop a local process pool now: its running trainings are killed, not waited for; then the pool is shut
-    down (its queues released: no "leaked semaphore" warning at exit)."""
-    procs = list((getattr(ex, "_processes", None) or {}).values())
-    for p in procs:
-        try:
-            p.kill()
-        except Exception:  # noqa: BLE001 - already gone
-            pass
-    for p in procs:
-        p.join(5)
-    try:
-        ex.shutdown(wait=True, cancel_futures=True)
-    except Exception:  # noqa: BLE001
-        pass
-
-
 @dataclass
 class Look:
     """What a look at the finished folds decided (``stop_at``'s answer; a plain bool means ``Look(stop=it)``)."""
@@ -95,6 +78,7 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     Returns (the finished folds in order, {unit key: metrics}, why it stopped: 'decided', 'needs time', 'all
     folds' or 'time'). When it stopped at a look, the folds are those of that look.
     """
+    from curate.core.pools import end_pool
     from curate.core.runfolder import held_token
     from curate.core.stage import is_fresh
     from curate.evaluate.units import (PROGRESS_FILE, _copy_unit, _unit_entry, auto_workers, read_metrics,
@@ -154,12 +138,10 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
             if workers <= 1:
                 ex = _Inline()
             else:
-                import multiprocessing as mp
                 import os
-                from concurrent.futures import ProcessPoolExecutor
+                from curate.core.pools import local_pool
                 from curate.evaluate.units import worker_start
-                ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=worker_start,
-                                         initargs=(os.getpid(),))
+                ex = local_pool(workers, worker_start, (os.getpid(),))
                 owned.append(ex)
 
     def may_start() -> bool:
@@ -267,8 +249,8 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
                     on_trained(durations[-1], workers)
             resolve()
     except BaseException:
-        for e in owned:
-            _kill(e)
+        for e in owned:        # killed and reaped: no training outlives the command
+            end_pool(e, kill=True)
         if executor is not None:
             for fut in inflight:
                 fut.cancel()
@@ -278,8 +260,9 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
         poller.join()
         show()
         bar.close()
-    for e in owned:
-        e.shutdown(wait=True)
+    for e in owned:            # decided, out of time or done: the trainings in flight finish, then the pool ends
+        end_pool(e)
+    owned.clear()
     resolve()
     if decided_now:   # the verdict is the look's: a fold the trainings still running completed is kept for later
         return finished[:n_decided], results, why_stopped

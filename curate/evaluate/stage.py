@@ -21,6 +21,7 @@ exports is measured before the selection, by :mod:`curate.evaluate.budget`.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -32,6 +33,8 @@ from curate.core.stage import StageResult
 if TYPE_CHECKING:
     from curate.config import RunConfig
     from curate.core.graph import RunContext
+
+log = logging.getLogger(__name__)
 
 STOPPED = {"decided": "every rival decided", "every photo": "every photo held out once",
            "folds asked": "the folds asked for done", "time": "the time given was spent",
@@ -67,6 +70,27 @@ def protocol(cfg: "RunConfig", folds: list, exported: list[int], n_registered: i
             "holdout": sorted(c for f in folds for c in f.holdout)}
 
 
+def evaluation_current(run_dir: Path, key: str) -> bool:
+    """The evaluation finished with ``key`` and its files are there: its summary, its ground truth and every
+    training it pooled (each unit's own record and files); an evaluation of an earlier curate, with only its
+    ``summary.json`` (or no list of units), by its key alone."""
+    from curate.core.stage import finished_record, read_stage, up_to_date
+    d = RunPaths(run_dir).evaluate
+    if read_stage(d) is None:
+        return (finished_record(run_dir, "evaluate") or {}).get("key") == key
+    now = up_to_date(d, key)
+    if not now.fresh:
+        if now.missing:
+            log.warning("%s: %s missing: the evaluation is done again (its finished trainings are reused)", d,
+                        ", ".join(now.missing[:3]))
+        return False
+    gone = [u for u in (read_stage(d) or {}).get("units") or () if not up_to_date(d / u, (read_stage(d / u) or
+                                                                                          {}).get("key", "")).fresh]
+    if gone:
+        log.warning("%s: the training(s) %s are incomplete: done again", d, ", ".join(gone[:3]))
+    return not gone
+
+
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: the run is evaluated (not ``--no-evaluate``)."""
     return cfg.run_evaluation
@@ -81,7 +105,7 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.evaluate.folds import (ALL_FOLDS, fold_order, in_capture_order, look_level, looks, plan_fold,
                                        planned_folds, summarize)
     from curate.evaluate.schedule import run_folds
-    from curate.evaluate.units import clear_evaluation, eval_cameras, resolved
+    from curate.evaluate.units import EVAL_OWN, clear_evaluation, eval_cameras, evaluation_folder, resolved
     from curate.field.train import default_box
     from curate.occupancy.stage import load_node_grid
     from curate.select.stage import read_selection
@@ -93,10 +117,15 @@ def run(ctx: "RunContext") -> StageResult:
     ev = cfg.evaluate
     key = eval_key(cfg, run_dir)
     if force:
-        clear_evaluation(run_dir)  # only what curate wrote there (curate.core.runfolder)
-    elif current_key(run_dir, "evaluate") == key:
+        kept = clear_evaluation(run_dir)  # only what curate wrote there (curate.core.runfolder)
+        if kept:
+            log.warning("%s: kept %d file(s) of yours there (%s...): curate removes only what it wrote", d, len(kept),
+                        kept[0].relative_to(d).as_posix())
+    elif evaluation_current(run_dir, key):
         return StageResult("evaluate", d, False, time.perf_counter() - t0)
     ev_run = resolved(ev)            # the device, chosen once for every training
+    evaluation_folder(run_dir)
+    (d / "stage.json").unlink(missing_ok=True)   # an earlier evaluation's record: this one replaces it
     sel = read_selection(run_dir)
     exported = [int(c) for c in sel["chosen"]]
     sfm = load_sfm(run_dir)
@@ -134,7 +163,8 @@ def run(ctx: "RunContext") -> StageResult:
                                        stopped, seconds), "plan": planner.record()}}
     write_json_atomic(d / "summary.json", summary)
     finish_stage(d, key, {"evaluate": replace(ev, workers=0), "select": cfg.select}, t0,
-                 outputs={"summary": "summary.json"}, stopped=stopped, n_folds=len(folds))
+                 outputs={"summary": "summary.json"}, owns=EVAL_OWN, stopped=stopped, n_folds=len(folds),
+                 units=sorted(u.key for f in folds for u in f.units))
     txt = ", ".join(f"{m} {v['psnr']:.2f}" for m, v in methods.items())
     views = sum(len(f.holdout) for f in folds)
     return StageResult("evaluate", d, True, seconds,

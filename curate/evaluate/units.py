@@ -34,6 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
+from curate.core.graph import BY_NAME, UNIT_OWNS
 from curate.core.paths import RunPaths
 from curate.core.cameras import Cameras
 from curate.core.executors import available_memory, cpu_count
@@ -112,7 +113,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
 
     d = RunPaths(run_dir).evaluate / unit.key
     check_holder(run_dir, lock_token)
-    if begin_stage(d, key):
+    if begin_stage(d, key, owns=UNIT_OWNS):
         return json.loads((d / "metrics.json").read_text())
     t0, c0 = time.perf_counter(), time.process_time()
     if cfg.field.threads > 0:
@@ -162,7 +163,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     write_json_atomic(d / "metrics.json", m)
     (d / PROGRESS_FILE).unlink(missing_ok=True)
     finish_stage(d, key, cfg, t0, outputs={"metrics": "metrics.json", "renders": "renders/"}, seed=cfg.train_seed,
-                 method=unit.method, psnr=m["psnr"])
+                 owns=UNIT_OWNS, method=unit.method, psnr=m["psnr"])
     log.info("evaluate %s: %d images, PSNR %.2f, SSIM %.3f (%.0fs)", unit.key, len(sub), m["psnr"], m["ssim"],
              time.perf_counter() - t0)
     return m
@@ -216,6 +217,7 @@ def save_ground_truth(run_dir: str | Path, cams: Cameras, paths: Sequence[str], 
     """``RUN/evaluate/gt/<stem>.png``: the held-out images at evaluation size."""
     from curate.field.metrics import save_png
     from curate.field.train import load_image
+    evaluation_folder(run_dir)
     d = RunPaths(run_dir).gt
     for i in holdout:
         p = d / f"{_stem(cams.names[i])}.png"
@@ -304,13 +306,15 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
             t.join()
         show()
     else:
-        import multiprocessing as mp
         import os
-        from concurrent.futures import ProcessPoolExecutor
-        from curate.core.runfolder import die_with_parent
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
-                                 initargs=(os.getpid(),)) as ex:
+        from curate.core.pools import end_pool, local_pool
+        ex = local_pool(workers, worker_start, (os.getpid(),))
+        try:
             collect({ex.submit(_unit_entry, a): a[1].key for a in args})
+        except BaseException:
+            end_pool(ex, kill=True)      # no training outlives the command
+            raise
+        end_pool(ex)
     for u, src in dups:
         results[u.key] = _copy_unit(RunPaths(run_dir).evaluate, src.key, u, results[src.key])
     bar.close()
@@ -321,27 +325,45 @@ def _copy_unit(ev_dir: Path, src_key: str, unit: Unit, metrics: dict) -> dict:
     """Copy the finished unit ``src_key`` as ``unit`` (same key: same subset and settings);
     its record last, so a crash leaves no stale record."""
     import shutil
-    from curate.core.runfolder import clear_tree
-    from curate.core.stage import STAGE_FILE, write_json_atomic, write_text_atomic
+    from curate.core.runfolder import clear_tree, manifest, write_stage_marker
+    from curate.core.stage import STAGE_FILE, write_json_atomic
     src, dst = ev_dir / src_key, ev_dir / unit.key
-    clear_tree(dst)
-    shutil.copytree(src, dst, ignore=shutil.ignore_patterns(STAGE_FILE))
+    clear_tree(dst, UNIT_OWNS)
+    dst.mkdir(parents=True, exist_ok=True)
+    write_stage_marker(dst, UNIT_OWNS)
+    for rel in manifest(src, UNIT_OWNS):       # what the source unit wrote, not what the user left there
+        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src / rel, dst / rel)
     m = {**metrics, "method": unit.method, "seed": unit.seed, "copied_from": src_key}
     write_json_atomic(dst / "metrics.json", m)
-    write_text_atomic(dst / STAGE_FILE, (src / STAGE_FILE).read_text())
+    rec = json.loads((src / STAGE_FILE).read_text())
+    write_json_atomic(dst / STAGE_FILE, {**rec, "files": manifest(dst, UNIT_OWNS), "copied_from": src_key})
     return m
 
 
-EVAL_OWN = ("summary.json", "gt/*.png")
-"""Files of ``RUN/evaluate`` outside the units' records: the summary and the ground truth."""
+EVAL_OWN = BY_NAME["evaluate"].owns
+"""Files of ``RUN/evaluate``: the summary, the ground truth and, in each unit's folder, what a training writes."""
 
 
-def clear_evaluation(run_dir: str | Path) -> None:
+def evaluation_folder(run_dir: str | Path) -> Path:
+    """``RUN/evaluate``, created with its stage marker (:func:`curate.core.runfolder.write_stage_marker`) when it
+    has none: the evaluation and the budget stage write their trainings there, each a stage of its own."""
+    from curate.core.runfolder import STAGE_MARKER, write_stage_marker
+    d = RunPaths(run_dir).evaluate
+    d.mkdir(parents=True, exist_ok=True)
+    if not (d / STAGE_MARKER).is_file():
+        write_stage_marker(d, EVAL_OWN)
+    return d
+
+
+def clear_evaluation(run_dir: str | Path) -> list[Path]:
     """Remove ``RUN/evaluate`` (``--force``): the units' recorded files, the summary and the ground
-    truth; nothing at all when it holds a file curate did not write
+    truth; the user's own files stay (returned). Nothing at all when a file curate wrote was changed since
     (:class:`curate.core.runfolder.RunFolderError`)."""
     from curate.core.runfolder import clear_tree
-    clear_tree(RunPaths(run_dir).evaluate, own=EVAL_OWN)
+    if RunPaths(run_dir).evaluate.is_dir():
+        evaluation_folder(run_dir)      # an evaluation folder of curate 0.2 had no marker
+    return clear_tree(RunPaths(run_dir).evaluate, own=EVAL_OWN)
 
 
 LEGACY_KEYS = {"energy": "selection", "energy-random": "selection-random", "energy-fvs": "selection-fvs",

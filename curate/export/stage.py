@@ -20,6 +20,7 @@ EXPORTED = {"hardlink": "hard-linked", "link": "linked", "copy": "copied"}
 
 def run(ctx: "RunContext") -> StageResult:
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
+    from curate.core.graph import BY_NAME
     from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, required_key, stage_key
     from curate.export.subset import check_unchanged, export_subset
     from curate.select.stage import read_selection
@@ -29,7 +30,7 @@ def run(ctx: "RunContext") -> StageResult:
     key = stage_key({"export": cfg.export}, [required_key(run_dir, "select")])
     if force or not is_fresh(d, key):
         check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
-    if begin_stage(d, key, force):  # unchanged: its warning still holds
+    if begin_stage(d, key, force, owns=BY_NAME["export"].owns):  # unchanged: its warning still holds
         return StageResult("export", d, False, time.perf_counter() - t0,
                            warning=(read_stage(d) or {}).get("export_warning"))
     sel = read_selection(run_dir)
@@ -45,7 +46,7 @@ def run(ctx: "RunContext") -> StageResult:
     shown = "; ".join(w for w in (import_warning(run_dir), warn) if w) or None
     finish_stage(d, key, {"export": cfg.export}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",
                                                                "list": "images.txt", "images": "images/"},
-                 model=model, warning=shown, export_warning=warn, connectivity=groups)
+                 owns=BY_NAME["export"].owns, model=model, warning=shown, export_warning=warn, connectivity=groups)
     return StageResult("export", d, True, time.perf_counter() - t0,
                        f"{len(sel['chosen_names'])} images ("
                        f"{'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "

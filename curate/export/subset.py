@@ -42,6 +42,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 from curate.core.paths import RunPaths
+from curate.core.runfolder import sha256_file
+from curate.core.stage import write_json_atomic
 from curate.export.config import ExportConfig
 from curate.export.trainable import PLY_NAME
 from curate.sfm.io import known_original, load_sfm, original_cameras, sfm_dir
@@ -89,15 +91,6 @@ _MODEL_FILES = tuple(f"{n}.bin" for n in ("cameras", "images", "points3D", "rigs
 model_converter``); all an export of curate 0.2, before ``files`` was recorded, may have written there."""
 
 
-def _sha256(p: Path) -> str:
-    import hashlib
-    h = hashlib.sha256()
-    with open(p, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def check_unchanged(out: str | Path) -> None:
     """``ValueError`` naming the first file of the export in ``out`` that was changed since curate wrote it
     (:func:`_changed`): clearing the export would delete a user's edit. Nothing without a readable
@@ -124,6 +117,8 @@ def _changed(out: Path, prev: dict) -> str | None:
     an earlier export is compared with its original)."""
     import filecmp
     digests = prev.get("files") or {}
+    if not isinstance(digests, dict):
+        raise ValueError("files is not a mapping")
     for it in prev.get("images", []):
         p = out / "images" / it["name"]
         if p.is_symlink():
@@ -141,9 +136,10 @@ def _changed(out: Path, prev: dict) -> str | None:
                 return str(p)
         elif p.is_file() and f"distorted/images/{it['name']}" not in digests:   # a file where a link was
             return str(p)
-    for rel, digest in digests.items():             # since 0.3: each file written, copies included
-        p = out / rel
-        if p.is_file() and not p.is_symlink() and _sha256(p) != digest:
+    from curate.core.runfolder import is_changed
+    for rel, digest in digests.items():             # since 0.3: each file written, copies included (an unreadable
+        p = out / rel                               # one counts as changed: curate cannot prove it is its own)
+        if os.path.lexists(p) and is_changed(p, digest):
             return str(p)
     return None
 
@@ -311,8 +307,7 @@ def export_subset(run_dir: str | Path, chosen_names: list[str], out_dir: str | P
                 "images": [{"camera": c, "name": n, "original": o, "rel": r}
                            for c, n, o, r in zip(chosen, names, originals, rels)],
                 "distorted": names if undistorted and cfg.keep_distorted else [],
-                "files": {f: _sha256(out / f) for f in files}}
-    from curate.core.stage import write_json_atomic
+                "files": {f: sha256_file(out / f) for f in files}}
     write_json_atomic(out / "export.json", manifest)      # never half written: it is the record of what to check
     logger.info("export: %d images (%s%s), %d sparse points -> %s", len(chosen), cfg.mode,
                 ", undistorted" if undistorted else "", model["n_points3D"], out)

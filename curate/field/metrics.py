@@ -88,9 +88,11 @@ def ssim(pred: np.ndarray, gt: np.ndarray) -> float:
 def save_png(img: np.ndarray, path: str | Path) -> Path:
     """Write a [H, W, 3] float image in [0, 1] as an 8-bit PNG."""
     from PIL import Image
+    from curate.core.stage import writing
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray((np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
+    with writing(path):
+        Image.fromarray((np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
     return path
 
 

@@ -323,12 +323,20 @@ class RadianceField(torch.nn.Module):
         """Checkpoint: state_dict + config + box (``torch.load`` -> :meth:`load`)."""
         lo = (self.centre - self.half_size).tolist()
         hi = (self.centre + self.half_size).tolist()
-        torch.save({"config": self.cfg.to_dict(), "box_min": lo, "box_max": hi,
-                    "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()}}, path)
+        from curate.core.stage import writing
+        # through a file of ours: a full disk is an OSError naming the file (torch's own writer says only
+        # "[enforce fail at inline_container.cc:672] ... file write failed")
+        with writing(path), open(path, "wb") as f:
+            torch.save({"config": self.cfg.to_dict(), "box_min": lo, "box_max": hi,
+                        "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()}}, f)
 
     @staticmethod
     def load(path, device: str | torch.device = "cpu") -> "RadianceField":
-        ck = torch.load(path, map_location="cpu", weights_only=True)
+        try:
+            ck = torch.load(path, map_location="cpu", weights_only=True)
+        except (RuntimeError, EOFError) as e:      # truncated (a full disk, a copy cut short), or not a field
+            raise ValueError(f"{path}: not a whole field checkpoint of curate ({str(e).splitlines()[0][:120]}); the "
+                             "stage that wrote it writes it again with --force") from None
         cfg = FieldConfig.from_dict(ck["config"])
         f = RadianceField(cfg, ck["box_min"], ck["box_max"])
         r = ck["state_dict"]["density"].shape[-1]

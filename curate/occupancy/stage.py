@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from curate.core.graph import BY_NAME
 from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
@@ -90,7 +91,8 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
     ``RUN/occupancy``. ``train_on``: the cameras the field trains on (None: every registered one;
     the evaluation harness passes a hold-out fold's pool)."""
     from curate.core.grid import NodeGrid
-    from curate.core.stage import begin_stage, finish_stage, is_fresh, required_key, stage_key, write_json_atomic
+    from curate.core.stage import (begin_stage, finish_stage, is_fresh, required_key, stage_key, write_json_atomic,
+                                   writing)
     from curate.field.train import default_box, train_field
     from curate.occupancy.masks import occupancy_from_points, refine_occupancy
     from curate.sfm.io import image_paths, load_sfm
@@ -112,7 +114,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too
     train_part = parts["train"] if field_needed else None
     key = key_field if field_needed else stage_key({**parts, "train": None}, deps)
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=BY_NAME["occupancy"].owns):
         return StageResult("occupancy", d, False, time.perf_counter() - t0)
     box = default_box(sfm.cameras)
     fld = st = None
@@ -148,14 +150,15 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         rmask = pts_mask if pts_mask is not None else np.ones((R,) * 3, bool)
     # nothing says where the scene is (no points, no field): its surface is taken as the box's walls
     band = surface_band(rmask, cfg.surface_band, outside_free=bool(rmask.all()))
-    np.savez_compressed(d / "occupancy.npz", box_min=grid.box_min, box_max=grid.box_max, res=R,
-                        points_mask=pts_mask if pts_mask is not None else np.zeros((R,) * 3, bool),
-                        refined_mask=rmask, nodes_mask=band)
+    with writing(d / "occupancy.npz"):
+        np.savez_compressed(d / "occupancy.npz", box_min=grid.box_min, box_max=grid.box_max, res=R,
+                            points_mask=pts_mask if pts_mask is not None else np.zeros((R,) * 3, bool),
+                            refined_mask=rmask, nodes_mask=band)
     n = {"points": int(pts_mask.sum()) if pts_mask is not None else 0, "refined": int(rmask.sum()),
          "nodes": int(band.sum())}
     outputs = {"occupancy": "occupancy.npz", **({"field": "field.pt"} if fld is not None else {})}
     finish_stage(d, key, {"occupancy": cfg.occupancy, "refine": cfg.refine, "train": train_part, "box": cfg.box}, t0,
-                 outputs=outputs, seed=ev.train_seed, counts=n, field=why,
+                 outputs=outputs, owns=BY_NAME["occupancy"].owns, seed=ev.train_seed, counts=n, field=why,
                  train={"iters": st.iters, "train_seconds": st.train_seconds} if st is not None else None)
     src = "refined by a field" if fld is not None else ("from the sparse points" if pts_mask is not None
                                                          else "unknown (no points, no field): the box's walls")

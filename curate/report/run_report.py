@@ -21,6 +21,7 @@ and reported in the page.
 from __future__ import annotations
 
 import logging
+import os
 import math
 import time
 from pathlib import Path
@@ -648,8 +649,19 @@ SECTIONS: list[tuple[str, Callable[[_Run], str], str]] = [
 
 
 def write_html(run_dir: str | Path) -> Path:
-    """Write ``RUN/report.html`` from ``RUN/report.json`` and the run folder; returns its path."""
+    """Write ``RUN/report.html`` from ``RUN/report.json`` and the run folder; returns its path.
+
+    ``report.json``'s ``html`` records what was written (:func:`curate.core.runfolder.file_state`): a page the user
+    changed since is kept as they left it, and a warning names it (curate never writes over a user's edit)."""
+    from curate.core.runfolder import file_state, is_changed
+    from curate.core.stage import write_json_atomic
     run_dir = Path(run_dir)
+    html = RunPaths(run_dir).report_html
+    was = (read_json(RunPaths(run_dir).report_json) or {}).get("html")
+    if isinstance(was, dict) and os.path.lexists(html) and is_changed(html, was):
+        logger.warning("report: %s was changed since curate wrote it: kept as you left it (move it out for a new "
+                       "page; report.json is up to date)", html)
+        return html
     run = _Run(run_dir)
     if not run.rep:
         logger.warning("report: %s missing or unreadable; the report will be mostly empty",
@@ -664,6 +676,9 @@ def write_html(run_dir: str | Path) -> Path:
             f'<title>curate: {esc(_title(run))}</title><style>{CSS}</style></head><body>\n' + "\n".join(body)
             + '\n<p class="small">Written by curate. Self-contained: every image is embedded.</p></body></html>\n')
     from curate.core.stage import write_text_atomic
-    out = write_text_atomic(RunPaths(run_dir).report_html, page)
+    out = write_text_atomic(html, page)
+    rep = read_json(RunPaths(run_dir).report_json)
+    if rep:
+        write_json_atomic(RunPaths(run_dir).report_json, {**rep, "html": file_state(out)})
     logger.info("report: %s (%.0f kB)", out, out.stat().st_size / 1024)
     return out

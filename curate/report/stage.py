@@ -73,8 +73,11 @@ def run(ctx: "RunContext") -> StageResult:
     if not timings:  # `curate report` alone: the stages as recorded when they ran
         timings = [{"name": k, "seconds": None, "skipped": None} for k in recorded]
     timings = [{**t, "compute_seconds": recorded.get(t["name"])} for t in timings]
-    if wall is None and RunPaths(run_dir).report_json.is_file():
-        wall = json.loads(RunPaths(run_dir).report_json.read_text()).get("wall_seconds")
+    from curate.html.parts import read_json
+    before = read_json(RunPaths(run_dir).report_json)           # what the last report wrote (its page's record)
+    before = before if isinstance(before, dict) else {}
+    if wall is None:
+        wall = before.get("wall_seconds")
     stale = stale_stages(run_dir)
     rep = {"photos": photos, "run_dir": str(run_dir), "budget": sel["budget"], "n_photos": len(photos_rec),
            "n_registered": len(sfm.cameras), "n_candidates": len(sel["pool"]),
@@ -115,6 +118,8 @@ def run(ctx: "RunContext") -> StageResult:
     if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
         rep["budget_check"] = sel["budget_auto"]["measured"]
     rep["verdict"] = verdict(rep)
+    if before.get("html"):          # the page as curate last wrote it: a page the user changed since is kept
+        rep["html"] = before["html"]
     write_json_atomic(RunPaths(run_dir).report_json, rep)
     from curate.report.run_report import write_html
     write_html(run_dir)

@@ -102,7 +102,8 @@ def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
 def run(ctx: "RunContext") -> StageResult:
     """Selection among every registered photo -> ``RUN/select``."""
     from curate.core.budget import AUTO, check_fits, parse_budget, resolve_budget
-    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic
+    from curate.core.graph import BY_NAME
+    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic, writing
     from curate.occupancy.stage import load_node_grid
     from curate.select.energy import energy_of_subset
     from curate.select.select import select
@@ -123,7 +124,7 @@ def run(ctx: "RunContext") -> StageResult:
         if measured is not None:
             parts["measured"] = measured["budget"]
     key = stage_key(parts, [required_key(run_dir, "occupancy")])
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=BY_NAME["select"].owns):
         return StageResult("select", d, False, time.perf_counter() - t0)
     sfm = load_sfm(run_dir)
     pool = list(range(len(sfm.cameras)))
@@ -144,9 +145,10 @@ def run(ctx: "RunContext") -> StageResult:
     sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
-    np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
-                        frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
-                        res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
+    with writing(d / "nodes.npz"):
+        np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
+                            frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
+                            res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
     rec = selection_record(sel, sfm.cameras, pool, [], 0, said, grid)
     rec["coverage"] = coverage(index, sel.chosen)
     if auto is not None:   # the law's prediction; with the measurement, what was measured and exported
@@ -155,7 +157,8 @@ def run(ctx: "RunContext") -> StageResult:
         rec["budget_auto"]["budget"] = budget
     write_json_atomic(d / "selection.json", rec)
     finish_stage(d, key, parts, t0,
-                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)
+                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed,
+                 owns=BY_NAME["select"].owns)
     from curate.select.methods import method_label
     how = method_label(sel.method) + (" (auto)" if cfg.select.method == "auto" else "")
     why = (f"; {auto.note}" if measured is None else

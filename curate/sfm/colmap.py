@@ -33,25 +33,31 @@ from __future__ import annotations
 import logging
 import shutil
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from curate.core.cameras import Cameras
+from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage
 from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
 from curate.sfm.continuity import drop_off_path, jumps_along
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.matching import match, pair_counts, rematch_left_out
-from curate.sfm.model import cameras_from_reconstruction
+from curate.sfm.model import cameras_from_reconstruction, write_model
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
-from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_matcher, input_key, prepare_photos,
-                             refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message, write_outputs)
+from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_guided, choose_matcher, input_key,
+                             prepare_photos, refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message,
+                             write_outputs)
 from curate.sfm.reconstruction import map_capture, model_sizes
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["run_sfm"]
+
+SFM = BY_NAME["sfm"]
+"""The stage's row of the graph: what it writes (``owns``) and what nothing reads again (``spare``)."""
 
 
 def _dense(sfm: Path, sparse: Path, images: Path) -> dict:
@@ -107,7 +113,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     out = _sfm_dir(run_dir)
     refuse_inside(out, photos)
     key = input_key(cfg, photos)
-    if begin_stage(out, key, force):
+    if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm: up to date (%s), skipped", out)
         return out, False
     started = time.perf_counter()
@@ -121,10 +127,11 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         raise RuntimeError(too_few_message(photos, records, videos, out / "images.json"))
     single = choose_camera_mode(cfg, kept)
     matcher = choose_matcher(cfg, kept)
+    guided = choose_guided(cfg, kept)
     check_free_space(out, len(names), matcher, cfg)     # COLMAP aborts the process on a full disk
     db, images = out / "database.db", out / "images"
     stats: dict = {"n_input_files": len(records), "n_kept": len(names), "camera_mode": "single" if single else
-                   "per_image", "matcher": matcher, **({"videos": videos} if videos else {})}
+                   "per_image", "matcher": matcher, "guided_matching": guided, **({"videos": videos} if videos else {})}
     pycolmap.set_random_seed(cfg.seed)
     with colmap_log(out / "colmap.log"):
         logger.info("sfm: extracting SIFT features (%s camera, %s) ...", stats["camera_mode"], cfg.camera_model)
@@ -134,7 +141,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
         logger.info("sfm: %s matching ...", matcher)
         t = time.perf_counter()
-        match(cfg, db, matcher, takes_of(kept), stats)
+        match(replace(cfg, guided_matching="on" if guided else "off"), db, matcher, takes_of(kept), stats)
         timings["match"] = round(time.perf_counter() - t, 2)
         stats["n_pairs_matched"], stats["n_pairs_verified"] = pair_counts(db, cfg.min_num_matches)
         logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],
@@ -160,13 +167,11 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         stats["path_jumps"] = jumps
     stats["model_sizes"] = model_sizes(models)
     sparse = out / "sparse" / "0"
-    sparse.mkdir(parents=True)
-    best.write(sparse)
+    write_model(best, sparse)
     others = sorted((r for r in models.values() if r is not best and r.num_reg_images() >= 2),
                     key=lambda r: -r.num_reg_images())
     for k, r in enumerate(others, 1):  # the other parts of a split capture, for --on-split each
-        (out / "sparse" / str(k)).mkdir()
-        r.write(out / "sparse" / str(k))
+        write_model(r, out / "sparse" / str(k))
     stats["parts"] = [{"model": f"sparse/{k}", "n_registered": int(r.num_reg_images())}
                       for k, r in enumerate([best] + others)]
     for part, r in zip(stats["parts"][1:], others):   # --on-split each curates them: a fold there is named too
@@ -195,6 +200,6 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     paths = [f"images/{n}" for n in cams.names]
     stats.update(write_outputs(out, cams, xyz, rgb, err, records, paths, cfg.normalize_percentile))
     stats["dense"] = dense
-    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,
                  seed=cfg.seed, mode="sfm", photos=str(photos), timings=timings, stats=stats)
     return out, True

@@ -1,17 +1,16 @@
-"""SIFT features into COLMAP's database, and a vocabulary tree trained on them (loop detection and the
-retrieval of cross-take pairs, :mod:`curate.sfm.matching`) without a download.
+"""SIFT features into COLMAP's database, and read back for the capture's own visual words
+(:mod:`curate.sfm.retrieval`: loop detection, retrieval matching, the pairs between takes).
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from pathlib import Path
 
 import numpy as np
 
 from curate.sfm.config import SfmConfig
-from curate.sfm.native import load as load_pycolmap, stdout_to
+from curate.sfm.native import load as load_pycolmap
 
 logger = logging.getLogger(__name__)
 
@@ -52,37 +51,16 @@ def tree_sample(per_image, n_images: int, max_descriptors: int, rng) -> np.ndarr
     return desc
 
 
-def build_vocab_tree(db: Path, path: Path, seed: int, max_descriptors: int = 100_000) -> Path:
-    """A vocabulary tree (COLMAP ``VisualIndex``) trained on this capture's own SIFT descriptors.
-
-    COLMAP's published trees are downloads; for loop detection within one capture a small
-    tree trained on a sample of the capture's own descriptors does as well and keeps the
-    stage offline. The sample is at most ``max_descriptors``, drawn evenly from every image,
-    and the tree has one visual word per ~40 of them (256 to 2048 for the default), so
-    training takes the same time for any pool size; indexing and querying grow linearly
-    with the pool. (Training on every image's 1,000 descriptors, with words growing with
-    the pool, took 158 s of the office's 210 s of matching, and grows with its square.)
-    """
+def read_descriptors(db: Path) -> tuple[list[str], list[np.ndarray]]:
+    """(the photos of COLMAP's database ``db`` in name order, each one's [n, 128] float32 SIFT descriptors)."""
     pycolmap = load_pycolmap()
-    rng = np.random.default_rng(seed)
     dbh = pycolmap.Database.open(db)
-    images = dbh.read_all_images()
-
-    def descriptors():
+    try:
+        images = sorted(dbh.read_all_images(), key=lambda im: im.name)
+        out = []
         for im in images:
             d = dbh.read_descriptors(im.image_id).to_float()
-            yield np.asarray(getattr(d, "data", d), np.float32)
-
-    desc = tree_sample(descriptors(), len(images), max_descriptors, rng)
-    dbh.close()
-    words = int(np.clip(2 ** np.floor(np.log2(max(len(desc) // 40, 1))), 256, 65536))
-    index = pycolmap.VisualIndex.create(128, 64)
-    bo = pycolmap.VisualIndex.BuildOptions()
-    bo.num_visual_words, bo.num_iterations, bo.num_rounds = words, 25, 1
-    t = time.perf_counter()
-    with stdout_to(db.parent / "colmap.log"):  # faiss prints clustering warnings on stdout
-        index.build(bo, pycolmap.FeatureDescriptorsFloat(pycolmap.FeatureExtractorType.SIFT, desc))
-    index.write(path)
-    logger.info("sfm: vocabulary tree of %d words from %d descriptors in %.1f s", words, len(desc),
-                time.perf_counter() - t)
-    return path
+            out.append(np.asarray(getattr(d, "data", d), np.float32).reshape(-1, 128))
+    finally:
+        dbh.close()
+    return [im.name for im in images], out

@@ -42,6 +42,26 @@ logger = logging.getLogger(__name__)
 
 
 
+NOT_UTF8 = ("its file name is not UTF-8 text (bytes of another encoding, such as Latin-1): curate names every photo in "
+            "its records and exports; rename it")
+"""Why a photo whose name is not UTF-8 is skipped (and listed): never fatal."""
+
+
+def text_name(p: str | Path) -> bool:
+    """True when the path ``p`` is text (a name the file system gave in bytes that are not UTF-8 is read by Python
+    with surrogates: :func:`os.fsdecode`), so it can be written to a JSON record, a page or a COLMAP model."""
+    try:
+        str(p).encode("utf-8")
+        return True
+    except UnicodeEncodeError:
+        return False
+
+
+def printable(s: str | Path) -> str:
+    """``s`` with the bytes of a name that are not UTF-8 written as ``\\xe9``: what a record says of such a file."""
+    return str(s).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def find_images(folder: str | Path, recursive: bool = False) -> tuple[list[Path], list[Path]]:
     """Files of ``folder`` (sorted by relative path), split into (image-like, other).
 
@@ -191,6 +211,8 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
     folder = source_root(path)
     out_dir.mkdir(parents=True, exist_ok=True)
     imgs, other = find_images(path, recursive)
+    odd = [p for p in imgs + other if not text_name(p)]            # names not UTF-8: skipped and listed, never fatal
+    imgs, other = [p for p in imgs if text_name(p)], [p for p in other if text_name(p)]
     broken = [p for p in imgs + other if not p.is_file()]          # links to nothing: listed, never dropped
     imgs, other = [p for p in imgs if p.is_file()], [p for p in other if p.is_file()]
     videos = [p for p in other if p.suffix.lower() in VIDEO_EXTS]
@@ -204,6 +226,8 @@ def ingest(folder: str | Path, out_dir: str | Path, max_size: int = 1600, recurs
                            reason=f"unsupported extension {p.suffix!r}") for p in other]
     records += [PhotoRecord(original=str(p.absolute()), rel=p.relative_to(folder).as_posix(), status="skipped",
                             reason=broken_said(p)) for p in broken]
+    records += [PhotoRecord(original=printable(p.absolute()), rel=printable(p.relative_to(folder).as_posix()),
+                            status="skipped", reason=NOT_UTF8) for p in odd]
     for v in videos:
         rel = rel_of[v]
         try:

@@ -1,5 +1,12 @@
 """Matching: the image pairs of a matcher (exhaustive, sequential with loop detection, spatial, retrieval; with
-several takes, each take's frames with their most similar frames of the others) matched and verified, seeded.
+several takes, each take's frames with their most similar frames of the others) matched and verified, the same
+pairs and matches on every run.
+
+What runs COLMAP's own pair generation (exhaustive, sequential neighbours, spatial) is deterministic; which
+photos look alike (loop detection, retrieval, the pairs between takes) comes from :mod:`curate.sfm.retrieval`,
+whose words are seeded, where COLMAP's vocabulary tree is not. Those pairs are then matched by COLMAP as a list
+(``match_image_pairs``). Verification RANSAC is seeded per pair (``cfg.seed``), so the threads' order does not
+change the matches.
 """
 
 from __future__ import annotations
@@ -9,8 +16,7 @@ import time
 from pathlib import Path
 
 from curate.sfm.config import SfmConfig
-from curate.sfm.features import build_vocab_tree
-from curate.sfm.native import load as load_pycolmap, stdout_to
+from curate.sfm.native import load as load_pycolmap
 
 logger = logging.getLogger(__name__)
 
@@ -27,7 +33,7 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
     takes (:func:`_match_across_takes`; ``stats["cross_take"]`` says how many pairs).
     """
     pycolmap = load_pycolmap()
-    mo, vo, dev = _options(cfg)
+    mo, vo, dev = _options(cfg, matcher)
     if matcher == "exhaustive":
         pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
     elif matcher == "sequential":
@@ -35,24 +41,22 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
-        tree = None
-        if cfg.loop_detection:  # with a vocabulary tree built from this capture's own features: offline
-            tree = build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors)
-            po.loop_detection = True
-            po.vocab_tree_path = str(tree)
-            po.loop_detection_period = cfg.loop_detection_period
-            po.loop_detection_num_images = cfg.loop_detection_num_images
         pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
                                   device=dev)
+        index = None
+        if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
+            index = _index(cfg, db)
+            names = index.names[::cfg.loop_detection_period]
+            pairs = [(q, c) for q, cands in ranked(index, names, k=cfg.loop_detection_num_images) for c in cands]
+            info = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher)
+            if stats is not None:
+                stats["loop_detection"] = {"queries": len(names), **info}
         if cfg.cross_take_matching and takes and len(takes) >= 2:
-            if tree is None:
-                tree = build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors)
-            info = _match_across_takes(cfg, db, takes, tree, mo, vo, dev)
+            info = _match_across_takes(cfg, db, takes, index or _index(cfg, db), matcher)
             if stats is not None:
                 stats["cross_take"] = info
-    elif matcher == "retrieval":   # each photo with its most similar ones, by a tree trained on this capture
-        _retrieve(cfg, db, build_vocab_tree(db, db.parent / "vocab_tree.bin", cfg.seed, cfg.vocab_tree_descriptors),
-                  cfg.retrieval_num_images)
+    elif matcher == "retrieval":   # each photo with its most similar ones, by words trained on this capture
+        _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_num_images, matcher)
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
@@ -63,102 +67,107 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         raise ValueError(f"unknown matcher {matcher!r}")
 
 
-def _options(cfg: SfmConfig):
+def ranked(index, queries, k=None, candidates=None):
+    """:func:`curate.sfm.retrieval.ranked` (imported here so that the matchers read as one module)."""
+    from curate.sfm.retrieval import ranked as _ranked
+    return _ranked(index, list(queries), candidates, k)
+
+
+def _index(cfg: SfmConfig, db: Path):
+    """The capture's visual words (:func:`curate.sfm.retrieval.build`), kept beside the database
+    (``visual_words.npz``) for the retrieval's second round."""
+    from curate.sfm.retrieval import build, load, save
+    path = db.parent / "visual_words.npz"
+    if path.is_file():
+        return load(path)
+    index = build(db, cfg.seed, cfg.vocab_tree_descriptors)
+    save(index, path)
+    return index
+
+
+def guided(cfg: SfmConfig, matcher: str) -> bool:
+    """Whether ``matcher``'s pairs are matched again along their verified geometry (``cfg.guided_matching``;
+    ``auto``: for a sequence of frames)."""
+    return cfg.guided_matching == "on" or (cfg.guided_matching == "auto" and matcher == "sequential")
+
+
+def _options(cfg: SfmConfig, matcher: str):
     """(matching, verification options, device) of every matcher: verification RANSAC seeded by ``cfg.seed``."""
     pycolmap = load_pycolmap()
     mo = pycolmap.FeatureMatchingOptions()
     mo.num_threads = cfg.num_threads
-    mo.guided_matching = cfg.guided_matching
+    mo.guided_matching = guided(cfg, matcher)
     vo = pycolmap.TwoViewGeometryOptions()
     vo.ransac.random_seed = cfg.seed
     vo.min_num_inliers = cfg.min_num_matches
     return mo, vo, pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
 
 
-def _retrieve(cfg: SfmConfig, db: Path, tree: Path, num_images: int, queries: Path | None = None) -> None:
-    """Match each photo (those listed in ``queries``, one name a line; all when None) with its ``num_images``
-    most similar photos by the vocabulary ``tree``."""
+def match_pairs(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
+    """Match and verify the image ``pairs`` ((name, name), either order) not matched yet, through a pair list
+    written beside ``db`` (``list_name``). Returns {"pairs", "new_pairs", "verified", "unlisted" (names with
+    spaces: COLMAP's list cannot name them)}."""
     pycolmap = load_pycolmap()
-    mo, vo, dev = _options(cfg)
-    po = pycolmap.VocabTreePairingOptions()
-    po.vocab_tree_path = str(tree)
-    po.num_images = num_images
-    po.num_threads = cfg.num_threads
-    if queries is not None:
-        po.match_list_path = str(queries)
-    with stdout_to(db.parent / "colmap.log"):
-        pycolmap.match_vocabtree(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+    dbh = pycolmap.Database.open(db)
+    try:
+        ids = {im.name: im.image_id for im in dbh.read_all_images()}
+        uniq = sorted({tuple(sorted((a, b))) for a, b in pairs if a != b and a in ids and b in ids})
+        new = [(a, b) for a, b in uniq if not dbh.exists_matches(ids[a], ids[b])]
+    finally:
+        dbh.close()
+    listed = [(a, b) for a, b in new if not any(c.isspace() for c in a + b)]
+    if len(listed) < len(new):
+        logger.warning("sfm: %d of %d pairs left unmatched: COLMAP's pair list cannot name photos with spaces in "
+                       "their names", len(new) - len(listed), len(new))
+    before = pair_counts(db, cfg.min_num_matches)[1]
+    if listed:
+        mo, vo, dev = _options(cfg, matcher)
+        path = db.parent / list_name
+        path.write_text("".join(f"{a} {b}\n" for a, b in listed))
+        po = pycolmap.ImportedPairingOptions()
+        po.match_list_path = str(path)
+        pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+    return {"pairs": len(uniq), "new_pairs": len(new), "verified": pair_counts(db, cfg.min_num_matches)[1] - before,
+            "unlisted": len(new) - len(listed)}
+
+
+def _retrieve(cfg: SfmConfig, db: Path, index, num_images: int, matcher: str, queries: list[str] | None = None,
+              list_name: str = "retrieval_pairs.txt") -> dict:
+    """Match each photo (those of ``queries``; all when None) with its ``num_images`` most similar photos."""
+    qs = index.names if queries is None else [q for q in queries if q in set(index.names)]
+    pairs = [(q, c) for q, cands in ranked(index, qs, k=num_images) for c in cands]
+    return match_pairs(cfg, db, pairs, list_name, matcher)
 
 
 def rematch_left_out(cfg: SfmConfig, db: Path, left_out: list[str]) -> dict:
     """Retrieval's second round: the photos ``left_out`` of the first model, each matched with its
-    ``cfg.retrieval_rematch_num_images`` most similar photos (the first round's tree). Returns {"photos",
+    ``cfg.retrieval_rematch_num_images`` most similar photos (the first round's words). Returns {"photos",
     "num_images", "verified" (new verified pairs), "unlisted" (names with spaces: COLMAP's list cannot name
     them), "seconds"}."""
     t0 = time.perf_counter()
-    listed = [n for n in left_out if not any(c.isspace() for c in n)]
-    before = pair_counts(db, cfg.min_num_matches)[1]
-    if listed:
-        path = db.parent / "retrieval_second_round.txt"
-        path.write_text("".join(n + "\n" for n in listed))
-        _retrieve(cfg, db, db.parent / "vocab_tree.bin", cfg.retrieval_rematch_num_images, path)
-    return {"photos": len(listed), "num_images": cfg.retrieval_rematch_num_images,
-            "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(left_out) - len(listed),
-            "seconds": round(time.perf_counter() - t0, 2)}
+    info = _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_rematch_num_images, "retrieval", left_out,
+                     "retrieval_second_round.txt")
+    return {"photos": len(left_out), "num_images": cfg.retrieval_rematch_num_images, "verified": info["verified"],
+            "unlisted": info["unlisted"], "seconds": round(time.perf_counter() - t0, 2)}
 
 
-def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], tree: Path, mo, vo, dev) -> dict:
+def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], index, matcher: str) -> dict:
     """Match every ``cfg.cross_take_period``-th frame of each take with its ``cfg.cross_take_num_images``
     most similar frames of each other take (:func:`curate.sfm.prep.cross_take_pairs`).
 
     Sequential matching pairs neighbours in name order, which are frames of one take; its loop
     detection ranks every frame against all others, so a frame's most similar ones are its own take's
-    neighbours and a second take seldom gets in. Here the ranking (COLMAP's vocabulary-tree retrieval with
-    the capture's own ``tree``, all frames indexed) is read to its end for each queried frame and only
-    the other takes' best frames are kept: (frames / period) x num_images x (takes - 1) pairs at most,
-    linear in the frames. Returns {"queries", "pairs", "new_pairs", "verified", "unlisted", "seconds"}.
+    neighbours and a second take seldom gets in. Here each queried frame's whole ranking (the capture's
+    own words, every frame indexed) is read to its end and only the other takes' best frames are kept:
+    (frames / period) x num_images x (takes - 1) pairs at most, linear in the frames. Returns {"queries",
+    "pairs", "new_pairs", "verified", "unlisted", "seconds"}.
     """
-    pycolmap = load_pycolmap()
-
     from curate.sfm.prep import cross_take_pairs
     t0 = time.perf_counter()
-    take_of = {n: t for t, names in takes.items() for n in names}
-    dbh = pycolmap.Database.open(db)
-    try:
-        ids = {im.name: im.image_id for im in dbh.read_all_images() if im.name in take_of}
-        name_of = {i: n for n, i in ids.items()}
-        queries = [ids[n] for names in takes.values() for n in names[::cfg.cross_take_period] if n in ids]
-        opts = pycolmap.VocabTreePairingOptions()
-        opts.vocab_tree_path = str(tree)
-        opts.num_images = len(ids)          # the whole ranking: the other takes' best may rank after the own take
-        opts.num_threads = cfg.num_threads
-        with stdout_to(db.parent / "colmap.log"):
-            gen = pycolmap.VocabTreePairGenerator(opts, dbh, queries)
-
-            def ranked():
-                while not gen.has_finished():
-                    block = gen.next()  # one queried frame: (query, candidate) pairs, most similar first
-                    if block:
-                        yield name_of.get(block[0][0]), [name_of.get(b) for _, b in block]
-            pairs = cross_take_pairs(((q, c) for q, c in ranked() if q is not None), take_of,
-                                     cfg.cross_take_num_images)
-        new = [(a, b) for a, b in pairs if not dbh.exists_matches(ids[a], ids[b])]
-    finally:
-        dbh.close()
-    # COLMAP's pair list separates names by spaces: a name holding one cannot be listed
-    listed = [(a, b) for a, b in new if not any(c.isspace() for c in a + b)]
-    if len(listed) < len(new):
-        logger.warning("sfm: %d of %d cross-take pairs left unmatched: COLMAP's pair list cannot name photos "
-                       "with spaces in their names", len(new) - len(listed), len(new))
-    before = pair_counts(db, cfg.min_num_matches)[1]
-    if listed:
-        path = db.parent / "cross_take_pairs.txt"
-        path.write_text("".join(f"{a} {b}\n" for a, b in listed))
-        po = pycolmap.ImportedPairingOptions()
-        po.match_list_path = str(path)
-        pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
-    info = {"queries": len(queries), "pairs": len(pairs), "new_pairs": len(new),
-            "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
+    take_of = {n: t for t, names in takes.items() for n in names if n in set(index.names)}
+    queries = [n for names in takes.values() for n in names[::cfg.cross_take_period] if n in take_of]
+    pairs = cross_take_pairs(ranked(index, queries, candidates=sorted(take_of)), take_of, cfg.cross_take_num_images)
+    info = {"queries": len(queries), **match_pairs(cfg, db, pairs, "cross_take_pairs.txt", matcher),
             "seconds": round(time.perf_counter() - t0, 2)}
     logger.info("sfm: cross-take matching (%d takes): %d frames queried, %d new pairs, %d verified in %.1f s",
                 len(takes), info["queries"], info["new_pairs"], info["verified"], info["seconds"])

@@ -9,15 +9,20 @@ import time
 from pathlib import Path
 
 from curate.core.cameras import Cameras
+from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage, hash_files, stage_key
 from curate.sfm.config import SfmConfig
 from curate.sfm.io import sfm_dir as _sfm_dir
-from curate.sfm.model import cameras_from_reconstruction, pycolmap_reconstruction, reconstruction_from_cameras
+from curate.sfm.model import (cameras_from_reconstruction, pycolmap_reconstruction, reconstruction_from_cameras,
+                               write_model)
 from curate.sfm.prep import refuse_inside, write_outputs
 from curate.sfm.subset_model import write_subset_model
 from curate.sfm.triangulation import triangulate_known_poses
 
 logger = logging.getLogger(__name__)
+
+SFM = BY_NAME["sfm"]
+"""The stage's row of the graph: what it writes (``owns``) and what nothing reads again (``spare``)."""
 
 
 def read_cameras(source: str | Path, photos: str | Path | None = None) -> tuple[Cameras, list[str]]:
@@ -135,16 +140,18 @@ def _pose_photos(cfg: SfmConfig, poses, source: Path, photos: Path | None):
              "reason": f"pose without a photo: {m.how[i]}", "working": "", "registered": False}
             for i, n in enumerate(names) if m.files[i] is None]
     unposed = m.unposed if photos is not None else []  # a folder found by the layout, not given: not listed
+    from curate.sfm.ingest import NOT_UTF8, printable, text_name
     from curate.sfm.video import VIDEO_EXTS
-    left += [{"original": str(p), "rel": p.relative_to(folder).as_posix(), "status": "skipped",
+    left += [{"original": printable(p), "rel": printable(p.relative_to(folder).as_posix()), "status": "skipped",
               "reason": ("a video: its frames have no names the poses could refer to" if p.suffix.lower() in VIDEO_EXTS
-                         else f"no pose in {source} names this photo"), "working": "", "registered": False}
+                         else NOT_UTF8 if not text_name(p) else f"no pose in {source} names this photo"),
+              "working": "", "registered": False}
              for p in unposed]
     stats = {"folder": str(folder), "given": photos is not None, "n_poses": len(names), "n_matched": len(idx),
              "n_by_name": sum(m.how[i] == "name" for i in idx), "n_photos": m.n_photos if photos is not None else None,
              "n_unposed": len(unposed) if photos is not None else None,
              "poses_without_photo": [names[i] for i in range(len(names)) if m.files[i] is None][:50],
-             "photos_without_pose": [p.relative_to(folder).as_posix() for p in unposed][:50]}
+             "photos_without_pose": [printable(p.relative_to(folder).as_posix()) for p in unposed][:50]}
     if len(idx) < len(names):
         logger.warning("sfm import: %d of the %d poses of %s have no photo in %s (left out), e.g. %s",
                        len(names) - len(idx), len(names), source, folder, _examples(stats["poses_without_photo"]))
@@ -207,7 +214,7 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
     readable = sum(Path(o).is_absolute() for o in originals)
     triangulate = cfg.triangulate == "auto" and not has_points and readable >= 2
     key = _import_key(cfg, source, photos, originals, left, triangulate)
-    if begin_stage(out, key, force):
+    if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm import: up to date (%s), skipped", out)
         return out, False
     started = time.perf_counter()
@@ -223,25 +230,22 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
             rec = pycolmap_reconstruction(sparse)
         else:
             rec = poses.reconstruction
-            sparse.mkdir(parents=True)
-            rec.write(sparse)
+            write_model(rec, sparse)
         _, xyz, rgb, err = cameras_from_reconstruction(rec)
         stats["triangulation"] = {"status": "source", "reason": "the source has 3D points"}
     elif triangulate:
         rec, stats["triangulation"] = triangulate_known_poses(cfg, cams, originals, out)
-        sparse.mkdir(parents=True)
-        rec.write(sparse)
+        write_model(rec, sparse)
         _, xyz, rgb, err = cameras_from_reconstruction(rec)
     else:
         reason = ("--triangulate off" if cfg.triangulate == "off" else
                   "fewer than 2 readable photos (image names without a photo folder)")
         stats["triangulation"] = {"status": "off" if cfg.triangulate == "off" else "skipped", "reason": reason}
         rec = reconstruction_from_cameras(cams)
-        sparse.mkdir(parents=True)
-        rec.write(sparse)
+        write_model(rec, sparse)
         xyz = rgb = err = None
     stats.update(write_outputs(out, cams, xyz, rgb, err, records + left, originals, cfg.normalize_percentile))
-    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"},
+    finish_stage(out, key, cfg, started, outputs={"sparse": "sparse/0", "cameras": "cameras.json"}, owns=SFM.owns,
                  mode="import", source=str(source), photos=str(photos) if photos else None, stats=stats)
     logger.info("sfm import: %d cameras, %d points from %s", len(cams), stats["n_points"], source)
     return out, True

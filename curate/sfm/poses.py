@@ -76,9 +76,13 @@ def read_poses(source: str | Path, photos: str | Path | None = None) -> Poses:
         raise ValueError(f"{source}: not a pose file: its JSON is nested too deeply to read") from None
     try:
         if isinstance(data, dict) and "convention" in data:
-            cams = Cameras.from_dict(data)
+            try:
+                cams = Cameras.from_dict(data)
+            except ValueError as e:   # a value no camera has: the file, the camera and the field named
+                raise ValueError(f"{source}: {e}") from None
             from curate.core.cameras import check_poses
-            check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source))
+            check_poses(cams.c2w, cams.fx, cams.fy, cams.cx, cams.cy, cams.width, cams.height, cams.names, str(source),
+                        dist=cams.dist)
             # names relative to the photo folder (a run folder's sfm/images), else to the file's own folder
             if photos is not None:   # looked up in the photo folder only (match_photos)
                 return Poses(cams, [str((Path(photos) / n).resolve()) if n else n for n in cams.names])
@@ -204,13 +208,15 @@ def match_photos(names: list[str], own: list[str], folder: str | Path, recursive
     """
     from collections import Counter
 
-    from curate.sfm.ingest import find_images
+    from curate.sfm.ingest import find_images, text_name
     from curate.sfm.video import VIDEO_EXTS
     folder = Path(folder).resolve()
     imgs, other = find_images(folder, recursive)
-    imgs = [p for p in imgs if p.is_file()]   # a link to nothing (gone, a loop) is no pose's photo: ingest lists it
+    odd = [p for p in imgs if not text_name(p)]          # a name that is not UTF-8 is no pose's: listed as left out
+    imgs = [p for p in imgs if p.is_file() and text_name(p)]   # a link to nothing (gone, a loop) is no pose's photo
     other = [p for p in other if p.is_file()]
-    photos = [p.resolve() for p in imgs] + [p.resolve() for p in other if p.suffix.lower() in VIDEO_EXTS]
+    photos = ([p.resolve() for p in imgs] + [p.resolve() for p in other if p.suffix.lower() in VIDEO_EXTS]
+              + [p for p in odd if p.is_file()])
     by_name: dict[str, list[Path]] = {}
     for p in imgs:
         by_name.setdefault(p.name, []).append(p.resolve())

@@ -36,7 +36,7 @@ def input_key(cfg: SfmConfig, photos: Path) -> str:
     root = source_root(photos)
     imgs, other = find_images(photos, cfg.recursive)
     files = sorted(imgs + other, key=lambda p: p.relative_to(root).as_posix())
-    h = hashlib.sha256("\n".join(p.relative_to(root).as_posix() for p in files).encode())
+    h = hashlib.sha256("\n".join(p.relative_to(root).as_posix() for p in files).encode("utf-8", "surrogateescape"))
     conf = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in _NOT_IN_KEY}
     return stage_key({"mode": "sfm", **conf}, [hash_files(files, h), str(photos)])
 
@@ -219,12 +219,23 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     # others by cross-take retrieval). A video with photos stays exhaustive: matched sequentially, the
     # office video with every 5th office photo of the other half split and left all the photos out
     # (docs/sfm.md, "Several takes of one place"), where exhaustive matching kept 30 of 38.
-    if all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]):
+    if in_order(kept):
         return "sequential"
     if any(r.extra.get("video") for r in kept):
         logger.warning("sfm: %d frames and photos: exhaustive matching (quadratic time)", n)
         return "exhaustive"
     return "retrieval"
+
+
+def in_order(kept: list[PhotoRecord]) -> bool:
+    """The photos are a sequence: every one a video frame, or names numbered in order (``frame_00001.jpg``)."""
+    return bool(kept) and (all(r.extra.get("video") for r in kept) or looks_sequential([r.rel for r in kept]))
+
+
+def choose_guided(cfg: SfmConfig, kept: list[PhotoRecord]) -> bool:
+    """Whether the pairs are matched again along their verified geometry (``cfg.guided_matching``; ``auto``: for a
+    sequence of frames, :func:`in_order`, whatever the matcher: a 41-frame video is matched exhaustively)."""
+    return cfg.guided_matching == "on" or (cfg.guided_matching == "auto" and in_order(kept))
 
 
 def choose_camera_mode(cfg: SfmConfig, kept: list[PhotoRecord]) -> bool:

@@ -18,12 +18,19 @@ from curate.sfm.parts import join_parts, part_agreement, verify_frames
 logger = logging.getLogger(__name__)
 
 
+MAPPING_THREADS = 1
+"""Threads of the mappers and their bundle adjustments, whatever ``SfmConfig.num_threads`` says. Ceres sums a
+multi-threaded adjustment in the order its threads finish: the same matches mapped twice on two threads gave poses
+0.09 deg apart (office.mp4 at half its frame rate), and a difference that small decides which frame registers next
+on a capture that is close to splitting (docs/sfm.md, "The same input, the same model")."""
+
+
 def seeded_pipeline_options(cfg: SfmConfig):
-    """COLMAP's incremental pipeline options with ``cfg``'s threads, seed (mapper and triangulation) and
-    minimum matches: what mapping and the triangulation of known poses share."""
+    """COLMAP's incremental pipeline options with one thread (:data:`MAPPING_THREADS`), ``cfg``'s seed (mapper and
+    triangulation) and minimum matches: what mapping and the triangulation of known poses share."""
     pycolmap = load_pycolmap()
     opts = pycolmap.IncrementalPipelineOptions()
-    opts.num_threads = cfg.num_threads
+    opts.num_threads = MAPPING_THREADS
     opts.random_seed = cfg.seed
     opts.mapper.random_seed = cfg.seed
     opts.triangulation.random_seed = cfg.seed
@@ -89,13 +96,16 @@ def map_incremental(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images:
 
 def map_global(cfg: SfmConfig, db: Path, images: Path, out: Path):
     """{id: Reconstruction} of COLMAP's global mapper (rotation averaging, then global positioning)
-    on the matches of ``db`` (written to: pass a copy to keep the original)."""
+    on the matches of ``db`` (written to: pass a copy to keep the original), on one thread and seeded in each
+    step (:data:`MAPPING_THREADS`)."""
     pycolmap = load_pycolmap()
     opts = pycolmap.GlobalPipelineOptions()
-    opts.num_threads = cfg.num_threads
+    opts.num_threads = opts.mapper.num_threads = MAPPING_THREADS
     opts.random_seed = cfg.seed
     opts.min_num_matches = cfg.min_num_matches
     opts.mapper.random_seed = cfg.seed
+    opts.mapper.rotation_averaging.random_seed = cfg.seed
+    opts.mapper.global_positioning.random_seed = cfg.seed
     out.mkdir(parents=True, exist_ok=True)
     return pycolmap.global_mapping(db, images, out, options=opts)
 

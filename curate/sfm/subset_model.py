@@ -84,9 +84,9 @@ def write_subset_model(sparse_dir: str | Path, keep_names: list[str], out_dir: s
                     shared[(ids[a], ids[b])] = shared.get((ids[a], ids[b]), 0) + 1
     components = covisible_groups(sorted(keep_ids), [e for e, n in shared.items() if n >= min_shared])
     rec.update_point_3d_errors()
+    from curate.sfm.model import write_model
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rec.write_binary(str(out_dir))
+    write_model(rec, out_dir)
     logger.info("subset model: %d images, %d of %d points -> %s", rec.num_reg_images(), rec.num_points3D(),
                 src.num_points3D(), out_dir)
     return {"n_images": rec.num_reg_images(), "n_cameras": rec.num_cameras(), "n_points3D": rec.num_points3D(),

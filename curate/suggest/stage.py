@@ -41,6 +41,11 @@ log = logging.getLogger(__name__)
 STAGE = "suggest"
 FIELD_STAGE = "suggest_field"
 UNANSWERED = "unanswered.json"
+OWNS = ("suggestions.json", "transforms.json", "images.txt", "cameras.txt", "coverage.npz", "preview_*.png",
+        "suggest.html", UNANSWERED)
+"""What ``curate suggest`` writes in ``RUN/suggest`` (:attr:`curate.core.graph.Stage.owns`)."""
+FIELD_OWNS = ("field.pt", "train.json")
+"""What it writes in ``RUN/suggest_field``."""
 """Written in ``RUN/suggest`` when the capture leaves nothing to suggest: ``reason`` (what it lacks), ``key``, and
 ``inputs`` (the keys of the sfm and occupancy stages it read: the report says the reason while they hold)."""
 RUN_FIELDS = ("occupancy/field.pt", "evaluate/all/field.pt")
@@ -183,7 +188,7 @@ def train_suggest_field(cfg: SuggestConfig, run_dir: Path, inp: RunInputs, force
     d = Path(run_dir) / FIELD_STAGE
     settings = field_settings(cfg)
     key = field_key(cfg, inp)
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=FIELD_OWNS):
         return d / "field.pt"
     if any(not p or not Path(p).is_file() for p in inp.paths):
         raise FileNotFoundError(f"{run_dir}: the photos of the capture are not all readable: a field for the "
@@ -195,7 +200,7 @@ def train_suggest_field(cfg: SuggestConfig, run_dir: Path, inp: RunInputs, force
     _, st = train_field(FieldConfig(), cams, inp.paths, d, iters=cfg.field_iters, seed=cfg.seed,
                         box=default_box(inp.cams))
     write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds, "n_train": len(cams)})
-    finish_stage(d, key, settings, t0, outputs={"field": "field.pt"}, seed=cfg.seed)
+    finish_stage(d, key, settings, t0, outputs={"field": "field.pt"}, seed=cfg.seed, owns=FIELD_OWNS)
     return d / "field.pt"
 
 
@@ -261,7 +266,7 @@ def suggest(cfg: SuggestConfig, inp: RunInputs, progress: bool = False):
 
 def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool = True) -> StageResult:
     """K suggested poses for the run folder -> ``RUN/suggest`` (module docstring)."""
-    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic
+    from curate.core.stage import begin_stage, finish_stage, stage_key, write_json_atomic, writing
     from curate.suggest import outputs
     from curate.suggest.guide import instruction, nearest_frames
     from curate.suggest.page import write_page
@@ -282,7 +287,7 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
                          "without points and no field) and --field none forbids training one")
     key = stage_key({"suggest": cfg, "field": field.relative_to(run_dir).as_posix() if field else None},
                     inp.keys + ([_key(field.parent)] if field is not None else []))
-    if begin_stage(d, key, force):
+    if begin_stage(d, key, force, owns=OWNS):
         return StageResult(STAGE, d, False, time.perf_counter() - t0)
     occ_source = "occupancy/occupancy.npz"
     if not usable:
@@ -311,11 +316,12 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     outputs.write_transforms_json(d / "transforms.json", sugg, names)
     outputs.write_colmap_text(d, sugg, names)
     flat = np.flatnonzero(used.ravel())
-    np.savez_compressed(d / "coverage.npz", flat=flat, res=inp.res, box_min=inp.box_min, box_max=inp.box_max,
-                        score_before=pl.before.angular_per_node + pl.before.frequency_per_node,
-                        score_after=pl.after.angular_per_node + pl.after.frequency_per_node,
-                        views_before=pl.before.views_per_node, views_after=pl.after.views_per_node,
-                        frontier=front.ravel()[flat])
+    with writing(d / "coverage.npz"):
+        np.savez_compressed(d / "coverage.npz", flat=flat, res=inp.res, box_min=inp.box_min, box_max=inp.box_max,
+                            score_before=pl.before.angular_per_node + pl.before.frequency_per_node,
+                            score_after=pl.after.angular_per_node + pl.after.frequency_per_node,
+                            views_before=pl.before.views_per_node, views_after=pl.after.views_per_node,
+                            frontier=front.ravel()[flat])
     timing = pl.timing()
     gains = pl.gains
     from curate.core.stage import config_dict
@@ -339,7 +345,7 @@ def run(cfg: SuggestConfig, run_dir: Path, force: bool = False, progress: bool =
     write_page(run_dir, d, rec, inp, pl, used)
     finish_stage(d, key, {"suggest": cfg}, t0, outputs={"suggestions": "suggestions.json", "page": "suggest.html",
                                                         "transforms": "transforms.json", "colmap": "images.txt"},
-                 seed=cfg.seed)
+                 seed=cfg.seed, owns=OWNS)
     if RunPaths(run_dir).report_json.is_file():   # the run's report links the page
         from curate.report.run_report import write_html
         write_html(run_dir)
