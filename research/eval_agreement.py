@@ -112,7 +112,7 @@ def reread(folder: Path, out: Path, texts: list[str], captures: list[str]) -> li
     product's interval after two folds: one look at 95% (``--folds 2``) and the first look of an evaluation that
     adds folds (:func:`curate.evaluate.folds.look_level`)."""
     from curate.core.stats import decision, folds_moderated
-    from curate.evaluate.folds import KAPPA_PRIOR, LOCAL_SPREAD, look_level
+    from curate.evaluate.folds import KAPPA_PRIOR, look_level
     from research.interval_study import fold_diffs
     rows = []
     ref = tag_of(texts[0])
@@ -128,8 +128,8 @@ def reread(folder: Path, out: Path, texts: list[str], captures: list[str]) -> li
                 common = sorted(set(d) & set(d_ref))
                 r = float(np.corrcoef([d_ref[k] for k in common], [d[k] for k in common])[0, 1])
                 fd = fold_diffs(s, rival)[:2]
-                p95 = folds_moderated(fd, 0.95, *KAPPA_PRIOR, local=LOCAL_SPREAD)
-                pad = folds_moderated(fd, look_level(True), *KAPPA_PRIOR, local=LOCAL_SPREAD)
+                p95 = folds_moderated(fd, 0.95, *KAPPA_PRIOR)
+                pad = folds_moderated(fd, look_level(True), *KAPPA_PRIOR)
                 rows.append({"capture": cap, "rival": rival, "setting": tag, "views": len(common), "r_vs_ref": r,
                              "mean": float(np.mean([d[k] for k in common])), "cpu_s_per_training": secs[tag],
                              "lo95": p95["lo"], "hi95": p95["hi"], "decision_folds2": decision(p95, 0.3),

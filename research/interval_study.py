@@ -7,18 +7,18 @@ its fold and its PSNR under the selection and each rival) and, per capture and r
   (:func:`curate.core.stats.folds_paired`) over the views' within-fold variance / N, with F - 1 degrees of
   freedom; what the prior of :func:`curate.core.stats.folds_moderated` is fitted to;
 * the prior ``(kappa0, nu0)`` fitted by maximum likelihood (``kappa_hat / kappa0 ~ F(F - 1, nu0)``: a scaled
-  inverse chi-square prior, as a moderated variance's) on every capture, and on every capture but one
-  (``--leave-one-out``: that capture's figures then use the prior of the others: chosen on part, checked on the
-  rest);
+  inverse chi-square prior, as a moderated variance's) on every capture, and on every capture but one;
 * coverage: over many draws of k folds (k = 2, 3, 4, 7), how often the interval of those k folds holds the mean
   of all folds (the cross-validation estimate the evaluation converges to), the old interval (the folds alone,
-  t on k - 1) and the new (the prior), at the level the product uses;
+  t on k - 1) and the new (with the product's prior, ``curate.evaluate.folds.KAPPA_PRIOR``), at the level the
+  product uses;
 * the verdicts after the first 2, 3, 4, 7 folds in the product's order, old beside new.
 
     python -m research.interval_study RUN... --json docs/evidence/interval_study.json
 
-No training: the runs' trainings are read. ``--prior KAPPA0,NU0`` evaluates a given prior instead of the fitted
-one (the product's: ``curate.evaluate.folds.KAPPA_PRIOR``).
+No training: the runs' trainings are read. ``--prior KAPPA0,NU0`` evaluates another prior than the product's;
+``--prior fitted``: each capture's figures with the prior fitted on the other captures (chosen on part, checked
+on the rest).
 """
 
 from __future__ import annotations
@@ -50,16 +50,12 @@ def fold_diffs(summary: dict, rival: str) -> list[np.ndarray]:
     return out
 
 
-LOCAL = False
-"""Measure the views' spread from successive views (``folds_moderated(local=True)``); ``--local`` sets it."""
-
-
 def kappa_hat(diffs: list[np.ndarray]) -> tuple[float, int] | None:
     """(design effect over all folds, its degrees of freedom F - 1); None below two folds or without spread."""
     from curate.core.stats import folds_moderated
     if len(diffs) < 2:
         return None
-    k = folds_moderated(diffs, nu0=0.0, local=LOCAL)["kappa_folds"]
+    k = folds_moderated(diffs, nu0=0.0)["kappa_folds"]
     return (k, len(diffs) - 1) if k is not None and k > 0 else None
 
 
@@ -89,7 +85,7 @@ def interval(diffs, level, prior):
     from curate.core.stats import folds_moderated, folds_paired
     if prior is None:
         return folds_paired(diffs, level)
-    return folds_moderated(diffs, level, kappa0=prior[0], nu0=prior[1], local=LOCAL)
+    return folds_moderated(diffs, level, kappa0=prior[0], nu0=prior[1])
 
 
 def coverage(diffs, truth, ks, level, prior, rng, draws=200) -> dict:
@@ -116,15 +112,13 @@ def main(argv=None) -> int:
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--level", type=float, default=None, help="each look's level (default: the product's)")
-    ap.add_argument("--prior", default=None, help="KAPPA0,NU0 instead of the fitted prior")
+    ap.add_argument("--prior", default=None, help="KAPPA0,NU0, or 'fitted' (leave one capture out), instead of "
+                    "the product's")
     ap.add_argument("--ks", default="2,3,4,7")
     ap.add_argument("--margin", type=float, default=0.3)
-    ap.add_argument("--local", action="store_true", help="the views' spread from successive views")
     ap.add_argument("--upper", type=float, default=None, help="the prior's kappa0 at this quantile of its fitted "
                     "distribution (a conservative prior) instead of its scale")
     a = ap.parse_args(argv)
-    global LOCAL
-    LOCAL = a.local
     from curate.core.stats import decision
     from curate.evaluate.folds import look_level
     level = a.level or look_level(True)
@@ -149,7 +143,9 @@ def main(argv=None) -> int:
     if a.upper:
         fitted = upper(fitted, a.upper)
     print(f"prior fitted on all: kappa0 {fitted[0]:.3f}, nu0 {fitted[1]:.1f}")
-    given = tuple(float(x) for x in a.prior.split(",")) if a.prior else None
+    from curate.evaluate.folds import KAPPA_PRIOR
+    given = (None if a.prior == "fitted" else tuple(float(x) for x in a.prior.split(",")) if a.prior
+             else tuple(KAPPA_PRIOR))
     rng = np.random.default_rng(0)
     cov_rows, verdicts, loo = [], [], {}
     for cap, by in caps.items():
@@ -172,7 +168,8 @@ def main(argv=None) -> int:
                     p = interval(diffs[:k], level, pr)
                     verdicts.append({"capture": cap, "rival": r, "interval": name, "folds": k, "mean": p["mean"],
                                      "lo": p["lo"], "hi": p["hi"], "decision": decision(p, a.margin)})
-    print("\nleave-one-capture-out priors: " + ", ".join(f"{c} ({k0:.2f}, {nu:.1f})" for c, (k0, nu) in loo.items()))
+    print("\npriors used (fitted: on the other captures): "
+          + ", ".join(f"{c} ({k0:.2f}, {nu:.1f})" for c, (k0, nu) in loo.items()))
     print("\ncoverage of the all-fold mean (hits / draws, median half-width), level", level)
     for k in ks:
         for name in ("old", "new"):
@@ -193,11 +190,16 @@ def main(argv=None) -> int:
                 line.append(f"{k}: {o['mean']:+.2f} [{o['lo']:+.2f},{o['hi']:+.2f}] {o['decision'][:4]} | "
                             f"[{n['lo']:+.2f},{n['hi']:+.2f}] {n['decision'][:4]}")
             print(f"  {cap:11s} {r:6s} " + "; ".join(line))
-    out = {"level": level, "prior_all": fitted, "prior_loo": loo, "kappas": rows, "coverage": cov_rows,
+    out = {"level": level, "prior_all": fitted, "prior_used": loo, "kappas": rows, "coverage": cov_rows,
            "verdicts": verdicts}
     if a.json:
         a.json.write_text(json.dumps(out, indent=1, default=float))
-    print(json.dumps({"prior_all": fitted, "prior_loo": loo}))
+    print(json.dumps({"prior_all": fitted, "prior_used": loo, "level": level,
+                      "coverage": {name: {k: [sum(c["coverage"][k][0] for c in cov_rows if c["interval"] == name
+                                                  and k in c["coverage"]),
+                                              sum(c["coverage"][k][1] for c in cov_rows if c["interval"] == name
+                                                  and k in c["coverage"])] for k in ks}
+                                   for name in ("old", "new")}}))
     return 0
 
 

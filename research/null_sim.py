@@ -19,7 +19,8 @@ folds the minutes given hold); a last look at the end of the time. A *false call
 look. Printed per setting: the design effect the setting has (measured over the simulations), the false-call rate
 and its 95% binomial upper bound; one JSON line last.
 
-    python -m research.null_sim --reps 2000
+    python -m research.null_sim --reps 2000                  # the product's
+    python -m research.null_sim --reps 2000 --interval old   # before issue 59
 """
 
 from __future__ import annotations
@@ -52,12 +53,12 @@ def capture(rng, photos: int, sigma: float, sigma_smooth: float, rho: float, tau
 def procedure(diffs, margin: float, time_folds: int, prior, level: float) -> tuple[str, int]:
     """The product's looks on ``diffs`` (one rival): (the decision it ends with, the folds it used)."""
     from curate.core.stats import decision, folds_moderated
-    from curate.evaluate.folds import FIRST_LOOK, LOCAL_SPREAD, LOOKS, folds_to_decide
+    from curate.evaluate.folds import FIRST_LOOK, LOOKS, folds_to_decide
     F_max = min(len(diffs), time_folds)
     F = min(FIRST_LOOK, F_max)
     looks = 0
     while True:
-        p = folds_moderated(diffs[:F], level, kappa0=prior[0], nu0=prior[1], local=LOCAL_SPREAD)
+        p = folds_moderated(diffs[:F], level, kappa0=prior[0], nu0=prior[1])
         looks += 1
         d = decision(p, margin)
         if d != "undecided" or F >= F_max or looks >= LOOKS:
@@ -68,20 +69,31 @@ def procedure(diffs, margin: float, time_folds: int, prior, level: float) -> tup
         F = F_max if looks == LOOKS - 1 else g
 
 
+def procedure_old(diffs, margin: float, time_folds: int) -> tuple[str, int]:
+    """The evaluation before issue 59 on ``diffs``: the folds alone (:func:`curate.core.stats.folds_paired`, t on
+    F - 1), a look after 4 folds and one at the end of the time (each at 97.5% when there are two, else 95%)."""
+    from curate.core.stats import decision, folds_paired
+    F_max = min(len(diffs), time_folds)
+    looks = [F_max] if F_max <= 4 else [4, F_max]
+    level = 0.95 if len(looks) == 1 else 1 - 0.05 / 2
+    for F in looks:
+        d = decision(folds_paired(diffs[:F], level), margin)
+        if d != "undecided":
+            return d, F
+    return d, F_max
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--reps", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--prior", default=None, help="KAPPA0,NU0 (default: the product's)")
     ap.add_argument("--margin", type=float, default=0.3)
-    ap.add_argument("--local", choices=("on", "off"), default=None, help="the views' spread from successive views "
-                    "(default: the product's, curate.evaluate.folds.LOCAL_SPREAD)")
+    ap.add_argument("--interval", choices=("new", "old"), default="new", help="new: the product's looks and "
+                    "prior; old: before issue 59 (the folds alone, looks after 4 folds and at the end)")
     a = ap.parse_args(argv)
     from curate.core.stats import folds_moderated
-    from curate.evaluate import folds as fo
     from curate.evaluate.folds import KAPPA_PRIOR, look_level
-    if a.local:
-        fo.LOCAL_SPREAD = a.local == "on"
     prior = tuple(float(x) for x in a.prior.split(",")) if a.prior else KAPPA_PRIOR
     level = look_level(True)
     rng = np.random.default_rng(a.seed)
@@ -93,15 +105,16 @@ def main(argv=None) -> int:
                     settings.append({"photos": photos, "sigma": sigma, "sigma_smooth": smooth, "rho": rho,
                                      "tau": tau, "time_folds": tf})
     rows = []
-    print(f"prior {prior}, level {level}")
+    print(f"interval {a.interval}" + (f", prior {prior}, level {level}" if a.interval == "new" else ""))
     for st in settings:
         calls, kap, used = 0, [], []
         for _ in range(a.reps):
             diffs = capture(rng, st["photos"], st["sigma"], st["sigma_smooth"], st["rho"], st["tau"])
-            k = folds_moderated(diffs, nu0=0, local=fo.LOCAL_SPREAD)["kappa_folds"]
+            k = folds_moderated(diffs, nu0=0)["kappa_folds"]
             if k is not None:
                 kap.append(k)
-            d, F = procedure(diffs, a.margin, st["time_folds"], prior, level)
+            d, F = (procedure(diffs, a.margin, st["time_folds"], prior, level) if a.interval == "new" else
+                    procedure_old(diffs, a.margin, st["time_folds"]))
             calls += d in ("ahead", "behind")
             used.append(F)
         rate = calls / a.reps
@@ -113,7 +126,9 @@ def main(argv=None) -> int:
               f"tau {st['tau']:.1f} time {st['time_folds']:2d} folds: kappa {row['kappa']:5.2f}  false calls "
               f"{rate:.3f} (<= {hi:.3f})  folds used {row['mean_folds']:.1f}", flush=True)
     worst = max(rows, key=lambda r: r["false_calls"])
-    print(json.dumps({"prior": prior, "level": level, "reps": a.reps, "worst": worst, "rows": rows}))
+    print(json.dumps({"interval": a.interval, "prior": prior if a.interval == "new" else None, "level": level,
+                      "reps": a.reps, "worst": worst,
+                      "rows": rows}))
     return 0
 
 

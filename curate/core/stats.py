@@ -94,7 +94,7 @@ def folds_paired(diffs, level: float = 0.95) -> dict:
             "sd": sd}
 
 
-def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float = 0.0, local: bool = False) -> dict:
+def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float = 0.0) -> dict:
     """Per-view differences pooled over hold-out folds, with an interval that uses what few folds give: the
     spread of the views within the folds, the spread between the folds, and a prior on how the two relate.
 
@@ -103,17 +103,12 @@ def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float 
     or less, the mean varies than if every view were an independent draw: what a fold's views share, their
     trainings' noise and random draw, raises it; folds that interleave along one capture lower it). The folds
     estimate ``kappa`` (the cluster-robust variance of :func:`folds_paired` over ``s_w^2 / N``) with only
-    ``F - 1`` degrees of freedom; the prior, ``kappa0`` worth ``nu0`` degrees of freedom (measured on real
-    captures: ``curate.evaluate.folds.KAPPA_PRIOR``), is pooled with it as a moderated variance is (a scaled
-    inverse chi-square prior): ``V = (nu0 kappa0 s_w^2 / N + (F - 1) V_cr) / (nu0 + F - 1)``, with a t quantile on
-    the Satterthwaite degrees of freedom of its two parts. ``nu0 = 0`` is :func:`folds_paired`'s interval (the
-    folds alone); as folds are added the data outweigh the prior. One fold gives the prior's interval.
-
-    ``local``: the views' spread is measured from the differences of successive views of a fold (in the order
-    given: capture order), ``s_d^2 = sum (d_i+1 - d_i)^2 / (2 (n - 1))``, instead of around the fold's mean. Along
-    a walk, what varies slowly (the walk's ends, its turns) is sampled alike by every fold, whose views interleave,
-    and leaves the pooled mean nearly untouched: the local spread is the part that does not cancel, and the design
-    effect over it varies less from capture to capture.
+    ``F - 1`` degrees of freedom; the prior, ``kappa0`` worth ``nu0`` degrees of freedom (chosen against real
+    captures and the null simulation: ``curate.evaluate.folds.KAPPA_PRIOR``), is pooled with it as a moderated
+    variance is (a scaled inverse chi-square prior): ``V = (nu0 kappa0 s_w^2 / N + (F - 1) V_cr) / (nu0 + F - 1)``,
+    with a t quantile on the Satterthwaite degrees of freedom of its two parts. ``nu0 = 0`` is
+    :func:`folds_paired`'s interval (the folds alone); as folds are added the data outweigh the prior. One fold
+    gives the prior's interval.
 
     ``diffs``: one array per fold. Non-finite differences are dropped, empty folds ignored. Returns
     :func:`folds_paired`'s keys (``dof`` now the Satterthwaite degrees of freedom, possibly fractional),
@@ -131,10 +126,7 @@ def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float 
     N, m = x.size, float(x.mean())
     sd = float(x.std(ddof=1)) if N > 1 else 0.0
     dof_w = N - F
-    if dof_w >= 2 and local:
-        ss = sum(float(np.sum(np.diff(d) ** 2)) for d in folds)
-        s2, dof_w = ss / (2 * dof_w), 2 * dof_w / 3           # successive differences: about 2/3 of the dof
-    elif dof_w >= 2:
+    if dof_w >= 2:
         ss = sum(float(np.sum((d - d.mean()) ** 2)) for d in folds)
         s2 = ss / dof_w
     elif N > 1:                       # one view a fold: the views' spread over all of them

@@ -222,12 +222,15 @@ class Planner:
         _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db)
         needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned)
                  for r in RIVALS if f"selection-{r}" in paired}
-        unit_s = self.unit_s() or 0.0
+        unit_s = self.unit_s()             # None: every training so far was reused (no cost measured here)
         self.forecast_folds = needs
         parts = []
         for r, g in sorted(needs.items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
             if g is None:
                 parts.append(f"{RIVAL_WORDS[r]}: more folds than the capture has")
+                continue
+            if unit_s is None:
+                parts.append(f"{RIVAL_WORDS[r]}: about {g} folds")
                 continue
             per = (1 + (self.ev.random_seeds if r == "random" else 1)) * unit_s / max(self.workers, 1)
             parts.append(f"{RIVAL_WORDS[r]}: about {g} folds ({_minutes(g * per)} here)")
@@ -270,7 +273,8 @@ class Planner:
         rec.update({"needs_folds": needs, "training": taken, "next_look": None if last else nxt,
                     "unit_seconds": round(unit_s, 1), "seconds_left": round(left, 1)})
         self.plans.append(rec)
-        self.say(_plan_said(F, paired, self.decided_at, needs, taken, unit_s, self.workers, self.ev.random_seeds))
+        self.say(_plan_said(F, paired, self.decided_at, needs, taken, self.unit_s(), self.workers,
+                            self.ev.random_seeds))
         skip = frozenset(set(RIVALS) - set(taken))
         if not taken:
             return Look(stop=True, why="needs time", skip=skip)
@@ -330,7 +334,7 @@ def _first_look() -> str:
 RIVAL_WORDS = {"random": "random subsets", "fvs": "FVS", "stride": "every n-th frame"}
 
 
-def _plan_said(F: int, paired: dict, decided_at: dict, needs: dict, taken: list, unit_s: float, workers: int,
+def _plan_said(F: int, paired: dict, decided_at: dict, needs: dict, taken: list, unit_s: float | None, workers: int,
                seeds: int) -> str:
     """The plan a look made, in one line."""
     done = [f"{paired[f'selection-{r}']['decision']} {RIVAL_WORDS[r]}" for r in decided_at if decided_at[r] == F]
@@ -340,7 +344,10 @@ def _plan_said(F: int, paired: dict, decided_at: dict, needs: dict, taken: list,
         if g is None:
             parts.append(f"{RIVAL_WORDS[r]} would stay undecided even with every photo held out")
             continue
-        per = (2 if r != "random" else 1 + seeds) * unit_s / max(workers, 1)
         what = "training it" if r in taken else "more than the time left"
+        if not unit_s:              # no training run here yet (all reused): no cost to say
+            parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({what})")
+            continue
+        per = (2 if r != "random" else 1 + seeds) * unit_s / max(workers, 1)
         parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({_minutes((g - F) * per)} here: {what})")
     return out + ("; " + "; ".join(parts) if parts else "")
