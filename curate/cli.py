@@ -25,6 +25,7 @@ from curate.core.options import HelpFormatter, Opt, add_options, apply_options, 
 from curate.select.methods import METHODS, method_help
 from curate.sfm.config import CAMERA_MODES, GUIDED, MAPPERS, MATCHERS, ON_SPLIT, TRIANGULATE
 from curate.export.config import MODES, UNDISTORT
+from curate.field.config import TRAINERS
 from curate.simulate.choices import Scene, SimOccupancy
 from curate.suggest.choices import FIELD_MODES, NODE_MODES
 
@@ -212,7 +213,10 @@ GRID = [Opt("--res", "occupancy.res", parse=int),
         Opt("--refine-size", "refine.max_side", parse=int, metavar="PX")]
 TRAIN = [Opt("--holdout-every", "evaluate.holdout_every", parse=int),
          Opt("--iters", "evaluate.iters", parse=int),
-         Opt("--eval-size", "evaluate.max_side", parse=int)]
+         Opt("--eval-size", "evaluate.max_side", parse=int),
+         Opt("--trainer", "evaluate.trainer", choices=TRAINERS),
+         Opt("--splat-steps", "evaluate.splat.steps", parse=int),
+         Opt("--splat-size", "evaluate.splat.max_side", parse=int, metavar="PX")]
 EVAL = [Opt("--eval-minutes", "evaluate.minutes", parse=float, metavar="MIN"),
         Opt("--folds", "evaluate.folds", parse=int),
         Opt("--equivalence-db", "evaluate.margin_db", parse=float, metavar="DB"),
@@ -292,6 +296,15 @@ def run_config(args, base=None):
         return apply_options(base if base is not None else RunConfig(), args, COMMAND_OPTS[args.command])
     except ValueError as e:
         raise CliError(str(e))
+
+
+def _check_trainer(cfg) -> None:
+    """``--trainer gsplat`` where it cannot run (no CUDA, no gsplat): one line, before any work."""
+    if cfg.run_evaluation and cfg.evaluate.trainer == "gsplat":
+        from curate.field.splat import unavailable
+        why = unavailable()
+        if why:
+            raise CliError(why)
 
 
 def _check_device(device: str | None) -> None:
@@ -399,6 +412,8 @@ def _stage(args, run_dir: Path) -> int:
     except FileNotFoundError as e:
         raise CliError(str(e))
     cfg = run_config(args, base)
+    if args.command == "evaluate":
+        _check_trainer(cfg)
     if cfg != base:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
     ctx = RunContext(cfg, run_dir, args.force, rec.get("photos"), rec.get("poses"))
@@ -483,6 +498,7 @@ def cmd_run(args) -> int:
     from curate.pipeline import run
     cfg = run_config(args)
     _check_device(cfg.select.device)
+    _check_trainer(cfg)
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
     try:
@@ -521,6 +537,7 @@ def cmd_batch(args) -> int:
     from curate.core.executors import RayMissing
     cfg = run_config(args)
     _check_device(cfg.select.device)
+    _check_trainer(cfg)
     folders = list(args.folders)
     if args.list:
         try:

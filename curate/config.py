@@ -75,9 +75,11 @@ class RunConfig:
 
 
 OLD_DEFAULTS = {("evaluate", "methods"): ["selection", "random", "fvs", "all"], ("evaluate", "random_seeds"): 3,
-                ("evaluate", "iters"): 800, ("evaluate", "max_side"): 240}
+                ("evaluate", "iters"): 800, ("evaluate", "max_side"): 240,
+                ("evaluate", "field", "batch_rays"): 4096, ("evaluate", "field", "n_inner"): 64,
+                ("evaluate", "field", "n_outer"): 32, ("evaluate", "field", "trans_thresh"): 0.001}
 """Options whose default changed in curate 0.3 (the evaluation over folds, with every n-th frame as a rival,
-one random draw per fold and a cheaper field), with their 0.1-0.2 default."""
+one random draw per fold and a cheaper field), with their 0.1-0.2 default (a key path into the config)."""
 
 
 def upgrade_config(d: dict, version: str | None) -> dict:
@@ -94,8 +96,13 @@ def upgrade_config(d: dict, version: str | None) -> dict:
         return d
     if (major, minor) >= (0, 3):
         return d
-    for (section, name), old in OLD_DEFAULTS.items():
-        sub = d.get(section)
+    from curate.core.stage import config_dict
+    today = config_dict(RunConfig())
+    for (*path, name), old in OLD_DEFAULTS.items():
+        sub, now = d, today
+        for k in path:
+            sub = sub.get(k) if isinstance(sub, dict) else None
+            now = now[k]
         if isinstance(sub, dict) and sub.get(name) == old:
-            del sub[name]
+            sub[name] = now[name]       # today's default, also inside a nested option (the field's)
     return d

@@ -94,6 +94,80 @@ def folds_paired(diffs, level: float = 0.95) -> dict:
             "sd": sd}
 
 
+def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float = 0.0) -> dict:
+    """Per-view differences pooled over hold-out folds, with an interval that uses what few folds give: the
+    spread of the views within the folds, the spread between the folds, and a prior on how the two relate.
+
+    The pooled mean's variance is written ``kappa * s_w^2 / N``: ``s_w^2`` the views' variance within their
+    folds (``N - F`` degrees of freedom: many, even with two folds), ``kappa`` the *design effect* (how much more,
+    or less, the mean varies than if every view were an independent draw: what a fold's views share, their
+    trainings' noise and random draw, raises it; folds that interleave along one capture lower it). The folds
+    estimate ``kappa`` (the cluster-robust variance of :func:`folds_paired` over ``s_w^2 / N``) with only
+    ``F - 1`` degrees of freedom; the prior, ``kappa0`` worth ``nu0`` degrees of freedom (chosen against real
+    captures and the null simulation: ``curate.evaluate.folds.KAPPA_PRIOR``), is pooled with it as a moderated
+    variance is (a scaled inverse chi-square prior): ``V = (nu0 kappa0 s_w^2 / N + (F - 1) V_cr) / (nu0 + F - 1)``,
+    with a t quantile on the Satterthwaite degrees of freedom of its two parts. ``nu0 = 0`` is
+    :func:`folds_paired`'s interval (the folds alone); as folds are added the data outweigh the prior. One fold
+    gives the prior's interval.
+
+    ``diffs``: one array per fold. Non-finite differences are dropped, empty folds ignored. Returns
+    :func:`folds_paired`'s keys (``dof`` now the Satterthwaite degrees of freedom, possibly fractional),
+    ``kappa`` (the pooled design effect the interval used), ``kappa_folds`` (the folds' own estimate, None below
+    two folds), ``sd_within`` (None without views to spread).
+    """
+    folds = [np.asarray(d, float) for d in diffs]
+    folds = [d[np.isfinite(d)] for d in folds]
+    folds = [d for d in folds if d.size]
+    F = len(folds)
+    if F == 0:
+        return {"mean": float("nan"), "lo": float("nan"), "hi": float("nan"), "n": 0, "n_folds": 0, "dof": 0,
+                "level": level, "sd": float("nan"), "kappa": None, "kappa_folds": None, "sd_within": None}
+    x = np.concatenate(folds)
+    N, m = x.size, float(x.mean())
+    sd = float(x.std(ddof=1)) if N > 1 else 0.0
+    dof_w = N - F
+    if dof_w >= 2:
+        ss = sum(float(np.sum((d - d.mean()) ** 2)) for d in folds)
+        s2 = ss / dof_w
+    elif N > 1:                       # one view a fold: the views' spread over all of them
+        s2, dof_w = sd * sd, N - 1
+    else:
+        return {"mean": m, "lo": -math.inf, "hi": math.inf, "n": 1, "n_folds": F, "dof": 0, "level": level,
+                "sd": sd, "kappa": None, "kappa_folds": None, "sd_within": None}
+    v0 = s2 / N
+    if F > 1:
+        s = np.array([d.sum() - d.size * m for d in folds])
+        v_cr = F / (F - 1) * float(np.sum(s * s)) / (N * N)
+    else:
+        v_cr = 0.0
+    if nu0 + F - 1 <= 0:              # one fold and no prior: nothing says what the folds share
+        out = mean_ci(x, level)
+        return {**out, "n_folds": F, "dof": max(N - 1, 0), "level": level, "sd": sd, "kappa": None,
+                "kappa_folds": None, "sd_within": math.sqrt(s2)}
+    var, dof = moderated_variance(v0, v_cr, F, dof_w, kappa0, nu0)
+    half = t_quantile(0.5 + level / 2, dof) * math.sqrt(var) if var > 0 else 0.0
+    return {"mean": m, "lo": m - half, "hi": m + half, "n": int(N), "n_folds": F, "dof": round(float(dof), 2),
+            "level": level, "sd": sd, "kappa": (var / v0) if v0 > 0 else None,
+            "kappa_folds": (v_cr / v0) if (v0 > 0 and F > 1) else None, "sd_within": math.sqrt(s2)}
+
+
+def moderated_variance(v0: float, v_cr: float, n_folds: int, dof_within: float, kappa0: float,
+                       nu0: float) -> tuple[float, float]:
+    """(variance, degrees of freedom) of :func:`folds_moderated`'s pooled mean: the prior's part ``nu0 kappa0 v0``
+    and the folds' ``(F - 1) v_cr`` over ``nu0 + F - 1``, with the Satterthwaite degrees of freedom of the two
+    (the prior's part also carries the uncertainty of ``v0``, on ``dof_within``)."""
+    F = n_folds
+    w = nu0 + F - 1
+    a = nu0 * kappa0 * v0 / w if nu0 > 0 else 0.0
+    b = (F - 1) * v_cr / w if F > 1 else 0.0
+    var = a + b
+    if var <= 0:
+        return 0.0, float(w)
+    dof_a = 1.0 / (1.0 / nu0 + 1.0 / max(dof_within, 1e-9)) if nu0 > 0 else math.inf
+    den = (a * a / dof_a if a > 0 else 0.0) + (b * b / (F - 1) if b > 0 else 0.0)
+    return var, (var * var / den if den > 0 else float(w))
+
+
 def decision(p: dict | None, margin: float) -> str | None:
     """What an interval ``p`` (``lo``, ``hi``) decides about a difference: 'ahead' (above 0), 'behind' (below
     0), 'level' (inside ``[-margin, margin]``), 'undecided' (none of these); None without an interval."""

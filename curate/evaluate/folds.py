@@ -23,20 +23,32 @@ from curate.evaluate.units import Unit
 FOLD_SEED = 1000
 """Random draw ``s`` of fold ``o`` uses seed ``FOLD_SEED * o + s``: every fold draws its own subsets."""
 
-ALL_FOLDS = 2
-"""Folds that also train on all the photos left (the ceiling of the gap closed): the first ones, which always
-run and which the budget stage's learning curve trains too; the comparisons with the rivals use every fold."""
+ALL_FOLDS = 1
+"""Folds that also train on all the photos left (the ceiling of the gap closed): the first, whose trainings always
+run; the comparisons with the rivals use every fold. (Two until 0.3: a fifth of the first two folds' trainings,
+for a figure the verdict does not rest on; the budget stage's learning curve still trains both of its own.)"""
 
-LOOKS = 2
-"""How often the pooled folds are looked at to decide whether to stop: after :data:`FIRST_LOOK` folds, and at
-the end (every fold done, or the time spent). Each look uses a ``1 - 0.05 / LOOKS`` interval, so that stopping
-at a decided look keeps the verdict's error at 5% (Bonferroni over the looks; docs/evaluation.md, "Folds until
-decided")."""
+KAPPA_PRIOR = (1.0, 8.0)
+"""The prior of the verdict's interval (:func:`curate.core.stats.folds_moderated`): ``(kappa0, nu0)``, the design
+effect of the pooled mean (how much more, or less, it varies than if every held-out view were an independent
+draw) and how many degrees of freedom of folds it is worth. ``kappa0 = 1``: as if the held-out views were
+independent, above every design effect measured on real captures (0.03 to 1.0 over two folds, 0.16 to 0.52 over
+the 14 folds of the office walk: folds interleave along the capture and agree more closely than independent views
+would), so the prior is cautious there; ``nu0 = 8``: the most weight at which the null simulation, with fold
+effects larger than measured (design effects up to 2), still calls a difference that is not there in at most 5%
+of captures (``research/null_sim.py``, ``research/interval_study.py``; docs/evaluation.md, "Intervals from two
+folds")."""
 
-FIRST_LOOK = 4
-"""Folds after which the evaluation first decides whether to stop. Folds interleave (every 14th photo from
-offsets 0, 7, 3, 10): each samples the whole capture, so their means agree closely and four already give an
-interval of a few tenths of a dB on a real walk (docs/evaluation.md)."""
+LOOKS = 3
+"""How often the pooled folds are looked at, at most, to decide whether to stop: after :data:`FIRST_LOOK` folds,
+at the fold count the first look plans (:func:`plan_rivals`), and at the end. Each look uses a ``1 - 0.05 / LOOKS``
+interval, so that stopping at a decided look keeps each verdict's error at 5% (Bonferroni over the looks;
+docs/evaluation.md, "Folds until decided")."""
+
+FIRST_LOOK = 2
+"""Folds after which the evaluation first decides whether to stop (and plans what to train next). Folds
+interleave (every 14th photo from offsets 0, 7, 3, 10): each samples the whole capture, and the interval's prior
+(:data:`KAPPA_PRIOR`) says how much the folds share, so two already give an interval a user can act on."""
 
 
 def fold_order(every: int, n: int | None = None) -> list[int]:
@@ -63,8 +75,8 @@ def planned_folds(cfg: EvalConfig, n_registered: int) -> int:
 
 def looks(n_folds: int, adaptive: bool) -> list[int]:
     """After how many finished folds the evaluation decides whether to stop: with ``adaptive`` (``--folds
-    0``) after :data:`FIRST_LOOK` and after all of them (a time-out before then is the last look);
-    otherwise only at the end."""
+    0``) after :data:`FIRST_LOOK` and after all of them (a time-out before then is the last look; the first look
+    may plan one more between: :func:`plan_rivals`); otherwise only at the end."""
     if not adaptive or n_folds <= FIRST_LOOK:
         return [n_folds]
     return [FIRST_LOOK, n_folds]
@@ -182,18 +194,22 @@ def per_view(results: dict, folds: list[Fold], method: str) -> dict[int, dict]:
     return out
 
 
-def summarize(results: dict, folds: list[Fold], level: float, margin: float) -> tuple[dict, dict, float | None]:
+def summarize(results: dict, folds: list[Fold], level: float, margin: float, prior: tuple = KAPPA_PRIOR,
+              rival_folds: dict | None = None) -> tuple[dict, dict, float | None]:
     """(methods, paired, gap_closed) over the finished ``folds``.
 
     ``methods[m]``: held-out ``psnr`` / ``ssim`` (means over every held-out photo of the folds that trained
     it: ``n_views``; all photos train in the first :data:`ALL_FOLDS` only), ``per_view`` (:func:`per_view`, in
     camera order), ``n_train`` (the subsets' mean size), ``key`` (fold 0's unit, whose renders the report
     shows), ``units``; random also ``psnr_std`` over its draws' means. ``paired["selection-<rival>"]``:
-    :func:`curate.core.stats.folds_paired` of the per-view differences at ``level``, with ``decision``
-    (:func:`curate.core.stats.decision` at ``margin``). ``gap_closed``: (selection - random) / (all - random)
+    :func:`curate.core.stats.folds_moderated` of the per-view differences at ``level`` with ``prior``
+    (``(kappa0, nu0)``; ``(1, 0)``: the folds alone, :func:`curate.core.stats.folds_paired`'s interval), with
+    ``decision`` (:func:`curate.core.stats.decision` at ``margin``); ``rival_folds[rival]``: the number of leading
+    folds its comparison uses (the look that decided it; default all). ``gap_closed``: (selection - random) /
+    (all - random)
     over the same photos, None when all photos do not beat random subsets.
     """
-    from curate.core.stats import decision, folds_paired
+    from curate.core.stats import decision, folds_moderated
     methods: dict[str, dict] = {}
     for m in ("selection", *RIVALS, "all"):
         pv = per_view(results, folds, m)
@@ -214,9 +230,10 @@ def summarize(results: dict, folds: list[Fold], level: float, margin: float) -> 
         other = per_view(results, folds, r)
         if not sel or not other:
             continue
+        upto = folds[:(rival_folds or {}).get(r, len(folds))]
         diffs = [np.array([sel[c]["psnr"] - other[c]["psnr"] for c in f.holdout if c in sel and c in other])
-                 for f in folds]
-        p = folds_paired(diffs, level)
+                 for f in upto]
+        p = folds_moderated(diffs, level, kappa0=prior[0], nu0=prior[1])
         if not p["n"]:
             continue
         paired[f"selection-{r}"] = {**_finite_or_none(p), "decision": decision(p, margin), "margin": margin}
@@ -234,6 +251,54 @@ def _finite_or_none(p: dict) -> dict:
     """``p`` with its non-finite figures (the infinite interval of one held-out view) as None: no NaN or
     Infinity reaches summary.json."""
     return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in p.items()}
+
+
+def folds_to_decide(p: dict, margin: float, max_folds: int, prior: tuple = KAPPA_PRIOR) -> int | None:
+    """The fewest folds at which the interval ``p`` (:func:`curate.core.stats.folds_moderated`'s, at its
+    ``level``) is expected to decide (exclude 0, or lie within ``margin``) if its mean, the views' spread within
+    folds and the folds' design effect stay as measured and every fold holds as many views as the mean so far;
+    ``p["n_folds"]`` when it has decided; None when even ``max_folds`` would not (or ``p`` has no spread to
+    project)."""
+    import math
+
+    from curate.core.stats import decision, moderated_variance, t_quantile
+    F, N = int(p.get("n_folds") or 0), int(p.get("n") or 0)
+    if F == 0 or N == 0:
+        return None
+    if decision(p, margin) in ("ahead", "behind", "level"):
+        return F
+    sw, m = p.get("sd_within"), abs(float(p["mean"]))
+    if sw is None or not math.isfinite(sw):
+        return None
+    kappa0, nu0 = prior
+    k_folds = p.get("kappa_folds")
+    k_folds = kappa0 if k_folds is None else k_folds
+    for g in range(F + 1, int(max_folds) + 1):
+        n = N * g / F
+        v0 = sw * sw / n
+        var, dof = moderated_variance(v0, k_folds * v0, g, n - g, kappa0, nu0)
+        half = t_quantile(0.5 + p["level"] / 2, dof) * math.sqrt(var) if var > 0 else 0.0
+        if half < m or m + half <= margin:
+            return g
+    return None
+
+
+def plan_rivals(needs: dict[str, int | None], n_folds: int, fold_units: int, unit_s: float, workers: int,
+                seconds_left: float) -> tuple[list[str], int | None]:
+    """Which undecided rivals to train on, and at how many folds to look next: the rivals that need the fewest
+    folds first (``needs``: :func:`folds_to_decide`), each taken while every fold up to the last it needs fits in
+    ``seconds_left`` (a fold trains the selection and each rival taken that still needs it, ``fold_units`` being
+    the trainings per rival draw (random subsets: ``--random-seeds``; the others one), ``unit_s`` seconds a
+    training, ``workers`` at a time). Returns (the rivals, the fold count of the next look; None: none fits)."""
+    taken: list[str] = []
+    for r in sorted((r for r in needs if needs[r] is not None), key=lambda r: needs[r]):
+        trial = taken + [r]
+        end = max(needs[x] for x in trial)
+        cost = sum(1 + sum(fold_units if x == "random" else 1 for x in trial if needs[x] >= g)
+                   for g in range(n_folds + 1, end + 1)) * unit_s / max(workers, 1)
+        if cost <= seconds_left:
+            taken = trial
+    return taken, (max(needs[x] for x in taken) if taken else None)
 
 
 def decided(paired: dict) -> bool:

@@ -17,6 +17,7 @@ import logging
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from pathlib import Path
 from typing import Callable
@@ -40,20 +41,42 @@ class _Inline:
         return f
 
 
+@dataclass
+class Look:
+    """What a look at the finished folds decided (``stop_at``'s answer; a plain bool means ``Look(stop=it)``)."""
+
+    stop: bool = False
+    """Start nothing more: every rival decided, or nothing left that the time given would decide."""
+    skip: frozenset = frozenset()
+    """Unit methods ('random', 'fvs', ...) not to train from now on (their rivals are decided, or not worth the
+    time); units of theirs not yet handed out are dropped, and a fold is finished without them."""
+    next_look: int | None = None
+    """The finished-fold count of the next look (None: at the end); no fold beyond it is started before it."""
+    why: str = "decided"
+    """Why it stopped, when ``stop``: 'decided', or 'needs time' (what is undecided would not be decided within
+    the time given)."""
+
+
 def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at: list[int],
-              stop_at: Callable[[list, dict], bool], cams, paths, box, unit_key: Callable, adaptive: bool,
-              executor=None, progress: bool = True, train: Callable | None = None) -> tuple[list, dict, str]:
+              stop_at: Callable[[list, dict], "bool | Look"], cams, paths, box, unit_key: Callable, adaptive: bool,
+              executor=None, progress: bool = True, train: Callable | None = None,
+              on_trained: Callable[[float, int], None] | None = None,
+              on_fold: Callable[[list, dict], None] | None = None) -> tuple[list, dict, str]:
     """Train folds ``make_fold(offset)`` for the offsets of ``order`` until one of: the finished folds decide
-    at a look (``stop_at(folds, results)`` at each count of ``look_at``), every fold is done, or (``adaptive``) the next
-    fold is not expected to end within ``cfg.minutes``.
+    at a look (``stop_at(folds, results)`` at each count of ``look_at``, and at the counts the looks plan: a
+    :class:`Look`), every fold is done, or (``adaptive``) the next fold is not expected to end within
+    ``cfg.minutes``.
 
     ``unit_key(unit, fold)``: a unit's stage key. ``cams``: every registered camera at evaluation size,
     ``paths`` their images, ``box`` the field's scene box. ``executor``: a ``concurrent.futures.Executor``
     (e.g. Ray's) for the trainings; None: local processes (:func:`curate.evaluate.units.auto_workers`).
     ``train``: what trains a unit, given :func:`curate.evaluate.units.train_unit`'s arguments and the log level
     as one tuple (default :func:`curate.evaluate.units._unit_entry`; a test passes its own).
-    Returns (the finished folds in order, {unit key: metrics}, why it stopped: 'decided', 'all folds' or
-    'time'). When it stopped decided, the folds are those of the deciding look.
+    ``on_trained(seconds, workers)``: called as each training of this call finishes, with its wall seconds and
+    the trainings run at a time (what a fold costs on this machine). ``on_fold(folds, results)``: called as each
+    fold finishes that is not a look (to forecast, not to decide).
+    Returns (the finished folds in order, {unit key: metrics}, why it stopped: 'decided', 'needs time', 'all
+    folds' or 'time'). When it stopped at a look, the folds are those of that look.
     """
     from curate.core.pools import end_pool
     from curate.core.runfolder import held_token
@@ -80,6 +103,10 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     owned: list = []             # the local pool this call started
     decided_now = False
     n_decided = 0                # the finished folds when they decided
+    why_stopped = "decided"
+    skip: set = set()            # unit methods not to train any more
+    dropped: set = set()         # unit keys not trained because of it
+    looks_at = sorted(set(look_at))
 
     if executor is not None:
         workers, ex = (cfg.workers or 8), executor
@@ -93,6 +120,9 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
         save_ground_truth(run_dir, cams, paths, f.holdout)
         for u in f.units:
             k = unit_key(u, f)
+            if u.method in skip and u.key not in results:
+                dropped.add(u.key)
+                continue
             if is_fresh(ev_dir / u.key, k):
                 results[u.key] = read_metrics(ev_dir / u.key)
                 by_key.setdefault(k, u.key)
@@ -117,35 +147,57 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     def may_start() -> bool:
         if decided_now or len(started) >= len(order):
             return False
+        pending = [n for n in looks_at if n > len(finished)]
+        if pending and len(started) >= pending[0] and adaptive:
+            return False                 # no fold beyond a look not yet made
         if len(started) < MIN_FOLDS or not adaptive:
             return True
         if not durations:
             return True
         per = float(np.median(durations)) / max(workers, 1)
-        left = len(queue) + len(inflight) + len(started[-1].units)
+        nxt = sum(1 for u in started[-1].units if u.method not in skip)
+        left = len(queue) + len(inflight) + nxt
         return time.monotonic() - t0 + left * per <= budget_s
+
+    def done(u) -> bool:
+        return u.key in results or u.key in dropped
 
     def resolve() -> None:
         """Copy the duplicates whose source is done; move finished folds to ``finished``; look."""
-        nonlocal decided_now, n_decided
+        nonlocal decided_now, n_decided, why_stopped, looks_at
         for u, src in list(dups):
-            if src in results:
+            if u.method in skip and src not in results:
+                dups.remove((u, src))
+                dropped.add(u.key)
+            elif src in results:
                 results[u.key] = _copy_unit(ev_dir, src, u, results[src])
                 dups.remove((u, src))
-        while len(finished) < len(started) and all(u.key in results for u in started[len(finished)].units):
+        while len(finished) < len(started) and all(done(u) for u in started[len(finished)].units):
             finished.append(started[len(finished)])
-            if len(finished) in look_at and not decided_now and stop_at(finished, results):
-                decided_now, n_decided = True, len(finished)
-                queue.clear()
+            if on_fold is not None and len(finished) not in looks_at and not decided_now:
+                on_fold(finished, results)
+            if len(finished) in looks_at and not decided_now:
+                lk = stop_at(finished, results)
+                lk = lk if isinstance(lk, Look) else Look(stop=bool(lk))
+                if lk.stop:
+                    decided_now, n_decided, why_stopped = True, len(finished), lk.why
+                    queue.clear()
+                    break
+                skip.update(lk.skip)
+                for item in [q for q in queue if q[0].method in skip]:
+                    queue.remove(item)
+                    dropped.add(item[0].key)
+                if lk.next_look is not None and lk.next_look > len(finished):
+                    looks_at = sorted(set(looks_at) | {int(lk.next_look)})
 
     def iters_done() -> int:
         n = 0
         for u, _, _ in trained_now:
             if u.key in results:
-                n += cfg.iters
+                n += cfg.train_steps()
                 continue
             try:
-                n += min(int((ev_dir / u.key / PROGRESS_FILE).read_text()), cfg.iters)
+                n += min(int((ev_dir / u.key / PROGRESS_FILE).read_text()), cfg.train_steps())
             except (OSError, ValueError):
                 pass
         return n
@@ -154,7 +206,7 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     stop_bar = threading.Event()
 
     def show() -> None:
-        bar.total = len(trained_now) * cfg.iters + len(queue) * cfg.iters
+        bar.total = len(trained_now) * cfg.train_steps() + len(queue) * cfg.train_steps()
         bar.n = iters_done()
         done = sum(u.key in results for u, _, _ in trained_now)
         bar.set_description_str(f"evaluate: fold {min(len(finished) + 1, len(order))} of up to {len(order)}")
@@ -188,11 +240,13 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
                 if not queue and not may_start():
                     break
                 continue
-            done, _ = wait(list(inflight), timeout=1.0, return_when=FIRST_COMPLETED)
-            for fut in done:
+            ready, _ = wait(list(inflight), timeout=1.0, return_when=FIRST_COMPLETED)
+            for fut in ready:
                 u = inflight.pop(fut)
                 results[u.key] = fut.result()
                 durations.append(time.monotonic() - began[u.key])
+                if on_trained is not None:
+                    on_trained(durations[-1], workers)
             resolve()
     except BaseException:
         for e in owned:        # killed and reaped: no training outlives the command
@@ -211,5 +265,5 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     owned.clear()
     resolve()
     if decided_now:   # the verdict is the look's: a fold the trainings still running completed is kept for later
-        return finished[:n_decided], results, "decided"
+        return finished[:n_decided], results, why_stopped
     return finished, results, "all folds" if len(finished) == len(order) else "time"

@@ -37,7 +37,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 STOPPED = {"decided": "every rival decided", "every photo": "every photo held out once",
-           "folds asked": "the folds asked for done", "time": "the time given was spent"}
+           "folds asked": "the folds asked for done", "time": "the time given was spent",
+           "needs time": "the folds the time holds would not decide what is undecided"}
 """Why the evaluation stopped adding folds (``protocol.stopped``), in words."""
 
 
@@ -100,11 +101,11 @@ def run(ctx: "RunContext") -> StageResult:
 
     ``ctx.executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).
     """
-    from curate.core.stage import finish_stage, inputs_of, write_json_atomic
-    from curate.evaluate.folds import (ALL_FOLDS, decided, fold_order, in_capture_order, look_level, looks, plan_fold,
+    from curate.core.stage import current_key, finish_stage, inputs_of, write_json_atomic
+    from curate.evaluate.folds import (ALL_FOLDS, fold_order, in_capture_order, look_level, looks, plan_fold,
                                        planned_folds, summarize)
     from curate.evaluate.schedule import run_folds
-    from curate.evaluate.units import EVAL_OWN, clear_evaluation, eval_cameras, evaluation_folder
+    from curate.evaluate.units import EVAL_OWN, clear_evaluation, eval_cameras, evaluation_folder, resolved
     from curate.field.train import default_box
     from curate.core.run import load_node_grid, read_selection
     from curate.sfm.io import image_paths, load_sfm
@@ -121,6 +122,7 @@ def run(ctx: "RunContext") -> StageResult:
                         kept[0].relative_to(d).as_posix())
     elif evaluation_current(run_dir, key):
         return StageResult("evaluate", d, False, time.perf_counter() - t0)
+    ev_run = resolved(ev)            # the device, chosen once for every training
     evaluation_folder(run_dir)
     (d / "stage.json").unlink(missing_ok=True)   # an earlier evaluation's record: this one replaces it
     sel = read_selection(run_dir)
@@ -135,28 +137,29 @@ def run(ctx: "RunContext") -> StageResult:
         raise ValueError(f"no photo to hold out from {n} registered photos: register more photos")
     adaptive = ev.folds == 0
     look_at, level = looks(len(order), adaptive), look_level(adaptive, len(order))
-    from curate.core.stage import current_key
     sfm_key = current_key(run_dir, "sfm") or ""
+    planner = Planner(ev, len(order), level, adaptive)
 
     def make_fold(offset: int):
         return plan_fold(ev, cfg.select, cams, grid, len(exported), offset, ordered,
                          with_all=order.index(offset) < ALL_FOLDS)
 
-    def stop_at(folds, res) -> bool:
-        return decided(summarize(res, folds, level, ev.margin_db)[1])
-
     def keyed(u, f):
         return unit_key(cfg, sfm_key, u, f)
     paths = image_paths(run_dir, list(cams.names), sfm.records)
-    folds, res, stopped = run_folds(run_dir, ev, make_fold, order, look_at, stop_at, eval_cameras(cams, ev.max_side),
-                                    paths, default_box(cams), keyed, adaptive, executor=executor)
+    planner.t0 = time.monotonic()
+    folds, res, stopped = run_folds(run_dir, ev_run, make_fold, order, look_at, planner.look,
+                                    eval_cameras(cams, ev.train_side()), paths, default_box(cams), keyed, adaptive,
+                                    executor=executor, on_trained=planner.trained, on_fold=planner.forecast)
     if stopped == "all folds" or (stopped == "decided" and not adaptive):   # --folds N: all N ran, as asked
         stopped = "every photo" if len(order) == min(ev.holdout_every, n) else "folds asked"
-    methods, paired, gap = summarize(res, folds, level, ev.margin_db)
+    methods, paired, gap = summarize(res, folds, level, ev.margin_db, rival_folds=planner.decided_at)
+    planner.needs_said(paired, len(folds), stopped)
     seconds = time.perf_counter() - t0
     summary = {"key": key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
                "gap_closed": gap,
-               "protocol": protocol(cfg, folds, exported, n, len(order), look_at, level, stopped, seconds)}
+               "protocol": {**protocol(cfg, folds, exported, n, len(order), planner.looked or look_at, level,
+                                       stopped, seconds), "plan": planner.record()}}
     write_json_atomic(d / "summary.json", summary)
     finish_stage(d, key, {"evaluate": replace(ev, workers=0), "select": cfg.select}, t0,
                  outputs={"summary": "summary.json"}, owns=EVAL_OWN, stopped=stopped, n_folds=len(folds),
@@ -167,3 +170,183 @@ def run(ctx: "RunContext") -> StageResult:
                        f"{len(folds)} of {len(order)} folds ({views} held-out photos; {STOPPED[stopped]}); "
                        f"held-out PSNR {txt}")
 
+
+
+class Planner:
+    """The evaluation's looks and plan: what a training costs here, which rivals each look decides, how many more
+    folds the undecided need and whether the time given holds them (:func:`curate.evaluate.folds.plan_rivals`), and
+    the lines that say so on the terminal. ``look`` is :func:`curate.evaluate.schedule.run_folds`'s ``stop_at``,
+    ``trained`` its ``on_trained``."""
+
+    def __init__(self, ev, planned: int, level: float, adaptive: bool, say=None):
+        self.ev, self.planned, self.level, self.adaptive = ev, planned, level, adaptive
+        self.say = say or _say
+        self.t0 = time.monotonic()
+        self.seconds: list[float] = []      # wall seconds of each training finished now
+        self.workers = 1
+        self.decided_at: dict[str, int] = {}   # rival -> the finished folds of the look that decided it
+        self.looked: list[int] = []
+        self.plans: list[dict] = []
+        self.needs: dict[str, dict] = {}
+        self.needs_minutes: float | None = None
+        self.forecast_folds: dict | None = None
+
+    def unit_s(self) -> float | None:
+        import numpy as np
+        return float(np.median(self.seconds)) if self.seconds else None
+
+    def fold_s(self, n_units: int) -> float | None:
+        u = self.unit_s()
+        return None if u is None else n_units * u / max(self.workers, 1)
+
+    def trained(self, seconds: float, workers: int) -> None:
+        self.seconds.append(float(seconds))
+        self.workers = workers
+        if len(self.seconds) == 1 and self.adaptive:
+            n_units = 1 + len(self.ev.methods) - 1 + max(self.ev.random_seeds - 1, 0)
+            fold = self.fold_s(n_units)
+            left = 60 * self.ev.minutes - (time.monotonic() - self.t0)
+            self.say(f"evaluate: a training takes {seconds:.0f} s here ({workers} at a time): a fold of up to "
+                     f"{n_units} trainings about {_minutes(fold)}; the {self.ev.minutes:g} minutes given hold about "
+                     f"{max(int(left // fold), 2) if fold else '?'} folds (the verdict is first read after "
+                     f"{_first_look()})")
+
+    def forecast(self, folds: list, results: dict) -> None:
+        """After the first fold (no look: nothing is decided on it): how many folds each comparison is expected
+        to need, and how long that takes here, from the prior's interval of one fold."""
+        from curate.evaluate.config import RIVALS
+        from curate.evaluate.folds import folds_to_decide, summarize
+        if len(folds) != 1 or not self.adaptive:
+            return
+        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db)
+        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned)
+                 for r in RIVALS if f"selection-{r}" in paired}
+        unit_s = self.unit_s()             # None: every training so far was reused (no cost measured here)
+        self.forecast_folds = needs
+        parts = []
+        for r, g in sorted(needs.items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
+            if g is None:
+                parts.append(f"{RIVAL_WORDS[r]}: more folds than the capture has")
+                continue
+            if unit_s is None:
+                parts.append(f"{RIVAL_WORDS[r]}: about {g} folds")
+                continue
+            per = (1 + (self.ev.random_seeds if r == "random" else 1)) * unit_s / max(self.workers, 1)
+            parts.append(f"{RIVAL_WORDS[r]}: about {g} folds ({_minutes(g * per)} here)")
+        self.say("evaluate: from the first fold, a decision needs " + "; ".join(parts))
+
+    def look(self, folds: list, results: dict):
+        """A look at the finished ``folds``: decided rivals are closed; the undecided are projected
+        (:func:`curate.evaluate.folds.folds_to_decide`) and those the time left holds are trained on to the next
+        look; stop when none is left."""
+        from curate.evaluate.config import RIVALS
+        from curate.evaluate.folds import LOOKS, folds_to_decide, plan_rivals, summarize
+        from curate.evaluate.schedule import Look
+        F = len(folds)
+        self.looked.append(F)
+        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, rival_folds=self.decided_at)
+        open_ = []
+        for r in RIVALS:
+            p = paired.get(f"selection-{r}")
+            if p is None:
+                continue
+            if r in self.decided_at:
+                continue
+            if p["decision"] in ("ahead", "behind", "level"):
+                self.decided_at[r] = F
+            else:
+                open_.append(r)
+        rec = {"folds": F, "decided": {r: paired[f"selection-{r}"]["decision"] for r in self.decided_at
+                                       if self.decided_at[r] == F}}
+        if not open_:
+            self.plans.append(rec)
+            return Look(stop=True, why="decided", skip=frozenset(RIVALS))
+        if not self.adaptive:
+            self.plans.append(rec)
+            return Look()
+        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned) for r in open_}
+        left = 60 * self.ev.minutes - (time.monotonic() - self.t0)
+        unit_s = self.unit_s() or 0.0
+        last = len(self.looked) >= LOOKS - 1          # the next look is the last
+        taken, nxt = plan_rivals(needs, F, self.ev.random_seeds, unit_s, self.workers, left)
+        rec.update({"needs_folds": needs, "training": taken, "next_look": None if last else nxt,
+                    "unit_seconds": round(unit_s, 1), "seconds_left": round(left, 1)})
+        self.plans.append(rec)
+        self.say(_plan_said(F, paired, self.decided_at, needs, taken, self.unit_s(), self.workers,
+                            self.ev.random_seeds))
+        skip = frozenset(set(RIVALS) - set(taken))
+        if not taken:
+            return Look(stop=True, why="needs time", skip=skip)
+        return Look(skip=skip, next_look=None if last else nxt)
+
+    def needs_said(self, paired: dict, n_folds: int, stopped: str) -> None:
+        """For each rival left undecided: the folds and minutes here that the projection says would decide it
+        (``paired[...]["needs"]``: ``folds`` more, ``minutes``; ``folds`` None: not even with every photo held
+        out); and the minutes all of them need together (``needs_minutes``: the folds trained with the selection
+        and each rival that still needs them)."""
+        from curate.evaluate.folds import folds_to_decide
+        unit_s = self.unit_s()
+        need: dict[str, int] = {}
+        for key, p in paired.items():
+            if p.get("decision") != "undecided" or p.get("mean") is None:
+                continue
+            g = folds_to_decide(p, self.ev.margin_db, self.planned)
+            more = None if g is None else max(g - n_folds, 0)
+            r = key.split("-", 1)[1]
+            units = self.ev.random_seeds if r == "random" else 1
+            minutes = None if (more is None or unit_s is None) else \
+                more * (1 + units) * unit_s / max(self.workers, 1) / 60
+            p["needs"] = {"folds": more, "minutes": None if minutes is None else round(minutes, 1)}
+            self.needs[key] = p["needs"]
+            if more:
+                need[r] = more
+        if need and unit_s is not None:
+            self.needs_minutes = round(sum(
+                1 + sum(self.ev.random_seeds if r == "random" else 1 for r in need if need[r] >= g)
+                for g in range(1, max(need.values()) + 1)) * unit_s / max(self.workers, 1) / 60, 1)
+
+    def record(self) -> dict:
+        """``summary.json``'s ``protocol.plan``: the cost of a training here, the first fold's forecast (the folds
+        each rival was expected to need), each look's plan, what the undecided need."""
+        u = self.unit_s()
+        return {"unit_seconds": None if u is None else round(u, 1), "workers": self.workers,
+                "trainings_now": len(self.seconds), "forecast": self.forecast_folds, "looks": self.plans,
+                "needs": self.needs, "needs_minutes": self.needs_minutes}
+
+
+def _say(msg: str) -> None:
+    from tqdm import tqdm
+    tqdm.write(msg)
+
+
+def _minutes(seconds: float | None) -> str:
+    if seconds is None:
+        return "?"
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
+
+
+def _first_look() -> str:
+    from curate.evaluate.folds import FIRST_LOOK
+    return f"{FIRST_LOOK} folds"
+
+
+RIVAL_WORDS = {"random": "random subsets", "fvs": "FVS", "stride": "every n-th frame"}
+
+
+def _plan_said(F: int, paired: dict, decided_at: dict, needs: dict, taken: list, unit_s: float | None, workers: int,
+               seeds: int) -> str:
+    """The plan a look made, in one line."""
+    done = [f"{paired[f'selection-{r}']['decision']} {RIVAL_WORDS[r]}" for r in decided_at if decided_at[r] == F]
+    out = f"evaluate: after {F} folds" + (f", decided: {', '.join(done)}" if done else ", nothing decided yet")
+    parts = []
+    for r, g in sorted(needs.items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
+        if g is None:
+            parts.append(f"{RIVAL_WORDS[r]} would stay undecided even with every photo held out")
+            continue
+        what = "training it" if r in taken else "more than the time left"
+        if not unit_s:              # no training run here yet (all reused): no cost to say
+            parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({what})")
+            continue
+        per = (2 if r != "random" else 1 + seeds) * unit_s / max(workers, 1)
+        parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({_minutes((g - F) * per)} here: {what})")
+    return out + ("; " + "; ".join(parts) if parts else "")

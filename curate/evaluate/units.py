@@ -11,7 +11,8 @@ Each unit is a stage of its own, ``RUN/evaluate/<key>/``:
 
 * ``stage.json``: the stage record (written last: a unit killed half-way is redone);
 * ``metrics.json``: ``{"method", "seed", "subset": [camera indices], "n_train", "psnr",
-  "ssim", "per_view": [{"name", "psnr", "ssim"}], "train_seconds", "iters"}``;
+  "ssim", "per_view": [{"name", "psnr", "ssim"}], "train_seconds", "iters", "cpu_seconds"}`` (``cpu_seconds``:
+  the worker's CPU time over loading, training and scoring: what the training costs whatever else runs);
 * ``renders/<stem>.png``: the rendered held-out views (``stem`` of the camera name);
 * ``field.pt``: the trained field.
 
@@ -59,6 +60,20 @@ class Unit:
     """The hold-out fold's offset."""
 
 
+def resolved(cfg: EvalConfig) -> EvalConfig:
+    """``cfg`` as its trainings run it, the device chosen once (here, not in each worker): the field on CUDA when
+    torch sees a GPU, else the CPU (``FieldConfig.device`` 'auto'); ``--trainer gsplat`` checked (ValueError, one
+    line, where it cannot run). The units' keys do not change with it (:meth:`EvalConfig.training`)."""
+    from dataclasses import replace
+    if cfg.trainer == "gsplat":
+        from curate.field.splat import unavailable
+        why = unavailable()
+        if why:
+            raise ValueError(why)
+        return cfg
+    return replace(cfg, field=replace(cfg.field, device=str(cfg.field.resolve_device())))
+
+
 def eval_cameras(cams: Cameras, max_side: int) -> Cameras:
     """The cameras at evaluation size (longer side <= ``max_side``; never upscaled)."""
     return cams.at_most(max_side)
@@ -73,7 +88,7 @@ def auto_workers(cfg: EvalConfig, n_units: int, pixels: int) -> int:
     (about 40 bytes of cached rays per training pixel) and by the number of units."""
     if cfg.workers > 0:
         return min(cfg.workers, max(n_units, 1))
-    if cfg.field.resolve_device().type == "cuda":
+    if cfg.trainer == "gsplat" or cfg.field.resolve_device().type == "cuda":
         return 1
     per = 40 * pixels + (1 << 30)
     return int(max(1, min(cpu_count(), n_units, available_memory() // per)))
@@ -100,7 +115,7 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     check_holder(run_dir, lock_token)
     if begin_stage(d, key, owns=UNIT_OWNS):
         return json.loads((d / "metrics.json").read_text())
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if cfg.field.threads > 0:
         torch.set_num_threads(cfg.field.threads)
     sub = list(unit.subset)
@@ -112,6 +127,18 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
                         stop_reason=meta.get("stop_reason", ""))
         import shutil
         shutil.copy2(field_path, d / "field.pt")
+    elif cfg.trainer == "gsplat":
+        from curate.field.splat import render_view, train_splats
+        from curate.sfm.io import load_points_rgb
+
+        def step(it: int) -> None:
+            if it % PROGRESS_EVERY == 0:
+                write_text_atomic(d / PROGRESS_FILE, str(it))
+        pts_file = RunPaths(run_dir).sfm / "points.npy"
+        pts = np.load(pts_file) if pts_file.is_file() else None
+        fld, st = train_splats(cfg.splat, cams[sub], [paths[i] for i in sub], pts, load_points_rgb(run_dir), box,
+                               seed=cfg.train_seed, callback=step)
+        write_text_atomic(d / PROGRESS_FILE, str(cfg.train_steps()))
     else:
         def report(it: int, _secs: float, _fld) -> None:   # the parent's bar reads it (run_units)
             if it % PROGRESS_EVERY == 0:
@@ -125,12 +152,13 @@ def train_unit(run_dir: str, unit: Unit, cfg: EvalConfig, cams: Cameras, paths: 
     with torch.no_grad():
         for k, i in enumerate(holdout):
             gt = load_image(paths[i], int(test.width[k]), int(test.height[k]))
-            pred = render_image(fld, test, k)
+            pred = render_view(fld, test, k) if cfg.trainer == "gsplat" else render_image(fld, test, k)
             save_png(pred, d / "renders" / f"{_stem(cams.names[i])}.png")
             per.append({"name": cams.names[i], "psnr": psnr(pred, gt), "ssim": ssim(pred, gt)})
     m = {"method": unit.method, "seed": unit.seed, "subset": sub, "n_train": len(sub),
          "psnr": float(np.mean([r["psnr"] for r in per])), "ssim": float(np.mean([r["ssim"] for r in per])),
-         "per_view": per, "train_seconds": round(st.train_seconds, 2), "iters": st.iters}
+         "per_view": per, "train_seconds": round(st.train_seconds, 2), "iters": st.iters,
+         "cpu_seconds": round(time.process_time() - c0, 2)}
     check_holder(run_dir, lock_token)  # a worker whose run lost the folder writes nothing
     write_json_atomic(d / "metrics.json", m)
     (d / PROGRESS_FILE).unlink(missing_ok=True)
@@ -237,14 +265,14 @@ def run_units(run_dir: str | Path, units: list[Unit], keys: dict[str, str], cfg:
     # progress in training iterations over every unit (each training reports through its progress file)
     ev_dir = RunPaths(run_dir).evaluate
     trained = [u for u in todo if u.key not in field_paths]
-    bar = tqdm(total=len(trained) * cfg.iters, desc=f"evaluate: {len(trained)} trainings", unit="it",
+    bar = tqdm(total=len(trained) * cfg.train_steps(), desc=f"evaluate: {len(trained)} trainings", unit="it",
                disable=not progress or not trained, smoothing=0.05)
     done: set = set()
 
     keys_trained = {u.key for u in trained}
 
     def show() -> None:
-        bar.n = _unit_progress(ev_dir, trained, cfg.iters, done)
+        bar.n = _unit_progress(ev_dir, trained, cfg.train_steps(), done)
         bar.set_postfix_str(f"{len(done & keys_trained)} of {len(trained)} done", refresh=False)
         bar.refresh()
 

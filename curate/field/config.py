@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, get_args
 
 if TYPE_CHECKING:
     import torch
@@ -99,3 +99,36 @@ class FieldConfig:
         known = {f for f in FieldConfig.__dataclass_fields__}
         kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in known}
         return FieldConfig(**kw)
+
+
+Trainer = Literal["field", "gsplat"]
+TRAINERS = get_args(Trainer)
+"""What the evaluation trains on each subset: curate's own radiance field (CPU or CUDA), or 3D Gaussian
+splatting through the gsplat package (CUDA only; ``pip install 'curate[gsplat]'``)."""
+
+
+@dataclass
+class SplatConfig:
+    """3D Gaussian splatting as the evaluation's trainer (``--trainer gsplat``, :mod:`curate.field.splat`): gsplat's
+    rasterizer and its default densification, as its ``simple_trainer`` uses them."""
+
+    steps: int = 7000
+    """Training steps per subset (one photo a step; 7,000 is 3DGS's first checkpoint)."""
+    max_side: int = 1600
+    """Photos are trained and scored with their longer side at most this (pixels): the capture's own resolution up
+    to the size SfM's working copies have; 0 keeps every photo as it is."""
+    sh_degree: int = 3
+    """Spherical-harmonic degree of the Gaussians' colour (one more every 1,000 steps, up to this)."""
+    ssim_weight: float = 0.2
+    """Loss: (1 - w) L1 + w (1 - SSIM), as 3DGS's."""
+    init_points: int = 100_000
+    """Gaussians to start from when the run has no sparse points (random in the scene box); with points, one
+    per point."""
+
+    def __post_init__(self) -> None:
+        for name, lo in (("steps", 1), ("max_side", 0), ("sh_degree", 0), ("init_points", 1)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+                raise ValueError(f"splat {name} must be an integer >= {lo}, got {v!r}")
+        if not 0 <= self.ssim_weight <= 1:
+            raise ValueError(f"splat ssim_weight must be in [0, 1], got {self.ssim_weight!r}")

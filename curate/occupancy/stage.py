@@ -47,9 +47,12 @@ def surface_band(mask: np.ndarray, k: int, outside_free: bool = False) -> np.nda
 
 def train_settings(cfg: "RunConfig") -> dict:
     """The refining field's training settings (part of the stage key): its own iterations and image size
-    (:class:`curate.occupancy.masks.RefineConfig`), the evaluation's field and training seed."""
+    (:class:`curate.occupancy.masks.RefineConfig`), :class:`curate.field.config.FieldConfig`'s own settings (not
+    the evaluation's cheaper field, :func:`curate.evaluate.config.evaluation_field`: this one is for the scene's
+    surface), the evaluation's training seed."""
+    from curate.field.config import FieldConfig
     ev = cfg.evaluate
-    return {"field": ev.field, "iters": cfg.refine.iters, "time_budget_s": ev.time_budget_s,
+    return {"field": FieldConfig(), "iters": cfg.refine.iters, "time_budget_s": ev.time_budget_s,
             "max_side": cfg.refine.max_side, "train_seed": ev.train_seed}
 
 
@@ -113,7 +116,7 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         paths = image_paths(run_dir, list(sfm.cameras.names), sfm.records)
         on = list(range(len(sfm.cameras))) if train_on is None else [int(i) for i in train_on]
         cams = sfm.cameras.at_most(cfg.refine.max_side)
-        fld, st = train_field(ev.field, cams[on], [paths[i] for i in on], d, time_budget_s=ev.time_budget_s,
+        fld, st = train_field(train_part["field"], cams[on], [paths[i] for i in on], d, time_budget_s=ev.time_budget_s,
                               iters=cfg.refine.iters, seed=ev.train_seed, box=box, progress_desc="occupancy (field)")
         write_json_atomic(d / "train.json", {"iters": st.iters, "train_seconds": st.train_seconds,
                                              "stop_reason": st.stop_reason, "n_train": len(on)})

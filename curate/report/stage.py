@@ -112,6 +112,9 @@ def run(ctx: "RunContext") -> StageResult:
                            "method": pr.get("method"), "shared_with_export": pr.get("shared_with_export"),
                            **{k: pr.get(k) for k in ("n_folds", "planned_folds", "stopped", "minutes", "level",
                                                      "margin_db", "seconds") if k in pr}}
+        need = (pr.get("plan") or {}).get("needs_minutes")
+        if need is not None:  # what the undecided comparisons need here, as the evaluation projected it
+            rep["estimate"]["needs_minutes"] = need
     if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
         rep["budget_check"] = sel["budget_auto"]["measured"]
     rep["verdict"] = verdict(rep)

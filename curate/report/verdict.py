@@ -52,6 +52,23 @@ def _interval(p: dict) -> str:
     return f"95% interval {lo:+.2f} to {hi:+.2f}"
 
 
+def _needs(p: dict) -> str:
+    """What an undecided comparison needs, as the evaluation projected it (``p["needs"]``: ``folds`` more and their
+    ``minutes`` on the machine that measured it; ``folds`` None: not even every photo held out)."""
+    nd = p.get("needs")
+    if not nd or decided_as(p) != "undecided":
+        return ""
+    if nd.get("folds") is None:
+        return "; not even every photo held out would tell them apart"
+    mins = nd.get("minutes")
+    return (f"; about {nd['folds']} more folds" + (f", {_mins(mins)} here," if mins is not None else "")
+            + " would decide it if the difference holds")
+
+
+def _mins(m: float) -> str:
+    return f"{max(1, math.ceil(m)):d} min"
+
+
 def _finite(p: dict) -> bool:
     return all(isinstance(p.get(k), (int, float)) and math.isfinite(p[k]) for k in ("lo", "hi"))
 
@@ -73,10 +90,16 @@ def estimate_said(est: dict, run_dir: str) -> str:
     stopped = est.get("stopped")
     if stopped == "decided":
         out += " It stopped adding folds when every rival was decided.)"
-    elif stopped == "time":
-        out += (f" It stopped when the {est.get('minutes', 0):g} minutes given were spent: "
-                f"`curate evaluate {run_dir} --eval-minutes {2 * est.get('minutes', 15):g}` adds folds, reusing "
-                "the trainings done.)")
+    elif stopped == "needs time" and not est.get("needs_minutes"):
+        out += (f" It stopped after {n_f} folds: from what they show, even every photo held out would not decide the "
+                "rest.)")
+    elif stopped in ("time", "needs time"):
+        need = est.get("needs_minutes")
+        more = max(1, math.ceil(need)) if need else 2 * est.get("minutes", 15)
+        out += ((f" It stopped when the {est.get('minutes', 0):g} minutes given were spent" if stopped == "time" else
+                 f" It stopped after {n_f} folds: the {est.get('minutes', 0):g} minutes given would not decide the "
+                 "rest")
+                + f": `curate evaluate {run_dir} --eval-minutes {more:g}` adds folds, reusing the trainings done.)")
     elif stopped == "folds asked" and n_f < (est.get("holdout_every") or n_f):
         out += (f" It trained the {n_f} folds asked for: `curate evaluate {run_dir} --folds 0` adds folds until "
                 "every rival is decided.)")
@@ -119,7 +142,7 @@ def verdict(rep: dict) -> dict:
                 continue
             against[key] = w
             within = f", within {p.get('margin', MARGIN_DB):g} dB" if decided_as(p) == "level" else ""
-            parts.append(f"{w} {words}{within} ({_db(p['mean'])}, {_interval(p)})")
+            parts.append(f"{w} {words}{within} ({_db(p['mean'])}, {_interval(p)}{_needs(p)})")
             short.append(f"{w} {brief} {_db(p['mean'])}" + (f" [{p['lo']:+.2f}, {p['hi']:+.2f}]" if _finite(p) else ""))
             if decided_as(p) == "undecided":
                 undecided.append(words)
