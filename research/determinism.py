@@ -123,7 +123,7 @@ def main(argv=None) -> list[dict]:
                         h = hashlib.sha1(colmap_tree(db0, tmp / f"tree{k}.bin", cfg.seed, threads).read_bytes())
                     else:
                         from curate.sfm.retrieval import build
-                        h = hashlib.sha1(build(db0, cfg.seed, cfg.vocab_tree_descriptors).vectors.tobytes())
+                        h = hashlib.sha1(build(db0, cfg.seed, cfg.vocab_tree_descriptors).vectors.toarray().tobytes())
                     hashes.append((h.hexdigest()[:12], round(time.perf_counter() - t, 1)))
                 out.append({"step": "tree", "colmap": a.colmap_tree, "threads": threads, "runs": hashes})
                 print(json.dumps(out[-1]), flush=True)

@@ -38,9 +38,8 @@ def _anchors(md: Path) -> tuple[set[str], set[str]]:
     return headings, ids
 
 
-PENDING = {"investigations/sfm.md#the-same-input-the-same-model-issue-58"}
-"""Links to a section being written (issue 58 adds "The same input, the same model" to docs/investigations/sfm.md):
-remove each once its section is there."""
+PENDING: set[str] = set()
+"""Links to a section being written: remove each once its section is there."""
 
 
 def test_every_link_of_the_docs_leads_somewhere():

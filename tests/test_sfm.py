@@ -25,6 +25,23 @@ def small_cfg(**kw) -> SfmConfig:
     return SfmConfig(**{"max_image_size": 480, "progress": False, **kw})
 
 
+SAME_MODEL_DEG, SAME_MODEL_CENTRE = 0.2, 1e-3
+"""What "the same model" means for two runs of `curate sfm` (docs/investigations/sfm.md#same-input-same-model): the
+same registered frames, every frame's orientation within 0.2 deg and its centre within 0.1% of the scene's extent
+(no alignment: the runs share their frame). Most runs are equal to the last bit; on a loaded machine a few verified
+pairs came out otherwise (2 of 2,211 on the fox) and the poses moved by up to 0.1 deg (office.mp4 with a cut)."""
+
+
+def assert_same_model(a: Cameras, b: Cameras) -> None:
+    from curate.core.cameras import rotation_angle_deg
+    assert b.names == a.names
+    rot = rotation_angle_deg(np.einsum("nji,njk->nik", a.c2w[:, :3, :3], b.c2w[:, :3, :3]))
+    extent = float(np.linalg.norm(np.ptp(a.centres, axis=0)))
+    assert float(np.max(rot)) <= SAME_MODEL_DEG, float(np.max(rot))
+    assert float(np.abs(b.centres - a.centres).max()) <= SAME_MODEL_CENTRE * extent
+    assert np.allclose(b.fx, a.fx, rtol=1e-4)
+
+
 @pytest.fixture(scope="module")
 def fox_run(tmp_path_factory):
     photos = need("fox/images")
@@ -308,12 +325,12 @@ def test_visual_words_are_the_same_every_run_and_rank_a_photos_look_alikes_first
         return retrieval.Index(top, leaves, off, names, retrieval.tfidf(hist))
 
     a, b = index(0), index(0)
-    assert np.array_equal(a.vectors, b.vectors) and a.n_words == b.n_words
+    assert (a.vectors != b.vectors).nnz == 0 and a.n_words == b.n_words
     ranks = dict(retrieval.ranked(a, names, k=3))
     assert ranks == dict(retrieval.ranked(b, names, k=3))
     for i, n in enumerate(names):
         assert {int(c[1:3]) // 4 for c in ranks[n]} == {i // 4}, (n, ranks[n])   # its own place's photos first
-    assert np.all(np.isfinite(retrieval.tfidf(np.zeros((3, 5)))))                   # photos without words: no NaN
+    assert np.all(np.isfinite(retrieval.tfidf(np.zeros((3, 5))).toarray()))         # photos without words: no NaN
 
 
 def test_vocabulary_tree_sample_is_bounded_and_even():
@@ -515,6 +532,17 @@ def test_import_transforms_json(tmp_path):
     # (COLMAP stores unit quaternions: the file's slightly non-orthonormal rotations come back to ~1e-7)
     assert np.allclose(c2.c2w, ref.c2w, atol=1e-5) and np.allclose(c2.dist, ref.dist)
     assert res2.is_dir()
+
+
+@pytest.mark.slow
+def test_a_photo_folder_gives_the_same_model_on_every_run_and_any_number_of_threads(fox_run, tmp_path):
+    """The fox's 67 photos mapped again, on one thread where the first run had every core: the same photos
+    registered with the same poses (:func:`assert_same_model`; verification is seeded per pair, the mapper runs on
+    one thread)."""
+    run_sfm(small_cfg(num_threads=1), need("fox/images"), tmp_path / "again")
+    a, b = load_sfm(fox_run).cameras, load_sfm(tmp_path / "again").cameras
+    assert len(a) >= 60
+    assert_same_model(a, b)
 
 
 @pytest.mark.slow
@@ -755,5 +783,4 @@ def test_a_video_that_turns_fast_stays_one_model_and_three_runs_give_the_same_mo
     assert stats[0]["mapper"] == "incremental" and "mappers_tried" not in stats[0], stats[0].get("mappers_tried")
     assert stats[0]["model_sizes"] == [41] and len(cams[0]) == 41
     for c in cams[1:]:
-        assert c.names == cams[0].names
-        assert np.abs(c.c2w - cams[0].c2w).max() < 1e-9 and np.array_equal(c.fx, cams[0].fx)
+        assert_same_model(cams[0], c)

@@ -18,10 +18,20 @@ import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    import scipy.sparse
+
 logger = logging.getLogger(__name__)
+
+BRANCHING = (256, 64)
+"""The words: 256 first-level words, each split into 64 (16,384 in all). office.mp4's loop detection with guided
+matching: 2,048 words (64 x 32) found 309 verified loop pairs and kept 359 of 371 frames in a model bent by up to
+5 deg (median 2.62 deg from the truth, 14 frames over 5); 16,384 words found 379 and kept all 371 (1.98 deg, 6 over
+5); without guided matching both split the walk (docs/investigations/sfm.md#same-input-same-model)."""
 
 
 @dataclass
@@ -36,8 +46,9 @@ class Index:
     """[k1 + 1] first word id of each first-level word's leaves (the last: the vocabulary's size)."""
     names: list[str]
     """The photos, in name order."""
-    vectors: np.ndarray
-    """[n, words] float32 tf-idf histograms, unit length (zero for a photo without descriptors)."""
+    vectors: "scipy.sparse.csr_matrix"
+    """[n, words] tf-idf histograms, unit length (zero for a photo without descriptors), sparse: a photo holds a
+    few thousand of the 16,384 words, so the index grows with the descriptors, not photos x words."""
 
     @property
     def n_words(self) -> int:
@@ -74,7 +85,7 @@ def _kmeans(x: np.ndarray, k: int, rng: np.random.Generator, iters: int = 10) ->
     return c.astype(np.float32)
 
 
-def train(sample: np.ndarray, seed: int, branching: tuple[int, int] = (64, 32)) -> tuple[np.ndarray, list, np.ndarray]:
+def train(sample: np.ndarray, seed: int, branching: tuple[int, int] = BRANCHING) -> tuple[np.ndarray, list, np.ndarray]:
     """(first-level centroids, second-level centroids per first-level word, word-id offsets) of ``sample``
     ([N, 128] descriptors), the same for the same sample and seed."""
     rng = np.random.default_rng(seed)
@@ -102,17 +113,25 @@ def words(desc: np.ndarray, top: np.ndarray, leaves: list, offsets: np.ndarray) 
     return out
 
 
-def tfidf(histograms: np.ndarray) -> np.ndarray:
-    """[n, W] unit-length tf-idf vectors of word counts ``histograms`` ([n, W]); a photo without words stays zero."""
-    h = np.asarray(histograms, np.float64)
-    df = np.count_nonzero(h, axis=0)
-    idf = np.log((len(h) + 1.0) / (df + 1.0))
-    v = h / np.maximum(h.sum(1, keepdims=True), 1.0) * idf
-    n = np.linalg.norm(v, axis=1, keepdims=True)
-    return (v / np.where(n > 0, n, 1.0)).astype(np.float32)
+def tfidf(histograms) -> "scipy.sparse.csr_matrix":
+    """[n, W] unit-length tf-idf vectors (sparse) of word counts ``histograms`` ([n, W], dense or sparse); a photo
+    without words stays zero."""
+    from scipy import sparse
+    h = sparse.csr_matrix(histograms, dtype=np.float64)
+    h.sum_duplicates()
+    h.sort_indices()
+    n = h.shape[0]
+    df = np.bincount(h.indices[h.data != 0], minlength=h.shape[1])
+    idf = np.log((n + 1.0) / (df + 1.0))
+    rows = np.repeat(np.arange(n), np.diff(h.indptr))
+    total = np.bincount(rows, weights=h.data, minlength=n)
+    data = h.data / np.maximum(total, 1.0)[rows] * idf[h.indices]
+    norm = np.sqrt(np.bincount(rows, weights=data * data, minlength=n))
+    data = data / np.where(norm > 0, norm, 1.0)[rows]
+    return sparse.csr_matrix((data, h.indices.copy(), h.indptr.copy()), shape=h.shape)
 
 
-def build(db: Path, seed: int, max_descriptors: int = 100_000, branching: tuple[int, int] = (64, 32)) -> Index:
+def build(db: Path, seed: int, max_descriptors: int = 100_000, branching: tuple[int, int] = BRANCHING) -> Index:
     """The :class:`Index` of every photo of COLMAP's database ``db``, trained on an even sample of at most
     ``max_descriptors`` of their SIFT descriptors."""
     from curate.sfm.features import read_descriptors, tree_sample
@@ -121,11 +140,18 @@ def build(db: Path, seed: int, max_descriptors: int = 100_000, branching: tuple[
     rng = np.random.default_rng(seed)
     sample = tree_sample(iter(desc), len(desc), max_descriptors, rng)
     top, leaves, offsets = train(sample, seed, branching)
+    from scipy import sparse
     W = int(offsets[-1])
-    hist = np.zeros((len(names), W), np.float32)
-    for i, d in enumerate(desc):
-        if len(d):
-            hist[i] = np.bincount(words(d, top, leaves, offsets), minlength=W)
+    cols, counts, indptr = [], [], [0]
+    for d in desc:
+        w, c = np.unique(words(d, top, leaves, offsets), return_counts=True) if len(d) else (np.zeros(0, np.int64),
+                                                                                            np.zeros(0, np.int64))
+        cols.append(w)
+        counts.append(c)
+        indptr.append(indptr[-1] + len(w))
+    hist = sparse.csr_matrix((np.concatenate(counts or [np.zeros(0)]).astype(np.float64),
+                              np.concatenate(cols or [np.zeros(0, np.int64)]), np.array(indptr)),
+                             shape=(len(names), W))
     index = Index(top, leaves, offsets, names, tfidf(hist))
     logger.info("sfm: visual words: %d from %d descriptors, %d photos indexed in %.1f s", W, len(sample), len(names),
                 time.perf_counter() - t)
@@ -138,11 +164,11 @@ def ranked(index: Index, queries: list[str], candidates: list[str] | None = None
     pos = {n: i for i, n in enumerate(index.names)}
     cand = np.array([pos[n] for n in (candidates if candidates is not None else index.names)], np.int64)
     cand.sort()
-    V = index.vectors.astype(np.float64)
+    V = index.vectors.tocsr()
     for q in queries:
         i = pos[q]
         c = cand[cand != i]
-        s = np.einsum("ij,j->i", V[c], V[i], optimize=False)   # no BLAS: the same sums whatever the threads
+        s = (V[c] @ V[i].T).toarray().ravel()   # scipy's sparse product: one thread, the same sums every run
         order = np.lexsort((c, -s))     # highest similarity first, then name order
         order = order[:k] if k is not None else order
         yield q, [index.names[j] for j in c[order]]
@@ -150,13 +176,16 @@ def ranked(index: Index, queries: list[str], candidates: list[str] | None = None
 
 def save(index: Index, path: Path) -> None:
     """Write ``index`` to ``path`` (numpy's .npz)."""
+    v = index.vectors.tocsr()
     np.savez(path, top=index.top, offsets=index.offsets, names=np.array(index.names, dtype=str),
-             vectors=index.vectors, **{f"leaf{j}": v for j, v in enumerate(index.leaves)})
+             v_data=v.data, v_indices=v.indices, v_indptr=v.indptr, v_shape=np.array(v.shape),
+             **{f"leaf{j}": x for j, x in enumerate(index.leaves)})
 
 
 def load(path: Path) -> Index:
     """The :class:`Index` :func:`save` wrote."""
     with np.load(path) as z:
+        from scipy import sparse
         top = z["top"]
-        return Index(top, [z[f"leaf{j}"] for j in range(len(top))], z["offsets"], [str(n) for n in z["names"]],
-                     z["vectors"])
+        v = sparse.csr_matrix((z["v_data"], z["v_indices"], z["v_indptr"]), shape=tuple(z["v_shape"]))
+        return Index(top, [z[f"leaf{j}"] for j in range(len(top))], z["offsets"], [str(n) for n in z["names"]], v)
