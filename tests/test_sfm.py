@@ -90,10 +90,10 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     assert o.mapper.init_min_num_inliers == 150 and o.mapper.random_seed == 7 and o.random_seed == 7
 
 
-def test_mapping_runs_on_one_thread_whatever_the_threads_asked(monkeypatch, tmp_path):
+def test_matching_and_mapping_run_on_one_thread_whatever_the_threads_asked(monkeypatch, tmp_path):
     """Ceres sums a multi-threaded adjustment in the order its threads finish: the same matches mapped twice on
-    two threads gave poses 0.09 deg apart, and the mappers decide on such differences. Matching and extraction
-    keep the threads asked for."""
+    two threads gave poses 0.09 deg apart, and the mappers decide on such differences; COLMAP's CPU matcher on two
+    threads gave other matches in 46 of 3,693 pairs of office.mp4 between two runs."""
     from curate.sfm import matching, reconstruction
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(inc=kw["options"]) or {})
@@ -103,7 +103,7 @@ def test_mapping_runs_on_one_thread_whatever_the_threads_asked(monkeypatch, tmp_
         reconstruction.map_incremental(cfg, tmp_path / "db", tmp_path, tmp_path / "m", 10, progress=False)
         reconstruction.map_global(cfg, tmp_path / "db", tmp_path, tmp_path / "g")
         assert got["inc"].num_threads == 1 and got["glob"].num_threads == got["glob"].mapper.num_threads == 1
-        assert matching._options(cfg, "sequential")[0].num_threads == threads
+        assert matching._options(cfg, "sequential")[0].num_threads == 1
 
 
 @pytest.mark.parametrize("asked, sequence, on", [("auto", True, True), ("auto", False, False), ("on", False, True),

@@ -197,7 +197,8 @@ class SfmConfig:
     """Scene box: points' [p, 100 - p] percentiles plus camera centres."""
     # --- execution (not in the stage key)
     num_threads: int = -1
-    """COLMAP threads (-1: all cores); ingest uses max(1, this) or 2."""
+    """Threads of ingest and SIFT extraction (-1: all cores; ingest uses max(1, this) or 2); matching and mapping
+    run on one thread, so that every run gives the same model (``MATCHING_THREADS``, ``MAPPING_THREADS``)."""
     progress: bool = True
     """tqdm bars on the terminal."""
 

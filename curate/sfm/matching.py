@@ -20,6 +20,14 @@ from curate.sfm.native import load as load_pycolmap
 
 logger = logging.getLogger(__name__)
 
+MATCHING_THREADS = 1
+"""Threads of COLMAP's matching and verification on the CPU, whatever ``SfmConfig.num_threads`` says. Its CPU
+matcher's nearest-neighbour search gave other matches in a few pairs on every run with two threads (office.mp4: 46
+of 3,693 pairs differed between two runs, and the two models by up to 8.9 deg); on one thread two runs gave the same
+bytes, at about 15% more time (85 s against 74 s for the stage on office.mp4;
+docs/investigations/sfm.md#same-input-same-model). Extraction keeps every core: its features are the same bytes
+on every run. With CUDA, COLMAP matches on the GPU (whether that is the same on every run is not measured)."""
+
 
 def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | None = None,
            stats: dict | None = None) -> None:
@@ -95,7 +103,7 @@ def _options(cfg: SfmConfig, matcher: str):
     """(matching, verification options, device) of every matcher: verification RANSAC seeded by ``cfg.seed``."""
     pycolmap = load_pycolmap()
     mo = pycolmap.FeatureMatchingOptions()
-    mo.num_threads = cfg.num_threads
+    mo.num_threads = MATCHING_THREADS
     mo.guided_matching = guided(cfg, matcher)
     vo = pycolmap.TwoViewGeometryOptions()
     vo.ransac.random_seed = cfg.seed
