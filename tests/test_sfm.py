@@ -304,7 +304,7 @@ def test_global_mapper_is_seeded(monkeypatch, tmp_path):
     assert o.mapper.rotation_averaging.random_seed == 5 and o.mapper.global_positioning.random_seed == 5
 
 
-def test_visual_words_are_the_same_every_run_and_rank_a_photos_look_alikes_first():
+def test_visual_words_are_the_same_every_run_and_rank_a_photos_look_alikes_first(tmp_path):
     """COLMAP's vocabulary tree is not seeded (three builds, three trees): loop detection matched other pairs on
     every run. The capture's own words are: the same descriptors give the same words, vectors and ranking."""
     from curate.sfm import retrieval
@@ -331,6 +331,9 @@ def test_visual_words_are_the_same_every_run_and_rank_a_photos_look_alikes_first
     for i, n in enumerate(names):
         assert {int(c[1:3]) // 4 for c in ranks[n]} == {i // 4}, (n, ranks[n])   # its own place's photos first
     assert np.all(np.isfinite(retrieval.tfidf(np.zeros((3, 5))).toarray()))         # photos without words: no NaN
+    retrieval.save(a, tmp_path / "visual_words.npz")                                  # kept for the second round
+    c = retrieval.load(tmp_path / "visual_words.npz")
+    assert (c.vectors != a.vectors).nnz == 0 and dict(retrieval.ranked(c, names, k=3)) == ranks
 
 
 def test_vocabulary_tree_sample_is_bounded_and_even():

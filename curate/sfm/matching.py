@@ -87,7 +87,10 @@ def _index(cfg: SfmConfig, db: Path):
     from curate.sfm.retrieval import build, load, save
     path = db.parent / "visual_words.npz"
     if path.is_file():
-        return load(path)
+        try:
+            return load(path)
+        except (KeyError, ValueError, OSError):   # another version's file, or cut short: learned again
+            logger.info("sfm: %s cannot be read; learning the visual words again", path)
     index = build(db, cfg.seed, cfg.vocab_tree_descriptors)
     save(index, path)
     return index
