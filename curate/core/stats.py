@@ -64,6 +64,13 @@ def seeds_summary(per_seed_means) -> dict:
             "std": float(v.std(ddof=1)) if v.size > 1 else 0.0, "n_seeds": int(v.size)}
 
 
+def _finite_folds(diffs) -> list[np.ndarray]:
+    """Each fold's differences as a float array without its non-finite values; empty folds left out."""
+    folds = [np.asarray(d, float) for d in diffs]
+    folds = [d[np.isfinite(d)] for d in folds]
+    return [d for d in folds if d.size]
+
+
 def folds_paired(diffs, level: float = 0.95) -> dict:
     """Per-view differences pooled over hold-out folds, with an interval that counts each fold as one draw.
 
@@ -74,9 +81,7 @@ def folds_paired(diffs, level: float = 0.95) -> dict:
     t interval (:func:`mean_ci`), which cannot see that noise. Non-finite differences are dropped, empty folds
     ignored. Returns {"mean", "lo", "hi", "n" (views), "n_folds", "dof", "level", "sd" (of the views)}.
     """
-    folds = [np.asarray(d, float) for d in diffs]
-    folds = [d[np.isfinite(d)] for d in folds]
-    folds = [d for d in folds if d.size]
+    folds = _finite_folds(diffs)
     F = len(folds)
     if F == 0:
         return {"mean": float("nan"), "lo": float("nan"), "hi": float("nan"), "n": 0, "n_folds": 0, "dof": 0,
@@ -115,9 +120,7 @@ def folds_moderated(diffs, level: float = 0.95, kappa0: float = 1.0, nu0: float 
     ``kappa`` (the pooled design effect the interval used), ``kappa_folds`` (the folds' own estimate, None below
     two folds), ``sd_within`` (None without views to spread).
     """
-    folds = [np.asarray(d, float) for d in diffs]
-    folds = [d[np.isfinite(d)] for d in folds]
-    folds = [d for d in folds if d.size]
+    folds = _finite_folds(diffs)
     F = len(folds)
     if F == 0:
         return {"mean": float("nan"), "lo": float("nan"), "hi": float("nan"), "n": 0, "n_folds": 0, "dof": 0,
