@@ -404,6 +404,7 @@ def _stage(args, run_dir: Path) -> int:
     which are saved); then redo the cheap stages computed from it and the report, and name the evaluation
     when it is now out of date (:func:`curate.pipeline.refresh_after`)."""
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.pipeline import refresh_after, save_run_config
     from curate.pipeline import check_needs
     base, rec = saved_config(run_dir)
@@ -418,7 +419,7 @@ def _stage(args, run_dir: Path) -> int:
         save_run_config(cfg, run_dir, rec.get("photos"), rec.get("poses"))
     ctx = RunContext(cfg, run_dir, args.force, rec.get("photos"), rec.get("poses"))
     try:
-        res = BY_NAME[args.command].run(ctx)
+        res = run_stage(BY_NAME[args.command], ctx)
         print(res.line(), flush=True)
         if args.command != "report":
             refresh_after(ctx, args.command)
@@ -436,12 +437,13 @@ def cmd_stage(args) -> int:
 @_claims("out", ("photos", "poses"), writes=("sfm",))
 def cmd_sfm(args) -> int:
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.core.stage import read_stage
     cfg = run_config(args)
     if not args.photos and not args.poses:
         raise CliError("give a photo folder, or --poses with a transforms.json or a COLMAP model")
     try:
-        res = BY_NAME["sfm"].run(RunContext(cfg, Path(args.out), args.force, args.photos, args.poses))
+        res = run_stage(BY_NAME["sfm"], RunContext(cfg, Path(args.out), args.force, args.photos, args.poses))
     except (FileNotFoundError, NotADirectoryError, RuntimeError, ValueError) as e:
         raise CliError(str(e))
     st = (read_stage(res.path) or {}).get("stats", {})

@@ -17,6 +17,7 @@ from pathlib import Path
 from curate.core.paths import RunPaths
 from curate.config import RunConfig
 from curate.core.graph import BY_NAME, RUN_WRITES, STAGES, RunContext, redone_after
+from curate.core.runner import run_stage
 from curate.core.stage import StageResult
 
 log = logging.getLogger(__name__)
@@ -187,12 +188,12 @@ def refresh_after(ctx: RunContext, stage: str) -> list[StageResult]:
     (:func:`curate.core.graph.redone_after`) and the report, printing a line for each, and a line naming the
     evaluation when it is now out of date (with the command that refreshes it). Returns the stages' results."""
     from curate.core.stage import refresh_command, stale_stages
-    results = [_done(BY_NAME[s].run(ctx), []) for s in redone_after(stage) if s != "report"]
+    results = [_done(run_stage(BY_NAME[s], ctx), []) for s in redone_after(stage) if s != "report"]
     stale = stale_stages(ctx.run_dir)
     if "evaluate" in stale:
         print(f"{'evaluate':10s} out of date ({stale['evaluate']}): "
               f"`{refresh_command(ctx.run_dir, stale, 'evaluate')}` estimates the current selection", flush=True)
-    out = BY_NAME["report"].run(ctx)
+    out = run_stage(BY_NAME["report"], ctx)
     print(out.line(), flush=True)
     return results + [out]
 
@@ -228,7 +229,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     results: list[StageResult] = []
     sfm, *rest, report = STAGES
     _start(sfm.name)
-    last = _done(sfm.run(ctx), results)
+    last = _done(run_stage(sfm, ctx), results)
     parts = split_parts(run_dir) if cfg.sfm.on_split == "each" and until is None else []
     if parts:  # the largest part takes its share of a count budget; the others follow the export
         from dataclasses import replace
@@ -243,13 +244,13 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
         if not stage.applies(ctx.cfg, run_dir):
             continue
         _start(stage.name)
-        last = _done(stage.run(ctx), results)
+        last = _done(run_stage(stage, ctx), results)
     if until is not None and last.name == until:
         return last.path
     if parts:
         _run_parts(cfg, run_dir, parts, force, executor)
     ctx.timings, ctx.seconds = [r.timing() for r in results], time.perf_counter() - t_start
-    out = report.run(ctx)
+    out = run_stage(report, ctx)
     print(out.line(), flush=True)
     for r in results:
         if r.warning:

@@ -51,7 +51,7 @@ def scene_run(scene: str, out: Path, runs: dict[str, Path]):
 
 def measure(scene: str, run: Path, out: Path, ev, fractions, every: int, folds: list[int]) -> dict:
     """Train the default selection at every budget of every fold of ``scene`` (run folder ``run``:
-    its RUN/sfm and, after :func:`curate.occupancy.stage.run`, RUN/occupancy) -> the curve record."""
+    its RUN/sfm and, after :func:`curate.occupancy.stage.occupancy`, RUN/occupancy) -> the curve record."""
     from curate.config import RunConfig
     from curate.core.stage import read_stage, stage_key
     from curate.core.stats import holdout_split

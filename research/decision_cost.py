@@ -80,6 +80,7 @@ def after(new: Path, out: Path, minutes: float) -> dict:
     from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.evaluate.config import EvalConfig
     dst = out / new.name
     if dst.exists():
@@ -94,7 +95,7 @@ def after(new: Path, out: Path, minutes: float) -> dict:
                                         random_seeds=d.random_seeds, max_side=d.max_side, iters=d.iters,
                                         field=field))
     with runfolder.claimed(dst, writes=("evaluate",)):
-        BY_NAME["evaluate"].run(RunContext(cfg, dst))
+        run_stage(BY_NAME["evaluate"], RunContext(cfg, dst))
     s = json.loads((dst / "evaluate" / "summary.json").read_text())
     cpu = unit_cpu(new)
     used = [k for f in s["protocol"]["folds"] for k in f["units"]]

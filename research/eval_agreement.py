@@ -73,13 +73,14 @@ def evaluate(run: Path, side: int, iters: int, folds: int, field: dict | None = 
     from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     cfg, _ = saved_config(run)
     ev = cfg.evaluate
     cfg = replace(cfg, evaluate=replace(ev, max_side=side, iters=iters, folds=folds,
                                         methods=methods or ("selection", "random", "fvs", "stride", "all"),
                                         random_seeds=1, field=replace(ev.field, **(field or {}))))
     with runfolder.claimed(run, writes=("evaluate",)):
-        res = BY_NAME["evaluate"].run(RunContext(cfg, run))
+        res = run_stage(BY_NAME["evaluate"], RunContext(cfg, run))
     print(res.line(), flush=True)
     return json.loads((run / "evaluate" / "summary.json").read_text())
 

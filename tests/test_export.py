@@ -263,5 +263,5 @@ def test_curate_export_on_a_run_keeps_an_edited_image(tmp_path, capsys):
         capsys.readouterr()
         assert main(argv) == 2
         err = capsys.readouterr().err
-        assert f"{img} was changed since curate exported it" in err and "Traceback" not in err
+        assert f"{img} was changed since curate" in err and "Traceback" not in err   # one guard, every stage
         assert img.read_bytes() == b"edited"

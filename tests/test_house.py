@@ -121,3 +121,55 @@ def test_the_shared_cameras_and_grid_are_read_only(tmp_path):
     with pytest.raises(ValueError, match="read-only"):
         grid.mask[0, 0, 0] = False
     assert cams[[0, 1]].c2w.flags.writeable                           # a subset is the caller's own
+
+
+SELF_KEYED = {"sfm/colmap.py", "sfm/pose_import.py", "evaluate/stage.py", "evaluate/units.py", "suggest/stage.py"}
+"""Where a stage still keys and skips by itself, each for a reason (docs/architecture.md#run-folder): SfM (its key
+hashes the photos it finds), the evaluation and its trainings (each training a stage of its own), ``curate suggest``
+(not a stage of ``curate run``)."""
+
+
+def test_the_graph_owns_keys_and_skipping():
+    """Every stage of the graph with a key function is keyed, skipped, begun and finished by the runner alone: no
+    module but the runner and the self-keyed ones calls ``begin_stage``/``finish_stage``; every stage not keyed by
+    the runner is one of those."""
+    import re
+    from curate.core.graph import STAGES
+    root = Path(__file__).resolve().parents[1] / "curate"
+    callers = {p.relative_to(root).as_posix() for p in root.rglob("*.py")
+               if re.search(r"\b(begin_stage|finish_stage)\(", re.sub(r"def (begin|finish)_stage\(", "",
+                                                                       p.read_text()))}
+    assert callers == {"core/runner.py"} | SELF_KEYED
+    assert {s.name for s in STAGES if s.key is None} == {"sfm", "evaluate", "report"}
+    for s in STAGES:
+        if s.key is not None:
+            assert s.keyed_on and set(s.keyed_on) <= set(s.reads) | set(s.needs), s.name
+
+
+def test_a_keyed_stage_is_computed_only_when_its_key_changed(tmp_path, monkeypatch):
+    """The runner skips an up-to-date stage without calling its computation, and calls it again when an option in
+    its key changed (the budget) or a file it wrote is gone."""
+    from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
+    from curate.pipeline import saved_config
+    from curate.select import stage as select_stage
+    run = tmp_path / "run"
+    run.mkdir()
+    assert cli.main(["run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--out", str(run),
+                     "--budget", "12", "--res", "8", "--triangulate", "off", "--method", "stride",
+                     "--no-evaluate"]) == 0
+    cfg, _ = saved_config(run)
+    real, calls = select_stage.choose, []
+
+    def counted(ctx, keyed):
+        calls.append(keyed.key)
+        return real(ctx, keyed)
+    monkeypatch.setattr(select_stage, "choose", counted)
+    res = run_stage(BY_NAME["select"], RunContext(cfg, run))
+    assert not res.ran and calls == []
+    from dataclasses import replace
+    res = run_stage(BY_NAME["select"], RunContext(replace(cfg, budget="10"), run))
+    assert res.ran and len(calls) == 1
+    (run / "select" / "nodes.npz").unlink()
+    res = run_stage(BY_NAME["select"], RunContext(replace(cfg, budget="10"), run))
+    assert res.ran and len(calls) == 2 and calls[0] == calls[1] and (run / "select" / "nodes.npz").is_file()

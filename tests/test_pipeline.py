@@ -272,7 +272,7 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
 
     before = sha()
     cams, files = read_transforms(SAMPLE / "transforms.json")
-    real = sfm_stage.run
+    real = sfm_stage.reconstruct
 
     def fake_sfm(ctx):
         if ctx.poses != "SPLIT":
@@ -301,7 +301,7 @@ def test_on_split_each_curates_every_part_in_its_own_run_folder(tmp_path, monkey
         write_json_atomic(d / "stage.json", rec)
         return res
 
-    monkeypatch.setattr(sfm_stage, "run", fake_sfm)
+    monkeypatch.setattr(sfm_stage, "reconstruct", fake_sfm)
     from curate.config import RunConfig
     from curate.select.config import SelectConfig
     from curate.sfm.config import SfmConfig

@@ -597,6 +597,7 @@ def test_a_split_capture_is_said_loudly_and_can_stop(tmp_path):
     from dataclasses import replace as dc_replace
     from curate.config import RunConfig
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.core.runfolder import claimed
     sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
     cfg = RunConfig()
@@ -604,7 +605,7 @@ def test_a_split_capture_is_said_loudly_and_can_stop(tmp_path):
 
     def sfm(cfg):
         with claimed(tmp_path, [sample]):
-            return BY_NAME["sfm"].run(RunContext(cfg, tmp_path, photos=sample, poses=sample / "transforms.json"))
+            return run_stage(BY_NAME["sfm"], RunContext(cfg, tmp_path, photos=sample, poses=sample / "transforms.json"))
     res = sfm(cfg)
     assert res.ran and res.warning is None
     rec_path = tmp_path / "sfm" / "stage.json"

@@ -117,12 +117,18 @@ MEASURED_FOLDS = 2
 """Hold-out folds the budget stage measures the learning curve on (:mod:`curate.evaluate.budget`)."""
 
 
+def measured_parts(cfg: "RunConfig") -> dict:
+    """The options the budget stage's key holds: the tolerance, the selection's options, the trainings' settings
+    (beside the keys of the scene: occupancy and SfM, :data:`curate.core.graph.STAGES`)."""
+    return {"tolerance": cfg.budget_tolerance, "select": cfg.select, "train": cfg.evaluate.training(),
+            "holdout_every": cfg.evaluate.holdout_every, "folds": MEASURED_FOLDS}
+
+
 def measured_key(cfg: "RunConfig", run_dir: str | Path) -> str:
-    """The budget stage's key: the tolerance, the selection's options, the trainings' settings and the scene."""
+    """The budget stage's key (:func:`measured_parts` and the scene's keys), as the stage runner computes it."""
+    from curate.core.graph import BY_NAME
     from curate.core.stage import current_key, stage_key
-    return stage_key({"tolerance": cfg.budget_tolerance, "select": cfg.select, "train": cfg.evaluate.training(),
-                      "holdout_every": cfg.evaluate.holdout_every, "folds": MEASURED_FOLDS},
-                     [current_key(run_dir, "occupancy") or "", current_key(run_dir, "sfm") or ""])
+    return stage_key(measured_parts(cfg), [current_key(run_dir, s) or "" for s in BY_NAME["budget"].keyed_on])
 
 
 def measured_budget(cfg: "RunConfig", run_dir: str | Path) -> dict | None:

@@ -1,10 +1,12 @@
 """The stage graph of ``curate run``, declared once.
 
 Each stage is one :class:`Stage` row of :data:`STAGES`: what it reads, what must have finished before its
-command, whether it is cheap, its start line, where it writes and the function that runs it. Every stage
-function has one signature, ``run(ctx: RunContext) -> StageResult``. The pipeline's order, the stage commands'
-checks and refreshes (:mod:`curate.cli`), the record's ``inputs`` and the staleness (:mod:`curate.core.stage`)
-and the batch summary's failed stage are all derived from this table.
+command, whether it is cheap, its start line, where it writes, what its key holds and the function that computes
+it. A keyed stage (:attr:`Stage.key`) is run by one runner, :func:`curate.core.runner.run_keyed`, which computes its
+key, skips it when up to date, clears and begins it, calls its computation and writes its record; the stage's own
+code only computes. The pipeline's order, the stage commands' checks and refreshes (:mod:`curate.cli`), the
+record's ``inputs`` and the staleness (:mod:`curate.core.stage`) and the batch summary's failed stage are all
+derived from this table.
 
 Light: the functions are named as ``module:function`` and imported only when a stage runs.
 """
@@ -18,7 +20,6 @@ from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
-    from curate.core.stage import StageResult
 
 
 @dataclasses.dataclass
@@ -53,7 +54,10 @@ class Stage:
     name: str
     """The stage's name: its folder in the run folder and its command (``curate NAME RUN``)."""
     runs: str
-    """``module:function`` of its ``run(ctx: RunContext) -> StageResult``."""
+    """``module:function`` of what it computes: with a :attr:`key`, ``(ctx: RunContext, keyed: Keyed) -> Done``, a
+    pure computation that writes its files, called by :func:`curate.core.runner.run_keyed` only when the stage is out
+    of date; without one, ``(ctx: RunContext) -> StageResult``, which keys and skips by itself (the evaluation:
+    each of its trainings is a stage of its own; SfM: its key hashes the photos it finds; the report: no key)."""
     start: str
     """What its start line says on a terminal (its end line replaces it)."""
     reads: tuple[str, ...] = ()
@@ -77,22 +81,20 @@ class Stage:
     spare: tuple[str, ...] = ()
     """Patterns of files it writes that nothing reads again (a log, COLMAP's database): their absence does not
     make it out of date."""
+    key: str | None = None
+    """``module:function`` of ``(ctx: RunContext) -> Keyed``: the options its key hashes (and any input's hash)
+    beside the keys of :attr:`keyed_on`. None: :attr:`runs` keys and skips by itself."""
+    keyed_on: tuple[str, ...] = ()
+    """The stages whose keys its key holds (a stage it reads whose result is already in its options, as the
+    measured budget is in the selection's, is not keyed on twice)."""
+    warns: str = ""
+    """A field of its record that a skipped stage repeats as its warning (the export's points warning)."""
 
     def __post_init__(self) -> None:
         if not self.writes:
             object.__setattr__(self, "writes", (self.name,))
         if not self.record:
             object.__setattr__(self, "record", f"{self.name}/stage.json")
-
-    def run(self, ctx: RunContext) -> "StageResult":
-        """Run the stage (its function imported now). An ``OSError`` that names no file (a full disk met by a
-        library) is raised again naming the stage's folder."""
-        try:
-            return _function(self.runs)(ctx)
-        except OSError as e:
-            if e.filename is None and e.errno is not None:
-                raise OSError(e.errno, e.strerror or str(e), str(Path(ctx.run_dir) / self.writes[0])) from None
-            raise
 
     def applies(self, cfg: "RunConfig", run_dir: str | Path) -> bool:
         """The stage is part of this run (its :attr:`when`)."""
@@ -112,7 +114,7 @@ UNIT_OWNS = ("metrics.json", "renders/*", "field.pt", "train.json", ".progress")
 """What one training of the evaluation writes in its folder (``RUN/evaluate/<unit>``)."""
 
 STAGES: tuple[Stage, ...] = (
-    Stage("sfm", "curate.sfm.stage:run", "photos to cameras",
+    Stage("sfm", "curate.sfm.stage:reconstruct", "photos to cameras",
           owns=("images/*", "sparse/*", "mapper/*", "dense/*", "triangulation/*", "database.db", "database.db-*",
                 "vocab_tree.bin", "visual_words.npz", "loop_pairs.txt", "retrieval_pairs.txt",
                 "retrieval_second_round.txt", "cross_take_pairs.txt", "cameras.json",
@@ -120,22 +122,24 @@ STAGES: tuple[Stage, ...] = (
                 "points_error.npy", "colmap.log"),
           spare=("database.db", "database.db-*", "colmap.log", "vocab_tree.bin", "visual_words.npz",
                  "loop_pairs.txt", "retrieval_pairs.txt", "retrieval_second_round.txt", "cross_take_pairs.txt")),
-    Stage("occupancy", "curate.occupancy.stage:run", "where the scene is", reads=("sfm",), needs=("sfm",),
-          owns=("occupancy.npz", "field.pt", "train.json")),
-    Stage("budget", "curate.evaluate.budget:run", "measuring how many photos this capture needs",
+    Stage("occupancy", "curate.occupancy.stage:compute", "where the scene is", reads=("sfm",), needs=("sfm",),
+          owns=("occupancy.npz", "field.pt", "train.json"), key="curate.occupancy.stage:key", keyed_on=("sfm",)),
+    Stage("budget", "curate.evaluate.budget:measure", "measuring how many photos this capture needs",
           reads=("occupancy",), needs=("sfm", "occupancy"), when="curate.evaluate.budget:wanted",
-          owns=("budget.json",)),
-    Stage("select", "curate.select.stage:run", "choosing photos", reads=("occupancy", "budget"),
-          needs=("sfm", "occupancy"), cheap=True, owns=("selection.json", "nodes.npz")),
-    Stage("evaluate", "curate.evaluate.stage:run", "training on the subsets", reads=("select",),
+          owns=("budget.json",), key="curate.evaluate.budget:key", keyed_on=("occupancy", "sfm")),
+    Stage("select", "curate.select.stage:choose", "choosing photos", reads=("occupancy", "budget"),
+          needs=("sfm", "occupancy"), cheap=True, owns=("selection.json", "nodes.npz"),
+          key="curate.select.stage:key", keyed_on=("occupancy",)),
+    Stage("evaluate", "curate.evaluate.stage:evaluate", "training on the subsets", reads=("select",),
           needs=("sfm", "occupancy", "select"), when="curate.evaluate.stage:wanted",
           owns=("summary.json", "gt/*") + tuple(f"*/{g}" for g in UNIT_OWNS)),
-    Stage("export", "curate.export.stage:run", "writing the export", reads=("select",), needs=("sfm", "select"),
-          cheap=True, owns=("images/*", "images_2/*", "images_4/*", "images_8/*", "sparse/0/cameras.bin",
+    Stage("export", "curate.export.stage:export", "writing the export", reads=("select",),
+          needs=("sfm", "select"), cheap=True, key="curate.export.stage:key", keyed_on=("select",),
+          warns="export_warning", owns=("images/*", "images_2/*", "images_4/*", "images_8/*", "sparse/0/cameras.bin",
                             "sparse/0/images.bin", "sparse/0/points3D.bin", "sparse/0/rigs.bin", "sparse/0/frames.bin",
                             "distorted/images/*", "distorted/sparse/0/*.bin", ".curate-undistort-*",
                             "transforms.json", "images.txt", "export.json", "sparse_pc.ply")),
-    Stage("report", "curate.report.stage:run", "writing the report", needs=("sfm", "occupancy", "select"),
+    Stage("report", "curate.report.stage:write_report", "writing the report", needs=("sfm", "occupancy", "select"),
           cheap=True, writes=("report.json", "report.html"), record="report.json"),
 )
 """The stages of ``curate run``, in order."""

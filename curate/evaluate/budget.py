@@ -18,17 +18,16 @@ counted in), ``budget`` (what the selection exports).
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from curate.core.paths import RunPaths
-from curate.core.budget import MEASURED_FOLDS, measured_key
-from curate.core.stage import StageResult
+from curate.core.budget import MEASURED_FOLDS, measured_parts
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
     from curate.core.graph import RunContext
+    from curate.core.runner import Done, Keyed
 
 
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
@@ -44,11 +43,17 @@ def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
         return False
 
 
-def run(ctx: "RunContext") -> StageResult:
+def key(ctx: "RunContext") -> "Keyed":
+    """The stage's key (:attr:`curate.core.graph.Stage.key`): :func:`curate.core.budget.measured_parts`."""
+    from curate.core.runner import Keyed
+    return Keyed(measured_parts(ctx.cfg))
+
+
+def measure(ctx: "RunContext", keyed: "Keyed") -> "Done":
     """Measure the learning curve of the selection's method on the first folds -> ``RUN/budget``."""
     import numpy as np
-    from curate.core.graph import BY_NAME
-    from curate.core.stage import begin_stage, current_key, finish_stage, stage_key, write_json_atomic
+    from curate.core.runner import Done
+    from curate.core.stage import current_key, stage_key, write_json_atomic
     from curate.evaluate.check import fit_check
     from curate.evaluate.folds import curve_fold, curve_points, fold_order
     from curate.evaluate.schedule import run_folds
@@ -60,12 +65,8 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.select.visibility import build_pair_index
     from curate.sfm.io import image_paths, load_sfm
 
-    t0 = time.perf_counter()
-    cfg, run_dir, force, executor = ctx.cfg, ctx.run_dir, ctx.force, ctx.executor
+    cfg, run_dir, executor = ctx.cfg, ctx.run_dir, ctx.executor
     d = RunPaths(run_dir).budget
-    key = measured_key(cfg, run_dir)
-    if begin_stage(d, key, force, owns=BY_NAME["budget"].owns):
-        return StageResult("budget", d, False, time.perf_counter() - t0)
     ev = cfg.evaluate
     sfm = load_sfm(run_dir)
     cams = sfm.cameras
@@ -93,8 +94,6 @@ def run(ctx: "RunContext") -> StageResult:
     budget = int(min(max(budget if budget is not None else law.budget, 2), len(cams) - 1))
     write_json_atomic(d / "budget.json", {"predicted": law.to_dict(), "check": {**check.to_dict(), "n_pool": n_pool},
                                           "budget": budget})
-    finish_stage(d, key, {"tolerance": cfg.budget_tolerance, "train": ev.training()}, t0,
-                 outputs={"budget": "budget.json"}, owns=BY_NAME["budget"].owns,
-                 units=[u.key for f in folds for u in f.units])
-    return StageResult("budget", d, True, time.perf_counter() - t0,
-                       f"{budget} of {len(cams)} photos to export: {check.note} (the law predicted {law.budget})")
+    return Done(f"{budget} of {len(cams)} photos to export: {check.note} (the law predicted {law.budget})",
+                {"budget": "budget.json"}, config={"tolerance": cfg.budget_tolerance, "train": ev.training()},
+                record={"units": [u.key for f in folds for u in f.units]})

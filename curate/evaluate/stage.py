@@ -96,7 +96,7 @@ def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     return cfg.run_evaluation
 
 
-def run(ctx: "RunContext") -> StageResult:
+def evaluate(ctx: "RunContext") -> StageResult:
     """Train the folds' units until decided (finished units are reused) -> ``RUN/evaluate``.
 
     ``ctx.executor``: a ``concurrent.futures.Executor`` for the trainings (None: local processes).

@@ -4,35 +4,33 @@
 from __future__ import annotations
 
 import json
-import time
 from typing import TYPE_CHECKING
 
 from curate.core.paths import RunPaths
-from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.core.graph import RunContext
+    from curate.core.runner import Done, Keyed
 
 
 EXPORTED = {"hardlink": "hard-linked", "link": "linked", "copy": "copied"}
 """How the stage line says each export mode ("10 images (copied)")."""
 
 
-def run(ctx: "RunContext") -> StageResult:
+def key(ctx: "RunContext") -> "Keyed":
+    """The stage's key (:attr:`curate.core.graph.Stage.key`): the export's options (beside the selection's key)."""
+    from curate.core.runner import Keyed
+    return Keyed({"export": ctx.cfg.export})
+
+
+def export(ctx: "RunContext", keyed: "Keyed") -> "Done":
     """COLMAP model, transforms.json, image list and image links (or copies) of the selection."""
-    from curate.core.graph import BY_NAME
-    from curate.core.stage import begin_stage, finish_stage, is_fresh, read_stage, required_key, stage_key
-    from curate.export.subset import check_unchanged, export_subset
+    from curate.core.runner import Done
+    from curate.core.stage import read_stage
+    from curate.export.subset import export_subset
     from curate.core.run import read_selection
-    t0 = time.perf_counter()
-    cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
+    cfg, run_dir = ctx.cfg, ctx.run_dir
     d = RunPaths(run_dir).export
-    key = stage_key({"export": cfg.export}, [required_key(run_dir, "select")])
-    if force or not is_fresh(d, key):
-        check_unchanged(d)    # a file the user changed in the export is theirs: never cleared
-    if begin_stage(d, key, force, owns=BY_NAME["export"].owns):  # unchanged: its warning still holds
-        return StageResult("export", d, False, time.perf_counter() - t0,
-                           warning=(read_stage(d) or {}).get("export_warning"))
     sel = read_selection(run_dir)
     export_subset(run_dir, sel["chosen_names"], d, config=cfg.export)
     model = json.loads((d / "export.json").read_text())["model"]
@@ -44,14 +42,12 @@ def run(ctx: "RunContext") -> StageResult:
     from curate.sfm.warn import import_warning
     # the record's warning (shown atop the report) also says when the photos and the poses did not match
     shown = "; ".join(w for w in (import_warning(run_dir), warn) if w) or None
-    finish_stage(d, key, {"export": cfg.export}, t0, outputs={"sparse": "sparse/0", "transforms": "transforms.json",
-                                                               "list": "images.txt", "images": "images/"},
-                 owns=BY_NAME["export"].owns, model=model, warning=shown, export_warning=warn, connectivity=groups)
-    return StageResult("export", d, True, time.perf_counter() - t0,
-                       f"{len(sel['chosen_names'])} images ("
-                       f"{'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "
-                       f"{model['n_points3D']} points -> {d}",
-                       warning=warn)
+    return Done(f"{len(sel['chosen_names'])} images ("
+                f"{'undistorted, PINHOLE' if model.get('undistorted') else EXPORTED[cfg.export.mode]}), "
+                f"{model['n_points3D']} points -> {d}",
+                {"sparse": "sparse/0", "transforms": "transforms.json", "list": "images.txt", "images": "images/"},
+                record={"model": model, "warning": shown, "export_warning": warn, "connectivity": groups},
+                warning=warn)
 
 
 MIN_POINTS = 100

@@ -12,20 +12,19 @@ grid, hence the same selection. (The hold-out split belongs to the evaluation st
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from curate.core.graph import BY_NAME
 from curate.core.paths import RunPaths
 from curate.core.stage import StageResult
 
 if TYPE_CHECKING:
     from curate.config import RunConfig
     from curate.core.graph import RunContext
+    from curate.core.runner import Done, Keyed
 
 log = logging.getLogger(__name__)
 
@@ -73,27 +72,17 @@ def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
     return False, f"not needed: the energy's surface comes from the {n_points} sparse points"
 
 
-def run(ctx: "RunContext") -> StageResult:
-    """The stage: :func:`occupancy` of the run folder, the field trained on every registered photo."""
-    return occupancy(ctx.cfg, ctx.run_dir, ctx.force)
+def key(ctx: "RunContext") -> "Keyed":
+    """The stage's key (:attr:`curate.core.graph.Stage.key`): :func:`occupancy_parts` of the run."""
+    return occupancy_parts(ctx.cfg, ctx.run_dir)
 
 
-def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None
-              ) -> StageResult:
-    """Field (when needed: :func:`needs_field`) and occupancy grid (points, refined, node band) ->
-    ``RUN/occupancy``. ``train_on``: the cameras the field trains on (None: every registered one;
-    the evaluation harness passes a hold-out fold's pool)."""
-    from curate.core.grid import NodeGrid
-    from curate.core.stage import (begin_stage, finish_stage, is_fresh, required_key, stage_key, write_json_atomic,
-                                   writing)
-    from curate.field.train import default_box, train_field
-    from curate.occupancy.masks import occupancy_from_points, refine_occupancy
-    from curate.sfm.io import image_paths, load_sfm
-
-    t0 = time.perf_counter()
-    run_dir = Path(run_dir)
-    d = RunPaths(run_dir).occupancy
-    ev = cfg.evaluate
+def occupancy_parts(cfg: "RunConfig", run_dir: Path, train_on: Sequence[int] | None = None) -> "Keyed":
+    """What the occupancy's key holds: its options, the box, the cameras the field trains on (``train_on``), and
+    the field's training settings only when a field is needed (:func:`needs_field`; a grid refined by a field
+    serves a run that needs none). ``state``: (the SfM result, whether a field is needed, why)."""
+    from curate.core.runner import Keyed
+    from curate.sfm.io import load_sfm
     sfm = load_sfm(run_dir)
     field_needed, why = needs_field(cfg, sfm.cameras, 0 if sfm.points is None else len(sfm.points))
     parts = {"occupancy": cfg.occupancy, "refine": cfg.refine, "band": cfg.surface_band, "train": train_settings(cfg)}
@@ -101,14 +90,38 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
         parts["box"] = list(cfg.box)
     if train_on is not None:
         parts["train_on"] = [int(i) for i in train_on]
-    deps = [required_key(run_dir, "sfm")]
-    key_field = stage_key(parts, deps)
-    if not field_needed and not force and is_fresh(d, key_field):
-        return StageResult("occupancy", d, False, time.perf_counter() - t0)  # one with the field serves too
-    train_part = parts["train"] if field_needed else None
-    key = key_field if field_needed else stage_key({**parts, "train": None}, deps)
-    if begin_stage(d, key, force, owns=BY_NAME["occupancy"].owns):
-        return StageResult("occupancy", d, False, time.perf_counter() - t0)
+    if field_needed:
+        return Keyed(parts, state=(sfm, True, why))
+    return Keyed({**parts, "train": None}, serves=parts, state=(sfm, False, why))
+
+
+def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None
+              ) -> StageResult:
+    """Field (when needed: :func:`needs_field`) and occupancy grid (points, refined, node band) ->
+    ``RUN/occupancy``, through the stage runner. ``train_on``: the cameras the field trains on (None: every
+    registered one; the research harness passes a hold-out fold's pool)."""
+    from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_keyed
+    return run_keyed(BY_NAME["occupancy"], RunContext(cfg, run_dir, force),
+                     key_of=lambda ctx: occupancy_parts(ctx.cfg, ctx.run_dir, train_on))
+
+
+def compute(ctx: "RunContext", keyed: "Keyed") -> "Done":
+    """The stage's computation: the field trained on every registered photo (or on the key's ``train_on``) when
+    one is needed, and the grid -> ``RUN/occupancy``."""
+    from curate.core.grid import NodeGrid
+    from curate.core.runner import Done
+    from curate.core.stage import write_json_atomic, writing
+    from curate.field.train import default_box, train_field
+    from curate.occupancy.masks import occupancy_from_points, refine_occupancy
+    from curate.sfm.io import image_paths
+
+    cfg, run_dir = ctx.cfg, Path(ctx.run_dir)
+    d = RunPaths(run_dir).occupancy
+    ev = cfg.evaluate
+    sfm, field_needed, why = keyed.state
+    train_on = keyed.parts.get("train_on")
+    train_part = keyed.parts["train"]
     box = default_box(sfm.cameras)
     fld = st = None
     if field_needed:
@@ -150,11 +163,10 @@ def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Se
     n = {"points": int(pts_mask.sum()) if pts_mask is not None else 0, "refined": int(rmask.sum()),
          "nodes": int(band.sum())}
     outputs = {"occupancy": "occupancy.npz", **({"field": "field.pt"} if fld is not None else {})}
-    finish_stage(d, key, {"occupancy": cfg.occupancy, "refine": cfg.refine, "train": train_part, "box": cfg.box}, t0,
-                 outputs=outputs, owns=BY_NAME["occupancy"].owns, seed=ev.train_seed, counts=n, field=why,
-                 train={"iters": st.iters, "train_seconds": st.train_seconds} if st is not None else None)
     src = "refined by a field" if fld is not None else ("from the sparse points" if pts_mask is not None
                                                          else "unknown (no points, no field): the box's walls")
-    return StageResult("occupancy", d, True, time.perf_counter() - t0,
-                       f"scene occupancy {src} ({n['refined']} of {R}^3 cells), {n['nodes']} surface nodes"
-                       + (f"; field trained on {st.iters} iterations" if st is not None else ""))
+    return Done(f"scene occupancy {src} ({n['refined']} of {R}^3 cells), {n['nodes']} surface nodes"
+                + (f"; field trained on {st.iters} iterations" if st is not None else ""), outputs,
+                config={"occupancy": cfg.occupancy, "refine": cfg.refine, "train": train_part, "box": cfg.box},
+                seed=ev.train_seed, record={"counts": n, "field": why, "train": {
+                    "iters": st.iters, "train_seconds": st.train_seconds} if st is not None else None})

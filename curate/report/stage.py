@@ -52,7 +52,7 @@ def evaluation_status(run_dir: Path, stale: dict[str, str]) -> dict:
             "of": {"exported_budget": pr.get("exported_budget"), "method": pr.get("method")}}
 
 
-def run(ctx: "RunContext") -> StageResult:
+def write_report(ctx: "RunContext") -> StageResult:
     """Write ``report.json`` and ``report.html``.
 
     ``ctx.timings``: this invocation's stages (:meth:`StageResult.timing`); ``report.json``

@@ -17,29 +17,21 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from curate.core.paths import RunPaths
-from curate.core.stage import StageResult
 
 log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from curate.core.graph import RunContext
+    from curate.core.runner import Done, Keyed
 
 
-def run(ctx: "RunContext") -> StageResult:
-    """Selection among every registered photo -> ``RUN/select``."""
-    from curate.core.budget import AUTO, budget_of_run, check_fits, parse_budget, resolve_budget
-    from curate.core.graph import BY_NAME
-    from curate.core.stage import begin_stage, finish_stage, required_key, stage_key, write_json_atomic, writing
-    from curate.core.run import load_node_grid
-    from curate.select.energy import energy_of_subset
-    from curate.select.record import coverage, selection_record
-    from curate.select.select import select
-    from curate.select.visibility import build_pair_index
-    from curate.sfm.io import load_sfm
-
-    t0 = time.perf_counter()
-    cfg, run_dir, force = ctx.cfg, ctx.run_dir, ctx.force
-    d = RunPaths(run_dir).select
+def key(ctx: "RunContext") -> "Keyed":
+    """The stage's key (:attr:`curate.core.graph.Stage.key`): the selection's options and the budget as the run
+    gives it (with ``auto``, the tolerance and the budget the budget stage measured on this capture, when it did).
+    ``state``: (the budget parsed, as the user said it, the measurement or None)."""
+    from curate.core.budget import AUTO, budget_of_run, parse_budget
+    from curate.core.runner import Keyed
+    cfg, run_dir = ctx.cfg, ctx.run_dir
     text, said = budget_of_run(cfg.budget, run_dir)
     b = parse_budget(text)
     parts = {"select": cfg.select, "budget": text}
@@ -50,9 +42,24 @@ def run(ctx: "RunContext") -> StageResult:
         measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
         if measured is not None:
             parts["measured"] = measured["budget"]
-    key = stage_key(parts, [required_key(run_dir, "occupancy")])
-    if begin_stage(d, key, force, owns=BY_NAME["select"].owns):
-        return StageResult("select", d, False, time.perf_counter() - t0)
+    return Keyed(parts, state=(b, said, measured))
+
+
+def choose(ctx: "RunContext", keyed: "Keyed") -> "Done":
+    """Selection among every registered photo -> ``RUN/select``."""
+    from curate.core.budget import AUTO, check_fits, resolve_budget
+    from curate.core.runner import Done
+    from curate.core.stage import write_json_atomic, writing
+    from curate.core.run import load_node_grid
+    from curate.select.energy import energy_of_subset
+    from curate.select.record import coverage, selection_record
+    from curate.select.select import select
+    from curate.select.visibility import build_pair_index
+    from curate.sfm.io import load_sfm
+
+    cfg, run_dir = ctx.cfg, ctx.run_dir
+    d = RunPaths(run_dir).select
+    b, said, measured = keyed.state
     sfm = load_sfm(run_dir)
     pool = list(range(len(sfm.cameras)))
     if b != AUTO:
@@ -83,14 +90,11 @@ def run(ctx: "RunContext") -> StageResult:
                               "measured", **({"measured": measured["check"]} if measured is not None else {})}
         rec["budget_auto"]["budget"] = budget
     write_json_atomic(d / "selection.json", rec)
-    finish_stage(d, key, parts, t0,
-                 outputs={"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed,
-                 owns=BY_NAME["select"].owns)
     from curate.select.methods import method_label
     how = method_label(sel.method) + (" (auto)" if cfg.select.method == "auto" else "")
     why = (f"; {auto.note}" if measured is None else
            f"; budget auto: {budget} measured on this capture (the law predicted {auto.budget})") if auto else ""
     cov = rec["coverage"]
     sees = (f"; they see {100 * cov['seen']:.0f}% of the scene the capture sees" if cov["n_nodes_seen"] else "")
-    return StageResult("select", d, True, time.perf_counter() - t0,
-                       f"{len(rec['chosen'])} of {len(pool)} photos by {how}{sees}; {sel.seconds:.2f}s{why}")
+    return Done(f"{len(rec['chosen'])} of {len(pool)} photos by {how}{sees}; {sel.seconds:.2f}s{why}",
+                {"selection": "selection.json", "nodes": "nodes.npz"}, seed=cfg.select.seed)

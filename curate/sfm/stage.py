@@ -1,7 +1,8 @@
 """The SfM stage as a run-folder stage: photos (or known poses) -> ``RUN/sfm``.
 
-:func:`run` has the shape of every stage (``run(ctx) -> StageResult``, :mod:`curate.core.graph`); the work is
-:func:`curate.sfm.colmap.sfm_in_claimed` (COLMAP) or :func:`curate.sfm.pose_import.import_in_claimed`.
+:func:`reconstruct` keys and skips by itself (its key hashes the photo files it finds, or the pose files and the
+photos they match: :mod:`curate.core.graph`); the work is :func:`curate.sfm.colmap.sfm_in_claimed` (COLMAP) or
+:func:`curate.sfm.pose_import.import_in_claimed`.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def run(ctx: "RunContext") -> StageResult:
+def reconstruct(ctx: "RunContext") -> StageResult:
     """SfM on ``ctx.photos`` or, with ``ctx.poses`` (a COLMAP model or transforms.json), an import, in the run
     folder its caller claimed (the command, or :func:`curate.pipeline.run`)."""
     from curate.core.run import load_cameras

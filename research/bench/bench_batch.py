@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def main() -> None:
     from curate import pipeline as pl
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.evaluate.units import EvalConfig
     from curate.core.executors import RayExecutor, cpu_count, ray_init
     from curate.occupancy.masks import OccupancyConfig
@@ -50,7 +51,7 @@ def main() -> None:
         shutil.rmtree(run_dir / "evaluate", ignore_errors=True)
         c = replace(cfg, evaluate=replace(cfg.evaluate, workers=workers))
         t = time.perf_counter()
-        BY_NAME["evaluate"].run(RunContext(c, run_dir, executor=executor))
+        run_stage(BY_NAME["evaluate"], RunContext(c, run_dir, executor=executor))
         dt = time.perf_counter() - t
         s = json.loads((run_dir / "evaluate" / "summary.json").read_text())["methods"]
         units = {p.parent.name: json.loads(p.read_text())["train_seconds"]

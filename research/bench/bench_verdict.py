@@ -25,6 +25,7 @@ def run_one(run: Path, out: Path, keep_saved: bool) -> float:
     from curate.pipeline import saved_config
     from curate.core import runfolder
     from curate.core.graph import BY_NAME, RunContext
+    from curate.core.runner import run_stage
     from curate.evaluate.config import EvalConfig
     from research.eval_agreement import sibling
     sib = sibling(run, out)
@@ -35,7 +36,7 @@ def run_one(run: Path, out: Path, keep_saved: bool) -> float:
                                             random_seeds=d.random_seeds, folds=d.folds, minutes=d.minutes))
     t0 = time.perf_counter()
     with runfolder.claimed(sib, writes=("evaluate",)):
-        print(BY_NAME["evaluate"].run(RunContext(cfg, sib)).line(), flush=True)
+        print(run_stage(BY_NAME["evaluate"], RunContext(cfg, sib)).line(), flush=True)
     return time.perf_counter() - t0
 
 
