@@ -137,21 +137,6 @@ def _run_parts(cfg: RunConfig, run_dir: Path, parts: list[dict], force: bool, ex
         run(pcfg, None, sub, poses=RunPaths(run_dir).sfm / p["model"], force=force, executor=executor)
 
 
-def check_budget(budget: str, run_dir: Path) -> None:
-    """ValueError unless ``budget`` leaves something to choose among the run's registered photos
-    (checked before the occupancy stage, which may train)."""
-    from curate.core.budget import AUTO, budget_of_run, check_fits, parse_budget, resolve_budget
-    from curate.core.run import load_cameras
-    n = len(load_cameras(run_dir))
-    text, said = budget_of_run(budget, run_dir)
-    b = parse_budget(text)
-    if b == AUTO:
-        if n < 3:
-            raise ValueError(f"budget {said}: {n} registered photos leave nothing to choose")
-    else:
-        check_fits(said, resolve_budget(b, n), n)
-
-
 def check_needs(command: str, run_dir: Path, rec: dict) -> None:
     """Before the stage command ``command`` (``curate select RUN``, ...): ``FileNotFoundError`` naming the curate
     command to run when a stage it reads has not finished, or when a file that stage wrote is missing (up to date
@@ -237,7 +222,8 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
                                                   sum(p["n_registered"] for p in parts)))
         print(f"part 0 (the largest): {parts[0]['n_registered']} photos, budget {ctx.cfg.budget} -> {run_dir}",
               flush=True)
-    check_budget(ctx.cfg.budget, run_dir)   # before any training
+    from curate.core.plan import plan_of_run
+    plan_of_run(ctx.cfg, run_dir)   # the plan, once: a budget that does not fit stops here, before any training
     for stage in rest:
         if until is not None and last.name == until:
             return last.path

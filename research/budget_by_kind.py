@@ -18,7 +18,7 @@ from curate.core.run import load_node_grid
 from curate.select.auto_budget import choose_for_pool
 from curate.select.config import SelectConfig
 from curate.select.methods import capture_kind
-from curate.core.budget import budget_of_run
+from curate.core.budget import budget_of_pool
 from curate.select.visibility import build_pair_index
 from curate.sfm.io import load_sfm
 
@@ -29,7 +29,7 @@ def main() -> None:
     args = ap.parse_args()
     for rd in args.runs:
         cams = load_sfm(rd).cameras
-        text, said = budget_of_run("default", rd)
+        text, said = budget_of_pool("default", cams)
         kind, ang = capture_kind(cams)
         if parse_budget(text) == AUTO:
             nodes = load_node_grid(rd).nodes()

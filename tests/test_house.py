@@ -173,3 +173,38 @@ def test_a_keyed_stage_is_computed_only_when_its_key_changed(tmp_path, monkeypat
     (run / "select" / "nodes.npz").unlink()
     res = run_stage(BY_NAME["select"], RunContext(replace(cfg, budget="10"), run))
     assert res.ran and len(calls) == 2 and calls[0] == calls[1] and (run / "select" / "nodes.npz").is_file()
+
+
+def test_one_plan_after_sfm_decides_the_kind_method_and_budget_once(tmp_path, monkeypatch):
+    """The capture's kind is worked out once in an evaluated run (before the plan: 4 times, once more per fold);
+    the report records the plan; the selection and every fold run the method it resolved."""
+    import json
+    import curate.select.methods as methods
+    calls = []
+    real = methods.capture_kind
+
+    def counted(cams):
+        calls.append(len(cams))
+        return real(cams)
+    monkeypatch.setattr(methods, "capture_kind", counted)
+    run = tmp_path / "run"
+    assert cli.main(["run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--out", str(run),
+                     "--budget", "12", "--res", "8", "--triangulate", "off", "--folds", "2", "--workers", "1",
+                     "--iters", "5", "--eval-size", "16", "--random-seeds", "1"]) == 0
+    assert len(calls) == 1
+    rep = json.loads((run / "report.json").read_text())
+    plan = rep["plan"]
+    assert plan["n_budget"] == 12 and plan["method"] != "auto" and plan["kind"] in ("walk", "object")
+    assert rep["selection"]["method"] == plan["method"]
+    summ = json.loads((run / "evaluate" / "summary.json").read_text())
+    assert {f["method"] for f in summ["protocol"]["folds"]} == {plan["method"]}
+
+
+def test_a_budget_that_does_not_fit_stops_the_run_before_the_occupancy(tmp_path, capsys):
+    """The plan checks the budget once, right after SfM: one line naming it, exit 2, no occupancy started."""
+    run = tmp_path / "run"
+    assert cli.main(["run", str(SAMPLE / "images"), "--poses", str(SAMPLE / "transforms.json"), "--out", str(run),
+                     "--budget", "100000", "--res", "8", "--triangulate", "off", "--no-evaluate"]) == 2
+    err = capsys.readouterr().err
+    assert "budget 100000 is more than all" in err and "Traceback" not in err
+    assert (run / "sfm" / "stage.json").is_file() and not (run / "occupancy").exists()

@@ -93,18 +93,10 @@ KIND_WORDS = {"walk": "a walk-through", "object": "an object capture"}
 """How a report names each kind of capture (``curate.select.methods.capture_kind``)."""
 
 
-def budget_of_run(text: str, run_dir: str | Path) -> tuple[str, str]:
-    """(the budget that applies to the run's registered photos, how it reads in a report): ``default``
-    by the capture's kind (:func:`by_kind`, the kind from ``RUN/sfm/cameras.json``); any other budget as given,
-    twice."""
-    if parse_budget(text) != DEFAULT:
-        return str(text), str(text)
-    from curate.core.run import load_cameras
-    return budget_of_pool(text, load_cameras(run_dir))
-
-
 def budget_of_pool(text: str, cams: "Cameras") -> tuple[str, str]:
-    """:func:`budget_of_run` for a pool of cameras (``curate select POSES``)."""
+    """(the budget that applies to the pool ``cams``, how it reads in a report): ``default`` by the capture's kind
+    (:func:`by_kind`); any other budget as given, twice. A run's: :attr:`curate.core.plan.Plan.budget`; ``curate
+    select POSES``'s: its cameras'."""
     if parse_budget(text) != DEFAULT:
         return str(text), str(text)
     from curate.select.methods import capture_kind

@@ -33,13 +33,12 @@ if TYPE_CHECKING:
 def wanted(cfg: "RunConfig", run_dir: Path) -> bool:
     """The stage runs: ``--budget auto`` (or ``default`` on an object capture) on an evaluated run with the
     check on. False while the run has no poses to tell the kind of capture by."""
-    from curate.core.budget import AUTO, parse_budget
-    from curate.core.budget import budget_of_run
+    from curate.core.plan import plan_of_run
     if not (cfg.run_evaluation and cfg.budget_check):
         return False
     try:
-        return parse_budget(budget_of_run(cfg.budget, run_dir)[0]) == AUTO
-    except (FileNotFoundError, ValueError):        # default, and no poses yet to tell the kind of capture by
+        return plan_of_run(cfg, run_dir).n_budget is None
+    except (FileNotFoundError, ValueError):        # no poses yet to plan by, or a budget that does not fit
         return False
 
 
@@ -52,6 +51,9 @@ def key(ctx: "RunContext") -> "Keyed":
 def measure(ctx: "RunContext", keyed: "Keyed") -> "Done":
     """Measure the learning curve of the selection's method on the first folds -> ``RUN/budget``."""
     import numpy as np
+    from dataclasses import replace
+
+    from curate.core.plan import plan_of_run
     from curate.core.runner import Done
     from curate.core.stage import current_key, stage_key, write_json_atomic
     from curate.evaluate.check import fit_check
@@ -79,7 +81,8 @@ def measure(ctx: "RunContext", keyed: "Keyed") -> "Done":
 
     def keyed(u, f):   # as the evaluation keys its units: a shared one ('all') is trained once
         return stage_key({"train": ev.training(), "subset": u.subset, "holdout": f.holdout}, [sfm_key])
-    folds, res, _ = run_folds(run_dir, ev, lambda o: curve_fold(ev, cfg.select, cams, grid, law.budget, o), order,
+    chosen_by = replace(cfg.select, method=plan_of_run(cfg, run_dir).method)   # the exported selection's method
+    folds, res, _ = run_folds(run_dir, ev, lambda o: curve_fold(ev, chosen_by, cams, grid, law.budget, o), order,
                               [len(order)], lambda f, r: False, eval_cameras(cams, ev.max_side),
                               image_paths(run_dir, list(cams.names), sfm.records), default_box(cams), keyed, False,
                               executor=executor)

@@ -130,10 +130,14 @@ def in_capture_order(cams, nodes=None) -> bool:
 
 def whole_capture_method(select_cfg, cams):
     """``select_cfg`` with "auto" resolved on the whole capture ``cams``, as the exported selection resolved it
-    (:func:`curate.select.methods.resolve_method`), so that a fold's smaller pool runs the same method."""
+    (:func:`curate.select.methods.resolve_method`), so that a fold's smaller pool runs the same method. In a run the
+    stages pass the method the plan resolved (:mod:`curate.core.plan`), and this returns it as it is; a caller with
+    ``auto`` (a research harness) gets it resolved here, once per fold."""
     from dataclasses import replace
 
     from curate.select.methods import resolve_method
+    if select_cfg.method != "auto":
+        return select_cfg
     return replace(select_cfg, method=resolve_method(cams, select_cfg.method)[0])
 
 

@@ -139,9 +139,11 @@ def evaluate(ctx: "RunContext") -> StageResult:
     look_at, level = looks(len(order), adaptive), look_level(adaptive, len(order))
     sfm_key = current_key(run_dir, "sfm") or ""
     planner = Planner(ev, len(order), level, adaptive)
+    from curate.core.plan import plan_of_run
+    chosen_by = replace(cfg.select, method=plan_of_run(cfg, run_dir).method)   # the exported selection's method
 
     def make_fold(offset: int):
-        return plan_fold(ev, cfg.select, cams, grid, len(exported), offset, ordered,
+        return plan_fold(ev, chosen_by, cams, grid, len(exported), offset, ordered,
                          with_all=order.index(offset) < ALL_FOLDS)
 
     def keyed(u, f):

@@ -3,7 +3,7 @@
 Writes ``occupancy.npz`` (``box_min`` [3], ``box_max`` [3], ``res``, ``points_mask`` [R,R,R] bool
 from the sparse points (all False without points), ``refined_mask`` [R,R,R] bool (the field's
 refinement when one was trained, else the points' mask), ``nodes_mask`` [R,R,R] bool: the surface
-band used as selection nodes) and, when a field is needed (:func:`needs_field`), ``field.pt`` +
+band used as selection nodes) and, when a field is needed (:attr:`curate.core.plan.Plan.field`), ``field.pt`` +
 ``train.json``: a field trained on every registered photo. The stage depends on the capture and
 its options only, never on the evaluation: a run with and without ``--no-evaluate`` gets the same
 grid, hence the same selection. (The hold-out split belongs to the evaluation stage.)
@@ -55,23 +55,6 @@ def train_settings(cfg: "RunConfig") -> dict:
             "max_side": cfg.refine.max_side, "train_seed": ev.train_seed}
 
 
-def needs_field(cfg: "RunConfig", cams, n_points: int) -> tuple[bool, str]:
-    """(train a field to refine the occupancy?, why). Never for the evaluation: the same in both
-    modes. ``refine.field`` 'always': yes; 'auto': only for the paper's energy (it scores the scene's
-    surface) when the sparse points are too few to give it (poses without points). Path spacing and
-    view medoids read only a look-at depth from the occupancy (every node of the box without
-    points); FVS, every n-th frame and random read the poses only."""
-    from curate.select.methods import resolve_method
-    if cfg.refine.field == "always":
-        return True, "--refine field always"
-    method, _ = resolve_method(cams, cfg.select.method)
-    if method != "energy":
-        return False, f"not needed: {method} needs no surface"
-    if n_points < cfg.occupancy.min_points:
-        return True, f"the energy scores the scene's surface, and {n_points} sparse points cannot give it"
-    return False, f"not needed: the energy's surface comes from the {n_points} sparse points"
-
-
 def key(ctx: "RunContext") -> "Keyed":
     """The stage's key (:attr:`curate.core.graph.Stage.key`): :func:`occupancy_parts` of the run."""
     return occupancy_parts(ctx.cfg, ctx.run_dir)
@@ -79,12 +62,14 @@ def key(ctx: "RunContext") -> "Keyed":
 
 def occupancy_parts(cfg: "RunConfig", run_dir: Path, train_on: Sequence[int] | None = None) -> "Keyed":
     """What the occupancy's key holds: its options, the box, the cameras the field trains on (``train_on``), and
-    the field's training settings only when a field is needed (:func:`needs_field`; a grid refined by a field
-    serves a run that needs none). ``state``: (the SfM result, whether a field is needed, why)."""
+    the field's training settings only when the plan needs a field (:attr:`curate.core.plan.Plan.field`; a grid
+    refined by a field serves a run that needs none). ``state``: (the SfM result, whether a field is needed, why)."""
+    from curate.core.plan import plan_of_run
     from curate.core.runner import Keyed
     from curate.sfm.io import load_sfm
     sfm = load_sfm(run_dir)
-    field_needed, why = needs_field(cfg, sfm.cameras, 0 if sfm.points is None else len(sfm.points))
+    plan = plan_of_run(cfg, run_dir)
+    field_needed, why = plan.field, plan.field_why
     parts = {"occupancy": cfg.occupancy, "refine": cfg.refine, "band": cfg.surface_band, "train": train_settings(cfg)}
     if cfg.box is not None:
         parts["box"] = list(cfg.box)
@@ -97,9 +82,9 @@ def occupancy_parts(cfg: "RunConfig", run_dir: Path, train_on: Sequence[int] | N
 
 def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None
               ) -> StageResult:
-    """Field (when needed: :func:`needs_field`) and occupancy grid (points, refined, node band) ->
-    ``RUN/occupancy``, through the stage runner. ``train_on``: the cameras the field trains on (None: every
-    registered one; the research harness passes a hold-out fold's pool)."""
+    """Field (when the plan needs one: :attr:`curate.core.plan.Plan.field`) and occupancy grid (points, refined,
+    node band) -> ``RUN/occupancy``, through the stage runner. ``train_on``: the cameras the field trains on (None:
+    every registered one; the research harness passes a hold-out fold's pool)."""
     from curate.core.graph import BY_NAME, RunContext
     from curate.core.runner import run_keyed
     return run_keyed(BY_NAME["occupancy"], RunContext(cfg, run_dir, force),

@@ -117,6 +117,11 @@ def write_report(ctx: "RunContext") -> StageResult:
             rep["estimate"]["needs_minutes"] = need
     if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
         rep["budget_check"] = sel["budget_auto"]["measured"]
+    try:                                         # what the run decided once its cameras were known
+        from curate.core.plan import plan_of_run
+        rep["plan"] = plan_of_run(cfg, run_dir).to_dict()
+    except ValueError:                           # a budget given since that does not fit: said by its stage
+        pass
     rep["verdict"] = verdict(rep)
     if before.get("html"):          # the page as curate last wrote it: a page the user changed since is kept
         rep["html"] = before["html"]

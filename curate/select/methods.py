@@ -159,14 +159,14 @@ def capture_kind(cams: Cameras) -> tuple[str, float]:
     return ("object" if ang < OBJECT_MAX_ANGLE_DEG else "walk"), ang
 
 
-def resolve_method(cams: Cameras, method: str) -> tuple[str, str]:
+def resolve_method(cams: Cameras, method: str, kind: tuple[str, float] | None = None) -> tuple[str, str]:
     """(method that runs, note) for ``method`` on ``cams``: "auto" becomes ``OBJECT_METHOD``
     on an object capture of at most ``OBJECT_METHOD_MAX_PHOTOS`` photos and ``WALK_METHOD`` on a walk
-    or a larger object capture (:func:`capture_kind`), with a note saying why; any other method runs as
-    given, with no note."""
+    or a larger object capture (:func:`capture_kind`, or ``kind`` when the caller has it), with a note saying why;
+    any other method runs as given, with no note."""
     if method != "auto":
         return method, ""
-    kind, ang = capture_kind(cams)
+    kind, ang = kind if kind is not None else capture_kind(cams)
     large = kind == "object" and len(cams) > OBJECT_METHOD_MAX_PHOTOS
     method = OBJECT_METHOD if kind == "object" and not large else WALK_METHOD
     why = ("the cameras look at one point (an object capture; their median angle to it {:.0f} deg)" if kind == "object"

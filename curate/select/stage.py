@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,26 +29,24 @@ if TYPE_CHECKING:
 def key(ctx: "RunContext") -> "Keyed":
     """The stage's key (:attr:`curate.core.graph.Stage.key`): the selection's options and the budget as the run
     gives it (with ``auto``, the tolerance and the budget the budget stage measured on this capture, when it did).
-    ``state``: (the budget parsed, as the user said it, the measurement or None)."""
-    from curate.core.budget import AUTO, budget_of_run, parse_budget
+    ``state``: (the run's plan, :mod:`curate.core.plan`; the measurement or None)."""
+    from curate.core.plan import plan_of_run
     from curate.core.runner import Keyed
     cfg, run_dir = ctx.cfg, ctx.run_dir
-    text, said = budget_of_run(cfg.budget, run_dir)
-    b = parse_budget(text)
-    parts = {"select": cfg.select, "budget": text}
+    plan = plan_of_run(cfg, run_dir)
+    parts = {"select": cfg.select, "budget": plan.budget}
     measured = None
-    if b == AUTO:
+    if plan.n_budget is None:
         from curate.core.budget import measured_budget
         parts["budget_tolerance"] = cfg.budget_tolerance
         measured = measured_budget(cfg, run_dir)     # how many, measured on this capture (evaluated runs)
         if measured is not None:
             parts["measured"] = measured["budget"]
-    return Keyed(parts, state=(b, said, measured))
+    return Keyed(parts, state=(plan, measured))
 
 
 def choose(ctx: "RunContext", keyed: "Keyed") -> "Done":
     """Selection among every registered photo -> ``RUN/select``."""
-    from curate.core.budget import AUTO, check_fits, resolve_budget
     from curate.core.runner import Done
     from curate.core.stage import write_json_atomic, writing
     from curate.core.run import load_node_grid
@@ -59,31 +58,32 @@ def choose(ctx: "RunContext", keyed: "Keyed") -> "Done":
 
     cfg, run_dir = ctx.cfg, ctx.run_dir
     d = RunPaths(run_dir).select
-    b, said, measured = keyed.state
+    plan, measured = keyed.state
     sfm = load_sfm(run_dir)
     pool = list(range(len(sfm.cameras)))
-    if b != AUTO:
-        budget = resolve_budget(b, len(pool))
-        check_fits(said, budget, len(pool))
+    budget = plan.n_budget          # checked by the plan to leave something to choose; None: auto
     grid = load_node_grid(run_dir)
     pc = sfm.cameras[pool]
     t_vis = time.perf_counter()
     index = build_pair_index(pc, grid.nodes(), cfg.select.energy.bins, device=cfg.select.device, progress=True)
     t_vis = time.perf_counter() - t_vis
     auto = None
-    if b == AUTO:
+    if budget is None:
         from curate.select.auto_budget import choose_for_pool
         auto = choose_for_pool(pc, grid.nodes(), index, cfg.budget_tolerance)
         budget = auto.budget if measured is None else measured["budget"]
         log.info("%s", auto.note)
-    sel = select(pc, grid, budget, cfg.select, progress=True, index=index)
+    if plan.method_note:
+        log.info("select %s", plan.method_note)
+    sel = select(pc, grid, budget, replace(cfg.select, method=plan.method), progress=True, index=index)
+    sel.note = "; ".join(n for n in (plan.method_note, sel.note) if n)
     sel.seconds += t_vis  # the selection's time, visibility included (as when select builds it)
     terms = energy_of_subset(index, sel.chosen, cfg.select.energy, per_node=True)
     with writing(d / "nodes.npz"):
         np.savez_compressed(d / "nodes.npz", nodes=grid.nodes(), angular=terms.angular_per_node,
                             frequency=terms.frequency_per_node, flat=np.flatnonzero(grid.mask.reshape(-1)),
                             res=grid.res, box_min=grid.box_min, box_max=grid.box_max)
-    rec = selection_record(sel, sfm.cameras, pool, [], 0, said, grid)
+    rec = selection_record(sel, sfm.cameras, pool, [], 0, plan.budget_said, grid)
     rec["coverage"] = coverage(index, sel.chosen)
     if auto is not None:   # the law's prediction; with the measurement, what was measured and exported
         rec["budget_auto"] = {**auto.to_dict(), "predicted": auto.budget, "source": "law" if measured is None else
