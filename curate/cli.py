@@ -166,17 +166,6 @@ def _bins(text: str):
     return nt, nph
 
 
-def _budget(text: str) -> str:
-    """argparse type of ``--budget``: the text as given, checked by :func:`curate.core.budget.parse_budget`."""
-    from curate.core.budget import parse_budget
-    try:
-        parse_budget(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--budget wants a count (200), a percentage (15%), 'auto' or 'default', "
-                                         f"got {text!r}")
-    return text.strip()
-
-
 def _size(text: str):
     from curate.simulate.progressive import CameraSpec
     try:
@@ -193,7 +182,7 @@ def _words(text: str) -> tuple[str, ...]:
 
 
 # ---------------------------------------------------------------------- flag -> field tables (paths in RunConfig)
-BUDGET = [Opt("--budget", "budget", parse=_budget, metavar="N|P%|auto|default"),
+BUDGET = [Opt("--budget", "budget", metavar="N|P%|auto|default"),
           Opt("--budget-tolerance", "budget_tolerance", parse=float, metavar="DB")]
 BUDGET_CHECK = [Opt("--no-budget-check", "budget_check", const=False,
                     help="with --budget auto: skip the two extra trainings that measure how many photos this "

@@ -203,9 +203,7 @@ def _run(cfg: RunConfig, photos: str | Path | None, run_dir: str | Path, poses: 
     a ``concurrent.futures.Executor`` for the evaluation's trainings (None: local processes).
     """
     t_start = time.perf_counter()
-    run_dir = Path(run_dir)
-    if photos is not None and run_dir.resolve().is_relative_to(Path(photos).resolve()):
-        raise ValueError(f"the run folder {run_dir} is inside the photo folder {photos}: curate never writes there")
+    run_dir = Path(run_dir)      # claimed by run(): not inside the photos or the poses, none of them inside it
     run_dir.mkdir(parents=True, exist_ok=True)
     if not force:
         check_same_capture(run_dir, photos, poses)

@@ -26,8 +26,17 @@ def test_resolve():
     assert resolve_budget(1.0, 43) == 43
 
 
-def test_cli_refuses_a_bad_budget(capsys):
-    from curate.cli import build_parser
-    with pytest.raises(SystemExit):
-        build_parser().parse_args(["select", "x.json", "--budget", "ten"])
-    assert "--budget wants a count" in capsys.readouterr().err
+@pytest.mark.parametrize("budget,said", [("ten", "a budget is a count (200), a percentage (15%), 'auto' or "
+                                                   "'default', got 'ten'"),
+                                          ("1", "budget 1: choose at least 2 images"), ("0%", "got '0%'")])
+def test_cli_refuses_a_bad_budget_in_one_line_before_any_work(tmp_path, capsys, budget, said):
+    """The budget is checked once, by its option (RunConfig), whatever the command: one line, exit 2, no folder
+    made; whether it fits the registered photos is the plan's (tests/test_house.py)."""
+    from curate.cli import main
+    (tmp_path / "p.json").write_text("{}")
+    for argv in (["select", str(tmp_path / "p.json"), "--out", str(tmp_path / "o1")],
+                 ["run", str(tmp_path), "--out", str(tmp_path / "o2")]):
+        assert main([*argv, "--budget", budget]) == 2
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o1").exists() and not (tmp_path / "o2").exists()

@@ -15,7 +15,7 @@ from curate.core.transforms_json import read_transforms, write_transforms
 from test_ingest import sha_tree
 
 pycolmap = pytest.importorskip("pycolmap")
-from curate.export.subset import ExportConfig, check_unchanged, export_names, export_subset  # noqa: E402
+from curate.export.subset import ExportConfig, export_names, export_subset  # noqa: E402
 from curate.sfm.config import SfmConfig  # noqa: E402
 from curate.sfm.pose_import import import_poses, read_cameras  # noqa: E402
 
@@ -236,15 +236,17 @@ def test_copies_are_checked_against_what_was_written_and_a_users_text_model_stay
     assert all(f"images/{Path(n).name}" in rec["files"] for n in cams.names[:4])
     moved = tmp_path / "moved_photos"
     shutil.move(str(src), str(moved))                                  # the originals are elsewhere now
-    check_unchanged(out)                                               # no edit: nothing said
+    from curate.export.subset import _changed
+    assert _changed(out, json.loads((out / "export.json").read_text())) is None   # no edit: nothing said
     (out / "sparse" / "0" / "points3D.txt").write_text("# the user's\n")
-    shutil.move(str(moved), str(src))
+    shutil.move(str(moved), str(src))                                  # (the photos back: an export reads them)
     export_subset(run, list(cams.names[1:5]), out, mode="copy")
     assert (out / "sparse" / "0" / "points3D.txt").read_text() == "# the user's\n"
     img = out / "images" / Path(cams.names[2]).name
     img.write_bytes(b"edited by the user")
     with pytest.raises(ValueError, match=f"{img.name} was changed since curate exported it"):
-        check_unchanged(out)
+        export_subset(run, list(cams.names[1:5]), out, mode="copy")
+    assert img.read_bytes() == b"edited by the user"
 
 
 @pytest.mark.slow

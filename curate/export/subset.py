@@ -70,7 +70,9 @@ def export_names(originals: list[str], rels: list[str]) -> list[str]:
 
 
 def _photo_roots(run_dir: Path, originals: list[str]) -> list[Path]:
-    """Folders the export must not be written into: the photo folder of the SfM stage, the originals' folders."""
+    """Folders the export must not be written into: the photo folder of the SfM stage, the originals' folders. The
+    run folder's claim (:func:`curate.core.runfolder.claimed`) already keeps it out of the inputs it was given; the
+    folders of the photos a pose file names are known only here."""
     roots = {Path(o).resolve().parent for o in originals}
     rec = read_stage(sfm_dir(run_dir))
     if rec is not None:
@@ -88,20 +90,6 @@ _DIRS = ("images", "images_2", "images_4", "images_8", "sparse/0", "sparse", "di
 _MODEL_FILES = tuple(f"{n}.bin" for n in ("cameras", "images", "points3D", "rigs", "frames"))
 """What an export writes in ``sparse/0`` (binary only: a ``.txt`` model there is the user's, from ``colmap
 model_converter``); all an export of curate 0.2, before ``files`` was recorded, may have written there."""
-
-
-def check_unchanged(out: str | Path) -> None:
-    """``ValueError`` naming the first file of the export in ``out`` that was changed since curate wrote it
-    (:func:`_changed`): clearing the export would delete a user's edit. Nothing without a readable
-    ``export.json``: there is no record to check against (the run folder's export stage then clears
-    ``RUN/export``, an export cut short; :func:`_clear` refuses a folder given as ``--out``)."""
-    out = Path(out)
-    try:
-        changed = _changed(out, json.loads((out / "export.json").read_text()))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return
-    if changed:
-        raise ValueError(_changed_said(changed, out))
 
 
 def _changed_said(path: str, out: Path) -> str:

@@ -48,7 +48,7 @@ from curate.sfm.model import cameras_from_reconstruction, write_model
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
 from curate.sfm.prep import (check_free_space, choose_camera_mode, choose_guided, choose_matcher, input_key,
-                             prepare_photos, refuse_inside, take_counts, takes_not_joined, takes_of, too_few_message,
+                             prepare_photos, take_counts, takes_not_joined, takes_of, too_few_message,
                              write_outputs)
 from curate.sfm.reconstruction import map_capture, model_sizes
 
@@ -111,7 +111,6 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
 
     photos, run_dir = Path(photos).resolve(), Path(run_dir).resolve()
     out = _sfm_dir(run_dir)
-    refuse_inside(out, photos)
     key = input_key(cfg, photos)
     if begin_stage(out, key, force, owns=SFM.owns, spare=SFM.spare):
         logger.info("sfm: up to date (%s), skipped", out)

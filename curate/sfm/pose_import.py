@@ -15,7 +15,7 @@ from curate.sfm.config import SfmConfig
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.model import (cameras_from_reconstruction, pycolmap_reconstruction, reconstruction_from_cameras,
                                write_model)
-from curate.sfm.prep import refuse_inside, write_outputs
+from curate.sfm.prep import write_outputs
 from curate.sfm.subset_model import write_subset_model
 from curate.sfm.triangulation import triangulate_known_poses
 
@@ -201,7 +201,6 @@ def import_in_claimed(cfg: SfmConfig, source: str | Path, run_dir: str | Path, p
     out = _sfm_dir(run_dir)
     if photos is not None:
         _check_photo_folder(photos, source)
-        refuse_inside(out, photos)
     poses = read_poses(source, photos)
     idx, originals, left, match = _pose_photos(cfg, poses, source, photos)
     cams = poses.cameras[idx]

@@ -25,12 +25,6 @@ _NOT_IN_KEY = ("num_threads", "progress", "on_split", "triangulate")
 """SfmConfig fields that do not change what SfM computes (``triangulate`` is for imports only)."""
 
 
-def refuse_inside(out: Path, photos: Path) -> None:
-    """Refuse a run folder inside the photo folder (the input folder is never written)."""
-    if out == photos or photos in out.parents:
-        raise ValueError(f"run folder {out} is inside the photo folder {photos}: the photo folder is never written")
-
-
 def input_key(cfg: SfmConfig, photos: Path) -> str:
     """Stage key: config (execution-only fields excluded) + names and content of every file of ``photos``."""
     root = source_root(photos)
