@@ -58,9 +58,13 @@ class RunConfig:
     """How the chosen subset is exported (``RUN/export``)."""
 
     def __post_init__(self) -> None:
-        b = parse_budget(str(self.budget))  # ValueError on a malformed budget
+        try:                                # the one check of the budget's form (its fit: the run's plan)
+            b = parse_budget(str(self.budget))
+        except ValueError:
+            raise ValueError(f"--budget wants a count (200), a percentage (15%), 'auto' or 'default', "
+                             f"got {self.budget!r}") from None
         if isinstance(b, int) and b < 2:
-            raise ValueError(f"budget {self.budget}: choose at least 2 images")
+            raise ValueError(f"--budget {self.budget}: choose at least 2 images")
         if not (math.isfinite(self.budget_tolerance) and self.budget_tolerance > 0):
             raise ValueError(f"--budget-tolerance must be > 0 dB, got {self.budget_tolerance}")
         if self.surface_band < 0:

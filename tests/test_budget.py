@@ -26,9 +26,9 @@ def test_resolve():
     assert resolve_budget(1.0, 43) == 43
 
 
-@pytest.mark.parametrize("budget,said", [("ten", "a budget is a count (200), a percentage (15%), 'auto' or "
+@pytest.mark.parametrize("budget,said", [("ten", "--budget wants a count (200), a percentage (15%), 'auto' or "
                                                    "'default', got 'ten'"),
-                                          ("1", "budget 1: choose at least 2 images"), ("0%", "got '0%'")])
+                                          ("1", "--budget 1: choose at least 2 images"), ("0%", "got '0%'")])
 def test_cli_refuses_a_bad_budget_in_one_line_before_any_work(tmp_path, capsys, budget, said):
     """The budget is checked once, by its option (RunConfig), whatever the command: one line, exit 2, no folder
     made; whether it fits the registered photos is the plan's (tests/test_house.py)."""
