@@ -36,7 +36,7 @@ class RunConfig:
     evaluation's split (half and twice its own) to measure how the loss falls on this capture, and
     advise a budget from that beside the prediction (two more trainings).
 
-    curate.evaluate.check fits the measured losses; docs/evaluation.md, "How many photos"."""
+    curate.evaluate.check fits the measured losses; docs/evaluation.md#how-many."""
     sfm: SfmConfig = field(default_factory=SfmConfig)
     """SfM stage options."""
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)

@@ -27,7 +27,7 @@ DEFAULT = "default"
 DEFAULT_BY_KIND = {"walk": "15%", "object": AUTO}
 """What ``default`` means for each kind of capture (``curate.select.methods.capture_kind``): a walk-through
 keeps 15% of its frames; an object capture keeps what ``auto`` advises, most of a capture of 40-60
-photos (measured on the three real object sets: 34-48 of 40-57, docs/evaluation.md, "How many photos"),
+photos (measured on the three real object sets: 34-48 of 40-57, docs/evaluation.md#how-many),
 where 15% kept 10 of 65 skull photos."""
 
 

@@ -8,7 +8,7 @@ the law never sees). The budget stage (:mod:`curate.evaluate.budget`) measures t
 and ``alpha`` this capture's (least squares in log, points losing at least :data:`MIN_LOSS`), and advises the
 fewest photos of the whole capture whose predicted loss is within the tolerance, on the whole capture's
 spacing curve. Its range: the same with ``alpha`` from each measured point alone (how far the points disagree
-with the law's shape). Validation on real captures: docs/evaluation.md, "How many photos".
+with the law's shape). Validation on real captures: docs/evaluation.md#how-many.
 """
 
 from __future__ import annotations

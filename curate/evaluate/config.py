@@ -20,8 +20,8 @@ def evaluation_field() -> FieldConfig:
     """The evaluation's field: :class:`FieldConfig` with 2,048 rays an iteration (was 4,096), 48 samples a ray in
     the box and 24 outside at the finest grid (was 64 and 32), and no transmittance pre-pass (``trans_thresh`` 0):
     2.2 times fewer CPU seconds a training on the office walk, its per-photo differences correlated 0.98-1.00
-    with the field's before on four real captures (docs/evaluation.md, "2,048 rays, 48 and 24 samples, no
-    pre-pass"). The occupancy's refining field keeps :class:`FieldConfig`'s own settings."""
+    with the field's before on four real captures (docs/evaluation.md#cheaper-field-2048). The occupancy's refining
+    field keeps :class:`FieldConfig`'s own settings."""
     return FieldConfig(batch_rays=2048, n_inner=48, n_outer=24, trans_thresh=0.0)
 
 
@@ -48,7 +48,7 @@ class EvalConfig:
     """Training and test images are resized so that their longer side is at most this (pixels).
 
     160 px and 400 iterations: the cheapest field measured whose per-photo differences agree with 240 px and
-    800 iterations (correlation 0.93-0.99 on real captures; docs/evaluation.md, "A cheaper field")."""
+    800 iterations (correlation 0.93-0.99 on real captures; docs/evaluation.md#cheaper-field)."""
     iters: int = 400
     """Training iterations per subset (the same for every subset)."""
     time_budget_s: float | None = None

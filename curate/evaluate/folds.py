@@ -36,14 +36,13 @@ independent, above every design effect measured on real captures (0.03 to 1.0 ov
 the 14 folds of the office walk: folds interleave along the capture and agree more closely than independent views
 would), so the prior is cautious there; ``nu0 = 8``: the most weight at which the null simulation, with fold
 effects larger than measured (design effects up to 2), still calls a difference that is not there in at most 5%
-of captures (``research/null_sim.py``, ``research/interval_study.py``; docs/evaluation.md, "Intervals from two
-folds")."""
+of captures (``research/null_sim.py``, ``research/interval_study.py``; docs/evaluation.md#two-folds)."""
 
 LOOKS = 3
 """How often the pooled folds are looked at, at most, to decide whether to stop: after :data:`FIRST_LOOK` folds,
 at the fold count the first look plans (:func:`plan_rivals`), and at the end. Each look uses a ``1 - 0.05 / LOOKS``
 interval, so that stopping at a decided look keeps each verdict's error at 5% (Bonferroni over the looks;
-docs/evaluation.md, "Folds until decided")."""
+docs/evaluation.md#folds-until-decided)."""
 
 FIRST_LOOK = 2
 """Folds after which the evaluation first decides whether to stop (and plans what to train next). Folds

@@ -21,7 +21,7 @@ class FieldConfig:
     fraction of the run's iterations: at the default 800 iterations the last level (128) is never
     reached and the field trains at 64 then 96. Kept so on purpose: every figure of the evaluation
     rests on it, and reaching all three levels at 800 iterations (``(200, 600)``) gained +0.24 dB on the
-    sample walk for 27% more training time (docs/speed.md, "The field's schedule")."""
+    sample walk for 27% more training time (docs/speed.md#field-schedule)."""
     sh_degree: int = 0
     """Spherical-harmonic degree of the view-dependent colour (0: diffuse, 1 or 2). Each degree
     multiplies the colour lookups' cost (3 * (deg + 1)^2 channels)."""

@@ -5,7 +5,7 @@ gsplat's ``rasterization`` and ``DefaultStrategy`` densification, as its ``simpl
 start from the run's sparse points (scales from the mean distance to the 3 nearest points, opacity 0.1, colour
 from the point's; without points, random in the scene box), one photo a step, loss ``(1 - w) L1 + w (1 - SSIM)``,
 spherical harmonics one degree more every 1,000 steps, simple_trainer's learning rates. Measured against curate's
-field on three real captures: docs/evaluation.md, "Does the ranking hold for 3D Gaussian splatting?".
+field on three real captures: docs/evaluation.md#gaussian-splatting.
 
 CUDA only, and gsplat is an optional dependency (``pip install 'curate[gsplat]'``), never downloaded at run time:
 :func:`unavailable` says why it cannot run here, in one line. Nothing here is imported unless asked for.

@@ -180,7 +180,7 @@ def verdict(rep: dict) -> dict:
 LAW_ERROR = {"walk": "on real walks it advised from a quarter (a phone video of a living room) to 1.3 times (the "
                      "office) what was needed",
              "object": "on three real objects of 40-60 photos it advised 1.0-1.2 times what was needed"}
-"""The law's measured error on real captures, by kind (docs/evaluation.md, "How many photos")."""
+"""The law's measured error on real captures, by kind (docs/evaluation.md#how-many)."""
 
 
 def how_many_said(auto: dict | None, k: int, legacy_check: dict | None = None) -> str | None:

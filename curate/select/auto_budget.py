@@ -10,7 +10,7 @@ with ``kind`` the capture's kind (walk-through or object capture:
 :func:`curate.select.methods.capture_kind`). The constants are calibrated on real captures by
 ``research/budget_real.py`` (the product's default selection and evaluation settings, learning
 curves at five or six budgets, two or three hold-out folds) and ``research/budget_real_fit.py``
-(docs/evidence/budget_real.json; docs/evaluation.md, "How many photos"): alpha per capture is
+(docs/evidence/budget_real.json; docs/evaluation.md#how-many): alpha per capture is
 fitted with the power p of ``research/budget_fit.py``'s fit on rendered walks; the product takes
 the *highest* alpha seen for the kind (an advice short of what a capture needs costs quality, one
 beyond it a little training time) and the lowest-to-highest spread as the advice's range. Objects:

@@ -25,7 +25,7 @@ given); poses that come without 3D points get points triangulated from the photo
 held fixed (:mod:`curate.sfm.triangulation`: the same SIFT extraction and matching, then COLMAP's
 point triangulator).
 
-What ``RUN/sfm/`` holds, file by file: docs/architecture.md, "RUN/sfm in detail".
+What ``RUN/sfm/`` holds, file by file: docs/architecture.md#run-sfm.
 """
 
 from __future__ import annotations

@@ -140,8 +140,8 @@ class SfmConfig:
     frames few matches.
 
     office.mp4 with a second cut out at a turn: one model of 361 of 361 frames with it, models of 205 (placed 32
-    deg off) and 166 without; at half the frame rate 171 of 187 in one model against 83 (docs/sfm.md, "The same
-    input, the same model"). Before 0.3 a boolean: true is on, false off."""
+    deg off) and 166 without; at half the frame rate 171 of 187 in one model against 83 (docs/sfm.md#same-model).
+    Before 0.3 a boolean: true is on, false off."""
     # --- mapping
     mapper: Mapper = "auto"
     """How matches become cameras: incremental (COLMAP's), global (COLMAP's global mapper, formerly GLOMAP), or auto:
@@ -159,8 +159,8 @@ class SfmConfig:
     direct_ba_max_fill: float = 270.0
     """Pools past 1,000 photos: a global bundle adjustment of more than 1,000 photos solves directly (sparse
     Cholesky) while the factor's fill stays under this many nonzeros per photo (a walk that covers new ground), else
-    iteratively, Ceres' choice past 1,000 (a room seen round and round); 0: Ceres' choice always (docs/sfm.md, "Which
-    solver ...")."""
+    iteratively, Ceres' choice past 1,000 (a room seen round and round); 0: Ceres' choice always
+    (docs/sfm.md#large-pools)."""
     min_registered_fraction: float = 0.95
     """'auto': the share of the kept photos the incremental model must hold."""
     min_global_gain: float = 0.05

@@ -212,7 +212,7 @@ def choose_matcher(cfg: SfmConfig, kept: list[PhotoRecord]) -> str:
     # Video frames, or numbered photos: sequential (several videos: each along itself, and with the
     # others by cross-take retrieval). A video with photos stays exhaustive: matched sequentially, the
     # office video with every 5th office photo of the other half split and left all the photos out
-    # (docs/sfm.md, "Several takes of one place"), where exhaustive matching kept 30 of 38.
+    # (docs/sfm.md#takes), where exhaustive matching kept 30 of 38.
     if in_order(kept):
         return "sequential"
     if any(r.extra.get("video") for r in kept):
