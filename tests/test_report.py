@@ -273,3 +273,17 @@ def test_the_first_screen_names_the_budget_the_user_gave(tmp_path, given, says):
            "budget_auto": {"tolerance_db": 0.5, "budget": 3, "pool": 5, "kind": "object"}}
     html = _verdict(SimpleNamespace(rep={"selection": sel, "n_registered": 5}, sel=sel, dir=tmp_path))
     assert says in html
+
+
+def test_the_method_table_shows_whole_counts_and_no_empty_spread():
+    """The folds' mean count of photos is a count when every fold trained as many (28, not 28.0), one decimal
+    otherwise; a spread that was not measured (random's SSIM over one draw) is left out, not shown as '± —'."""
+    from types import SimpleNamespace
+    from curate.report.run_report import _method_table
+    run = SimpleNamespace(rep={"estimate": {"budget": 28, "n_pool": 200, "n_holdout": 14, "n_folds": 1}}, paired={},
+                          methods={"selection": {"psnr": 20.0, "ssim": 0.5, "n_train": 28.0},
+                                   "random": {"psnr": 19.0, "ssim": 0.4, "psnr_std": 0.2, "n_train": 27.5},
+                                   "all": {"psnr": 21.0, "ssim": 0.6, "n_train": 186.0, "n_views": 14}})
+    html = _method_table(run)
+    assert "<td>28</td>" in html and "<td>27.5</td>" in html and "<td>186</td>" in html and "28.0" not in html
+    assert "19.00 ± 0.20" in html and "± —" not in html

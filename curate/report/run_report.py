@@ -275,14 +275,15 @@ def _method_table(run: _Run) -> str:
     rows = []
     for k in [k for k in METHOD_ORDER if k in m] + sorted(set(m) - set(METHOD_ORDER)):
         v = m[k]
-        if k == "random":
-            psnr = f"{fmt_num(v.get('psnr'))} ± {fmt_num(v.get('psnr_std'))}"
-            ssim = f"{fmt_num(v.get('ssim'), 3)} ± {fmt_num(v.get('ssim_std'), 3)}"
-        else:
-            psnr, ssim = fmt_num(v.get("psnr")), fmt_num(v.get("ssim"), 3)
+        psnr, ssim = fmt_num(v.get("psnr")), fmt_num(v.get("ssim"), 3)
+        if k == "random":                 # the spread over draws, where it was measured
+            psnr += f" ± {fmt_num(v['psnr_std'])}" if v.get("psnr_std") is not None else ""
+            ssim += f" ± {fmt_num(v['ssim_std'], 3)}" if v.get("ssim_std") is not None else ""
+        n = v.get("n_train")              # the folds' mean: a whole count when every fold trained as many
+        n = "—" if n is None else (f"{n:.0f}" if float(n).is_integer() else f"{n:.1f}")
         cls = ' class="hl"' if k == "selection" else ""
         rows.append(f'<tr{cls}><td class="l">{esc(_unit_label(run, k))}</td><td>{psnr}</td><td>{ssim}</td>'
-                    f'<td>{esc(v.get("n_train", "—"))}</td></tr>')
+                    f'<td>{esc(n)}</td></tr>')
     est = run.rep.get("estimate") or {}
     nseeds = len((m.get("random") or {}).get("seeds") or [])
     draws = (m.get("random") or {}).get("units") or nseeds
