@@ -13,11 +13,17 @@ from curate.core.graph import BY_NAME, NAMES, STAGES
 
 
 def test_every_stage_runs_through_one_signature_and_names_stages_before_it():
-    """Each stage's function takes one RunContext and returns a StageResult; what it reads and needs are
-    stages that come before it, so the pipeline's order computes every input first."""
+    """A keyed stage's key function takes the RunContext and its computation the RunContext and the key (the
+    runner calls both); a stage that keys itself takes one RunContext; what a stage reads, needs and is keyed on
+    are stages that come before it, so the pipeline's order computes every input first."""
     for i, s in enumerate(STAGES):
         fn = graph._function(s.runs)
-        assert list(inspect.signature(fn).parameters) == ["ctx"], s.name
+        if s.key is not None:
+            assert list(inspect.signature(graph._function(s.key)).parameters) == ["ctx"], s.name
+            assert list(inspect.signature(fn).parameters) == ["ctx", "keyed"], s.name
+            assert set(s.keyed_on) <= set(NAMES[:i]), s.name
+        else:
+            assert list(inspect.signature(fn).parameters) == ["ctx"], s.name
         assert set(s.reads) | set(s.needs) <= set(NAMES[:i]), s.name
         if s.when is not None:
             assert list(inspect.signature(graph._function(s.when)).parameters) == ["cfg", "run_dir"], s.name
