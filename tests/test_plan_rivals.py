@@ -157,3 +157,34 @@ def test_a_rival_is_trained_to_its_own_need_not_to_the_largest(tmp_path):
     assert in_fold["random"] == list(range(need_r)) and planner.decided_at["random"] == need_r
     assert in_fold["fvs"] == in_fold["selection"] == list(range(len(folds)))
     assert 3 in planner.looked                               # random subsets' own look
+
+
+def _null_ish(seed: int, mean: float):
+    """14 folds of a 373-photo walk where the selection is ``mean`` dB above random subsets, per-photo sd 2.5."""
+    rng = np.random.default_rng(seed)
+    folds, res = [], {}
+    for o in fold_order(14):
+        hold = list(range(o, N_PHOTOS, 14))
+        d = rng.normal(mean, 2.5, len(hold))
+        units = [Unit(f"f{o:02d}_{m}", m, None, [0, 1], o) for m in ("selection", "random")]
+        res[f"f{o:02d}_selection"] = {"n_train": 2, "psnr": 0, "ssim": 0, "per_view": [
+            {"name": f"{c}", "psnr": 20 + x, "ssim": 0.5} for c, x in zip(hold, d)]}
+        res[f"f{o:02d}_random"] = {"n_train": 2, "psnr": 0, "ssim": 0, "per_view": [
+            {"name": f"{c}", "psnr": 20.0, "ssim": 0.5} for c in hold]}
+        folds.append(Fold(o, hold, [], 2, "path", [0, 1], units))
+    return folds, res
+
+
+def test_a_later_evaluation_trains_to_the_folds_the_earlier_verdict_asked_for():
+    """Undecided at its second look (7 folds), random subsets are projected to need 9: their last look is there.
+    When an earlier evaluation of the same selection said they need 12 (``curate evaluate RUN --eval-minutes M``
+    after a verdict that said so), the last look is at 12 instead, so the command adds the folds it promised."""
+    from curate.evaluate.stage import Planner
+    folds, res = _null_ish(0, 0.35)
+    for extend, last in (({}, 9), ({"random": 12}, 12)):
+        pl = Planner(EvalConfig(minutes=60), 14, look_level(True, 14), True, say=lambda m: None)
+        pl.extend = extend
+        first = pl.look(folds[:2], res)
+        assert not first.stop and first.until["random"] == 7
+        second = pl.look(folds[:7], res)
+        assert not second.stop and second.until["random"] == second.until["selection"] == last
