@@ -12,6 +12,8 @@ field before (160 px, 400 iterations, 4,096 rays: its trainings give the CPU sec
   ``--new`` sibling whose trainings are all there (reused, so it runs in seconds): the folds and trainings it
   uses until decided, each costing the CPU seconds its unit recorded. Its time limit is not replayed (reused
   trainings cost no time): ``--minutes`` is checked against the CPU seconds it used over ``--cores``.
+  The trainings counted are those ``summary.json`` lists per fold: since issue 59's item 3 only the ones trained
+  or reused (before, a fold listed the trainings its plan left out too, and this count included them).
 
 Printed per capture: folds, trainings and CPU seconds until the verdict, before and after, and each verdict.
 One JSON line last.

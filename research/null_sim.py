@@ -15,7 +15,8 @@ then centred on the capture's mean so that the true difference is 0. The procedu
 (:class:`curate.evaluate.stage.Planner`'s looks with :func:`curate.core.stats.folds_moderated` at
 :data:`curate.evaluate.folds.KAPPA_PRIOR`): a look after 2 folds; undecided, the folds the projection
 (:func:`curate.evaluate.folds.folds_to_decide`) says decide it, if the time holds them (``--time-folds``: the
-folds the minutes given hold); a last look at the end of the time. A *false call* is "ahead" or "behind" at any
+folds the minutes given hold); undecided there, a last look at the folds the projection then asks for, if the time
+holds them (until issue 59's item 3, at the end of the time). A *false call* is "ahead" or "behind" at any
 look. Printed per setting: the design effect the setting has (measured over the simulations), the false-call rate
 and its 95% binomial upper bound; one JSON line last.
 
@@ -66,7 +67,7 @@ def procedure(diffs, margin: float, time_folds: int, prior, level: float) -> tup
         g = folds_to_decide(p, margin, len(diffs), prior)
         if g is None or g > F_max:
             return d, F              # the time given would not decide it: stop, say what it needs
-        F = F_max if looks == LOOKS - 1 else g
+        F = g                        # each look at the folds the projection asks for (issue 59, item 3)
 
 
 def procedure_old(diffs, margin: float, time_folds: int) -> tuple[str, int]:

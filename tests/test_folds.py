@@ -77,8 +77,9 @@ def _null_capture(rng, photos, sigma, smooth, rho, tau):
 
 
 def _procedure(diffs, time_folds):
-    """The evaluation's looks (curate.evaluate.stage.Planner): after FIRST_LOOK folds; undecided, at the folds the
-    projection says decide it, if the time holds them; then at the end of the time."""
+    """The evaluation's looks of one rival (curate.evaluate.stage.Planner): after FIRST_LOOK folds; undecided, at
+    the folds the projection says decide it, if the time holds them; undecided there, once more at the folds the
+    projection then says (or the end of the time)."""
     from curate.evaluate.folds import FIRST_LOOK, KAPPA_PRIOR, folds_to_decide
     level = look_level(True)
     F_max = min(len(diffs), time_folds)
@@ -92,7 +93,7 @@ def _procedure(diffs, time_folds):
         g = folds_to_decide(p, 0.3, len(diffs))
         if g is None or g > F_max:
             return d
-        F = F_max if n_looks == LOOKS - 1 else g
+        F = g
 
 
 @pytest.mark.parametrize("sigma,smooth,rho,tau", [(2.8, 0.0, 0.0, 0.6), (1.5, 2.5, 0.9, 0.3)])
@@ -345,7 +346,8 @@ def test_the_planner_stops_when_every_rival_is_decided_and_says_the_cost_first(t
     rec = planner.record()["looks"][0]
     assert rec["folds"] == 2 and rec["decided"] == {"random": "ahead", "fvs": "level"}
     planner.trained(12.0, 2)
-    assert "a training takes 12 s here (2 at a time)" in said[0]
+    assert "a training takes 12 s here (2 at a time)" in said[-1]
+    assert "random subsets: ahead, decided after 2 folds" in said[0]
 
 
 def test_the_planner_trains_on_what_the_time_decides_and_stops_when_nothing_is_left(tmp_path):
@@ -379,11 +381,14 @@ def test_the_planner_trains_on_what_the_time_decides_and_stops_when_nothing_is_l
         lk = planner.look(folds, res)
         rec = planner.record()["looks"][0]
         assert rec["needs_folds"]["random"] is not None and rec["needs_folds"]["random"] > 2
-        assert lk.stop == stops and "random subsets needs about" in said[-1]
+        assert lk.stop == stops and "random subsets:" in said[-1]
         if not stops:
             assert lk.next_look == rec["needs_folds"]["random"] and "random" not in lk.skip
+            assert lk.until == {"random": rec["needs_folds"]["random"], "fvs": 2, "stride": 2,
+                                "selection": rec["needs_folds"]["random"]}
+            assert f"random subsets: {rec['needs_folds']['random'] - 2} more folds, ~" in said[-1]
         else:
-            assert lk.why == "needs time" and "more than the time left" in said[-1]
+            assert lk.why == "needs time" and "beyond --eval-minutes: not pursued" in said[-1]
 
 
 def test_an_undecided_verdict_says_how_many_more_minutes_here_would_decide_it():

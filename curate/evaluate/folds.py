@@ -39,10 +39,11 @@ effects larger than measured (design effects up to 2), still calls a difference 
 of captures (``research/null_sim.py``, ``research/interval_study.py``; docs/evaluation.md#two-folds)."""
 
 LOOKS = 3
-"""How often the pooled folds are looked at, at most, to decide whether to stop: after :data:`FIRST_LOOK` folds,
-at the fold count the first look plans (:func:`plan_rivals`), and at the end. Each look uses a ``1 - 0.05 / LOOKS``
-interval, so that stopping at a decided look keeps each verdict's error at 5% (Bonferroni over the looks;
-docs/evaluation.md#folds-until-decided)."""
+"""How often each rival's comparison is looked at, at most: after :data:`FIRST_LOOK` folds, at the fold count that
+look projects it to need (:func:`plan_rivals`), and at the fold count the second look projects (or when the time
+or the folds run out first). Each rival has its own looks, on the folds where it and the selection were both
+trained. Each look uses a ``1 - 0.05 / LOOKS`` interval, so that stopping at a decided look keeps each verdict's
+error at 5% (Bonferroni over the looks; docs/evaluation.md#folds-until-decided)."""
 
 FIRST_LOOK = 2
 """Folds after which the evaluation first decides whether to stop (and plans what to train next). Folds
@@ -287,20 +288,28 @@ def folds_to_decide(p: dict, margin: float, max_folds: int, prior: tuple = KAPPA
 
 
 def plan_rivals(needs: dict[str, int | None], n_folds: int, fold_units: int, unit_s: float, workers: int,
-                seconds_left: float) -> tuple[list[str], int | None]:
-    """Which undecided rivals to train on, and at how many folds to look next: the rivals that need the fewest
-    folds first (``needs``: :func:`folds_to_decide`), each taken while every fold up to the last it needs fits in
-    ``seconds_left`` (a fold trains the selection and each rival taken that still needs it, ``fold_units`` being
-    the trainings per rival draw (random subsets: ``--random-seeds``; the others one), ``unit_s`` seconds a
-    training, ``workers`` at a time). Returns (the rivals, the fold count of the next look; None: none fits)."""
+                seconds_left: float, committed: dict[str, int] | None = None) -> tuple[list[str], int | None]:
+    """Which undecided rivals to train on, each only to the folds its own comparison is projected to need: the
+    rivals that need the fewest folds first (``needs``: :func:`folds_to_decide`), each taken while its trainings
+    fit in ``seconds_left`` beside those already taken (a fold trains the selection, if any rival still needs it,
+    and each rival that still needs it: ``fold_units`` trainings for random subsets (``--random-seeds``), one for
+    the others; ``unit_s`` seconds a training, ``workers`` at a time). ``committed``: rivals already planned (to
+    the fold count given) by an earlier look; their trainings are spent first, and the selection's trainings in
+    those folds are shared. A rival whose own need does not fit is not taken, so a comparison that needs many
+    folds does not eat the time that would decide the others. Returns (the rivals, the last fold count any of
+    them needs; None: none fits)."""
+    committed = dict(committed or {})
+
+    def cost(plan: dict[str, int]) -> float:
+        end = max(plan.values(), default=n_folds)
+        return sum((1 if any(g <= x for x in plan.values()) else 0)
+                   + sum(fold_units if r == "random" else 1 for r, x in plan.items() if g <= x)
+                   for g in range(n_folds + 1, end + 1)) * unit_s / max(workers, 1)
     taken: list[str] = []
     for r in sorted((r for r in needs if needs[r] is not None), key=lambda r: needs[r]):
-        trial = taken + [r]
-        end = max(needs[x] for x in trial)
-        cost = sum(1 + sum(fold_units if x == "random" else 1 for x in trial if needs[x] >= g)
-                   for g in range(n_folds + 1, end + 1)) * unit_s / max(workers, 1)
-        if cost <= seconds_left:
-            taken = trial
+        trial = {**committed, **{x: needs[x] for x in taken + [r]}}
+        if cost(trial) <= seconds_left:
+            taken.append(r)
     return taken, (max(needs[x] for x in taken) if taken else None)
 
 

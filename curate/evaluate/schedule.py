@@ -17,7 +17,7 @@ import logging
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from pathlib import Path
 from typing import Callable
@@ -52,6 +52,12 @@ class Look:
     time); units of theirs not yet handed out are dropped, and a fold is finished without them."""
     next_look: int | None = None
     """The finished-fold count of the next look (None: at the end); no fold beyond it is started before it."""
+    until: dict = field(default_factory=dict)
+    """{unit method: the folds, counted from the first in the order trained, in which it is trained}: its units of
+    later folds are not trained (each rival only as far as its own comparison is projected to need; the selection
+    as far as any rival). A method not named keeps its earlier limit (none: every fold)."""
+    also: tuple = ()
+    """More finished-fold counts at which to look (each rival's own planned look), besides ``next_look``."""
     why: str = "decided"
     """Why it stopped, when ``stop``: 'decided', or 'needs time' (what is undecided would not be decided within
     the time given)."""
@@ -75,8 +81,9 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     ``on_trained(seconds, workers)``: called as each training of this call finishes, with its wall seconds and
     the trainings run at a time (what a fold costs on this machine). ``on_fold(folds, results)``: called as each
     fold finishes that is not a look (to forecast, not to decide).
-    Returns (the finished folds in order, {unit key: metrics}, why it stopped: 'decided', 'needs time', 'all
-    folds' or 'time'). When it stopped at a look, the folds are those of that look.
+    Returns (the finished folds in order, each listing the units it trained or reused (those a look closed left
+    out), {unit key: metrics}, why it stopped: 'decided', 'needs time', 'all folds' or 'time'). When it stopped at
+    a look, the folds are those of that look.
     """
     from curate.core.pools import end_pool
     from curate.core.runfolder import held_token
@@ -106,6 +113,7 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     why_stopped = "decided"
     skip: set = set()            # unit methods not to train any more
     dropped: set = set()         # unit keys not trained because of it
+    until: dict[str, int] = {}   # unit method -> the folds (from the first) it is trained in
     looks_at = sorted(set(look_at))
 
     if executor is not None:
@@ -113,14 +121,20 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
     else:
         workers, ex = 1, None
 
+    def closed(u, pos: int) -> bool:
+        """Unit ``u`` of the ``pos``-th fold (from 0) is not to be trained: its method is closed, or past its
+        folds."""
+        return u.method in skip or pos >= until.get(u.method, len(order))
+
     def start_fold() -> None:
         nonlocal workers, ex
         f = make_fold(order[len(started)])
+        pos = len(started)
         started.append(f)
         save_ground_truth(run_dir, cams, paths, f.holdout)
         for u in f.units:
             k = unit_key(u, f)
-            if u.method in skip and u.key not in results:
+            if closed(u, pos) and u.key not in results:
                 dropped.add(u.key)
                 continue
             if is_fresh(ev_dir / u.key, k):
@@ -150,12 +164,14 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
         pending = [n for n in looks_at if n > len(finished)]
         if pending and len(started) >= pending[0] and adaptive:
             return False                 # no fold beyond a look not yet made
+        if until and len(started) >= max(until.values()):
+            return False                 # no method is trained in a fold this far
         if len(started) < MIN_FOLDS or not adaptive:
             return True
         if not durations:
             return True
         per = float(np.median(durations)) / max(workers, 1)
-        nxt = sum(1 for u in started[-1].units if u.method not in skip)
+        nxt = sum(1 for u in started[-1].units if not closed(u, len(started)))
         left = len(queue) + len(inflight) + nxt
         return time.monotonic() - t0 + left * per <= budget_s
 
@@ -166,7 +182,7 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
         """Copy the duplicates whose source is done; move finished folds to ``finished``; look."""
         nonlocal decided_now, n_decided, why_stopped, looks_at
         for u, src in list(dups):
-            if u.method in skip and src not in results:
+            if closed(u, order.index(u.fold) if u.fold in order else 0) and src not in results:
                 dups.remove((u, src))
                 dropped.add(u.key)
             elif src in results:
@@ -184,11 +200,13 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
                     queue.clear()
                     break
                 skip.update(lk.skip)
-                for item in [q for q in queue if q[0].method in skip]:
+                until.update({m: int(n) for m, n in lk.until.items()})
+                for item in [q for q in queue if closed(q[0], started.index(q[1]))]:
                     queue.remove(item)
                     dropped.add(item[0].key)
-                if lk.next_look is not None and lk.next_look > len(finished):
-                    looks_at = sorted(set(looks_at) | {int(lk.next_look)})
+                for n in (lk.next_look, *lk.also):
+                    if n is not None and n > len(finished):
+                        looks_at = sorted(set(looks_at) | {int(n)})
 
     def iters_done() -> int:
         n = 0
@@ -264,6 +282,8 @@ def run_folds(run_dir: Path, cfg, make_fold: Callable, order: list[int], look_at
         end_pool(e)
     owned.clear()
     resolve()
+    for f in finished:         # a fold lists the units it trained (or reused), not those its plan closed
+        f.units = [u for u in f.units if u.key not in dropped]
     if decided_now:   # the verdict is the look's: a fold the trainings still running completed is kept for later
         return finished[:n_decided], results, why_stopped
     return finished, results, "all folds" if len(finished) == len(order) else "time"

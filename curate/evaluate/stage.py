@@ -123,6 +123,7 @@ def evaluate(ctx: "RunContext") -> StageResult:
     elif evaluation_current(run_dir, key):
         return StageResult("evaluate", d, False, time.perf_counter() - t0)
     ev_run = resolved(ev)            # the device, chosen once for every training
+    earlier = earlier_needs(run_dir)
     evaluation_folder(run_dir)
     (d / "stage.json").unlink(missing_ok=True)   # an earlier evaluation's record: this one replaces it
     sel = read_selection(run_dir)
@@ -139,6 +140,7 @@ def evaluate(ctx: "RunContext") -> StageResult:
     look_at, level = looks(len(order), adaptive), look_level(adaptive, len(order))
     sfm_key = current_key(run_dir, "sfm") or ""
     planner = Planner(ev, len(order), level, adaptive)
+    planner.extend = earlier
     from curate.core.plan import plan_of_run
     chosen_by = replace(cfg.select, method=plan_of_run(cfg, run_dir).method)   # the exported selection's method
 
@@ -155,7 +157,7 @@ def evaluate(ctx: "RunContext") -> StageResult:
                                     executor=executor, on_trained=planner.trained, on_fold=planner.forecast)
     if stopped == "all folds" or (stopped == "decided" and not adaptive):   # --folds N: all N ran, as asked
         stopped = "every photo" if len(order) == min(ev.holdout_every, n) else "folds asked"
-    methods, paired, gap = summarize(res, folds, level, ev.margin_db, rival_folds=planner.decided_at)
+    methods, paired, gap = summarize(res, folds, level, ev.margin_db, rival_folds=planner.rival_folds())
     planner.needs_said(paired, len(folds), stopped)
     seconds = time.perf_counter() - t0
     summary = {"key": key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
@@ -174,6 +176,27 @@ def evaluate(ctx: "RunContext") -> StageResult:
 
 
 
+def earlier_needs(run_dir: Path) -> dict[str, int]:
+    """{rival: the folds an earlier evaluation of the same selection said would decide it} (the folds its comparison
+    used plus ``paired[...]["needs"]["folds"]``), so that ``curate evaluate RUN --eval-minutes M`` trains the folds
+    the verdict asked for instead of stopping where the earlier plan stopped; {} without one."""
+    import json
+
+    from curate.core.stage import inputs_of
+    try:
+        s = json.loads((RunPaths(run_dir).evaluate / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    if s.get("inputs") != inputs_of(run_dir, "evaluate"):
+        return {}
+    out = {}
+    for k, p in (s.get("paired") or {}).items():
+        more = (p.get("needs") or {}).get("folds")
+        if more and p.get("n_folds"):
+            out[k.split("-", 1)[1]] = int(p["n_folds"]) + int(more)
+    return out
+
+
 class Planner:
     """The evaluation's looks and plan: what a training costs here, which rivals each look decides, how many more
     folds the undecided need and whether the time given holds them (:func:`curate.evaluate.folds.plan_rivals`), and
@@ -187,6 +210,10 @@ class Planner:
         self.seconds: list[float] = []      # wall seconds of each training finished now
         self.workers = 1
         self.decided_at: dict[str, int] = {}   # rival -> the finished folds of the look that decided it
+        self.closed_at: dict[str, int] = {}    # rival -> the finished folds of its last look, left undecided
+        self.until: dict[str, int] = {}        # rival -> the folds it is trained in (its next look)
+        self.n_looks: dict[str, int] = {}      # rival -> its looks so far
+        self.extend: dict[str, int] = {}       # rival -> the folds an earlier evaluation said decide it
         self.looked: list[int] = []
         self.plans: list[dict] = []
         self.needs: dict[str, dict] = {}
@@ -238,48 +265,107 @@ class Planner:
         self.say("evaluate: from the first fold, a decision needs " + "; ".join(parts))
 
     def look(self, folds: list, results: dict):
-        """A look at the finished ``folds``: decided rivals are closed; the undecided are projected
-        (:func:`curate.evaluate.folds.folds_to_decide`) and those the time left holds are trained on to the next
-        look; stop when none is left."""
+        """A look at the finished ``folds``, for the rivals whose own look it is (the first look: every rival;
+        then each rival at the fold count its plan projected, on the folds where it and the selection were both
+        trained): decided rivals are closed; each undecided one is projected
+        (:func:`curate.evaluate.folds.folds_to_decide`) and trained on only to the folds its own comparison needs,
+        when the time left holds them beside the others' (:func:`curate.evaluate.folds.plan_rivals`), else closed;
+        a rival is looked at :data:`curate.evaluate.folds.LOOKS` times at most. The selection is trained in every
+        fold any rival still needs (the comparisons are paired per fold). Stops when no rival is left."""
         from curate.evaluate.config import RIVALS
         from curate.evaluate.folds import LOOKS, folds_to_decide, plan_rivals, summarize
         from curate.evaluate.schedule import Look
         F = len(folds)
         self.looked.append(F)
-        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, rival_folds=self.decided_at)
-        open_ = []
+        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, rival_folds=self.rival_folds())
+        due, pending = [], {}
+        for r in RIVALS:
+            p = paired.get(f"selection-{r}")
+            if p is None or r in self.decided_at or r in self.closed_at:
+                continue
+            if r in self.until and self.until[r] > F and F < self.planned:
+                pending[r] = self.until[r]            # its own look is later
+                continue
+            self.n_looks[r] = self.n_looks.get(r, 0) + 1
+            if p["decision"] in ("ahead", "behind", "level"):
+                self.decided_at[r] = F
+            elif self.n_looks[r] >= LOOKS or F >= self.planned or not self.adaptive:
+                self.closed_at[r] = F                  # its last look: undecided
+            else:
+                due.append(r)
+        rec = {"folds": F, "decided": {r: paired[f"selection-{r}"]["decision"] for r in self.decided_at
+                                       if self.decided_at[r] == F}}
+        if not self.adaptive:
+            self.plans.append(rec)
+            return Look()
+        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned) for r in due}
+        left = 60 * self.ev.minutes - (time.monotonic() - self.t0)
+        unit_s = self.unit_s() or 0.0
+        floor = {r: min(max(needs[r], self.extend.get(r, 0)), self.planned) for r in due
+                 if needs[r] is not None and self.n_looks[r] == LOOKS - 1 and self.extend.get(r, 0) > needs[r]}
+        needs.update(floor)                         # a later evaluation adds the folds an earlier one said it needs
+        taken, _ = plan_rivals(needs, F, self.ev.random_seeds, unit_s, self.workers, left, committed=pending)
+        for r in due:
+            if r in taken:
+                self.until[r] = needs[r]
+            else:
+                self.closed_at[r] = F                  # not pursued: its need does not fit, or is beyond the folds
+        open_ = {r: self.until[r] for r in (*pending, *taken)}
+        if due:
+            rec.update({"needs_folds": needs, "training": taken,
+                        "next_look": max(open_.values()) if open_ else None,
+                        "unit_seconds": round(unit_s, 1), "seconds_left": round(left, 1)})
+        self.plans.append(rec)
+        self.say(self.plan_said(F, paired, needs, taken, pending))
+        if not open_:
+            undecided = any(r in self.closed_at for r in RIVALS)
+            why = "decided" if not undecided else ("all folds" if F >= self.planned else "needs time")
+            return Look(stop=True, why=why, skip=frozenset(RIVALS))
+        until = {r: (open_[r] if r in open_ else F) for r in RIVALS}
+        until["selection"] = max(open_.values())
+        return Look(skip=frozenset(set(RIVALS) - set(open_)), next_look=min(open_.values()), until=until,
+                    also=tuple(sorted(set(open_.values()))))
+
+    def rival_folds(self) -> dict[str, int]:
+        """{rival: the leading folds its comparison uses}: those of the look that decided it, or of its last look
+        (a rival not pursued); rivals still open use every fold trained with them."""
+        return {**self.closed_at, **self.decided_at}
+
+    def plan_said(self, F: int, paired: dict, needs: dict, taken: list, pending: dict) -> str:
+        """What a look decided and plans, one part per rival (the plan lines the terminal shows)."""
+        from curate.evaluate.config import RIVALS
+        from curate.evaluate.folds import folds_to_decide
+        unit_s, seeds = self.unit_s(), self.ev.random_seeds
+        parts = []
         for r in RIVALS:
             p = paired.get(f"selection-{r}")
             if p is None:
                 continue
+            w = RIVAL_WORDS[r]
             if r in self.decided_at:
+                parts.append(f"{w}: {paired[f'selection-{r}']['decision']}, decided after {self.decided_at[r]} folds")
                 continue
-            if p["decision"] in ("ahead", "behind", "level"):
-                self.decided_at[r] = F
-            else:
-                open_.append(r)
-        rec = {"folds": F, "decided": {r: paired[f"selection-{r}"]["decision"] for r in self.decided_at
-                                       if self.decided_at[r] == F}}
-        if not open_:
-            self.plans.append(rec)
-            return Look(stop=True, why="decided", skip=frozenset(RIVALS))
-        if not self.adaptive:
-            self.plans.append(rec)
-            return Look()
-        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned) for r in open_}
-        left = 60 * self.ev.minutes - (time.monotonic() - self.t0)
-        unit_s = self.unit_s() or 0.0
-        last = len(self.looked) >= LOOKS - 1          # the next look is the last
-        taken, nxt = plan_rivals(needs, F, self.ev.random_seeds, unit_s, self.workers, left)
-        rec.update({"needs_folds": needs, "training": taken, "next_look": None if last else nxt,
-                    "unit_seconds": round(unit_s, 1), "seconds_left": round(left, 1)})
-        self.plans.append(rec)
-        self.say(_plan_said(F, paired, self.decided_at, needs, taken, self.unit_s(), self.workers,
-                            self.ev.random_seeds))
-        skip = frozenset(set(RIVALS) - set(taken))
-        if not taken:
-            return Look(stop=True, why="needs time", skip=skip)
-        return Look(skip=skip, next_look=None if last else nxt)
+            if r in pending:
+                parts.append(f"{w}: looked at again after {pending[r]} folds, as planned")
+                continue
+            per = (1 + (seeds if r == "random" else 1)) * (unit_s or 0.0) / max(self.workers, 1)
+            if r in taken:
+                more = needs[r] - F
+                cost = f", ~{_minutes(more * per)} here" if unit_s else ""
+                parts.append(f"{w}: {more} more folds{cost}")
+                continue
+            if r not in needs:                          # closed at an earlier look, or its last look now
+                parts.append(f"{w}: undecided after {self.closed_at.get(r, F)} folds")
+                continue
+            if needs[r] is None:
+                far = folds_to_decide(p, self.ev.margin_db, FAR_FOLDS) if p.get("mean") is not None else None
+                parts.append(f"{w}: would need ~{far} folds, more than the capture's {self.planned}: not pursued"
+                             if far else f"{w}: would stay undecided even with every photo held out: not pursued")
+                continue
+            more = needs[r] - F
+            cost = f", ~{_minutes(more * per)} here" if unit_s else ""
+            parts.append(f"{w}: would need {more} more folds{cost}, beyond --eval-minutes: not pursued")
+        return f"evaluate: after {F} folds: " + "; ".join(parts)
 
     def needs_said(self, paired: dict, n_folds: int, stopped: str) -> None:
         """For each rival left undecided: the folds and minutes here that the projection says would decide it
@@ -293,7 +379,7 @@ class Planner:
             if p.get("decision") != "undecided" or p.get("mean") is None:
                 continue
             g = folds_to_decide(p, self.ev.margin_db, self.planned)
-            more = None if g is None else max(g - n_folds, 0)
+            more = None if g is None else max(g - int(p.get("n_folds") or n_folds), 0)
             r = key.split("-", 1)[1]
             units = self.ev.random_seeds if r == "random" else 1
             minutes = None if (more is None or unit_s is None) else \
@@ -334,21 +420,6 @@ def _first_look() -> str:
 
 RIVAL_WORDS = {"random": "random subsets", "fvs": "FVS", "stride": "every n-th frame"}
 
-
-def _plan_said(F: int, paired: dict, decided_at: dict, needs: dict, taken: list, unit_s: float | None, workers: int,
-               seeds: int) -> str:
-    """The plan a look made, in one line."""
-    done = [f"{paired[f'selection-{r}']['decision']} {RIVAL_WORDS[r]}" for r in decided_at if decided_at[r] == F]
-    out = f"evaluate: after {F} folds" + (f", decided: {', '.join(done)}" if done else ", nothing decided yet")
-    parts = []
-    for r, g in sorted(needs.items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
-        if g is None:
-            parts.append(f"{RIVAL_WORDS[r]} would stay undecided even with every photo held out")
-            continue
-        what = "training it" if r in taken else "more than the time left"
-        if not unit_s:              # no training run here yet (all reused): no cost to say
-            parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({what})")
-            continue
-        per = (2 if r != "random" else 1 + seeds) * unit_s / max(workers, 1)
-        parts.append(f"{RIVAL_WORDS[r]} needs about {g - F} more folds ({_minutes((g - F) * per)} here: {what})")
-    return out + ("; " + "; ".join(parts) if parts else "")
+FAR_FOLDS = 200
+"""How far the plan's words project a comparison that the capture's folds would not decide ("would need ~40
+folds"): beyond it, "would stay undecided"."""
