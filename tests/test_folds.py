@@ -409,6 +409,11 @@ def test_an_undecided_verdict_says_how_many_more_minutes_here_would_decide_it():
     assert "`curate evaluate RUN --eval-minutes 4`" in q
     rep["estimate"] = {**rep["estimate"], "needs_minutes": None}
     assert "even every photo held out would not decide the rest" in verdict(rep)["quality"]
+    # every training reused (no cost a training to project minutes by), but more folds would decide one rival:
+    rep["estimate"] = {**rep["estimate"], "needs_folds": 4}
+    q = verdict(rep)["quality"]
+    assert "would not decide the rest" in q and "even every photo held out would not decide" not in q
+    assert "--eval-minutes 4`" in q
 
 
 def test_the_evaluation_trains_the_cheaper_field_and_the_refining_field_keeps_its_own():

@@ -115,6 +115,10 @@ def write_report(ctx: "RunContext") -> StageResult:
         need = (pr.get("plan") or {}).get("needs_minutes")
         if need is not None:  # what the undecided comparisons need here, as the evaluation projected it
             rep["estimate"]["needs_minutes"] = need
+        folds = [n["folds"] for n in ((pr.get("plan") or {}).get("needs") or {}).values()
+                 if isinstance(n, dict) and n.get("folds")]
+        if folds:             # more folds would decide them (their minutes unknown when every training was reused)
+            rep["estimate"]["needs_folds"] = max(folds)
     if (sel.get("budget_auto") or {}).get("measured"):   # how many, measured before the selection
         rep["budget_check"] = sel["budget_auto"]["measured"]
     try:                                         # what the run decided once its cameras were known

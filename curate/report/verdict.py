@@ -90,7 +90,7 @@ def estimate_said(est: dict, run_dir: str) -> str:
     stopped = est.get("stopped")
     if stopped == "decided":
         out += " It stopped adding folds when every rival was decided.)"
-    elif stopped == "needs time" and not est.get("needs_minutes"):
+    elif stopped == "needs time" and not est.get("needs_minutes") and not est.get("needs_folds"):
         out += (f" It stopped after {n_f} folds: from what they show, even every photo held out would not decide the "
                 "rest.)")
     elif stopped in ("time", "needs time"):
