@@ -30,7 +30,7 @@ from curate.sfm.native import load as load_pycolmap
 logger = logging.getLogger(__name__)
 
 MATCHING_THREADS = 1
-"""Threads of COLMAP's matching and verification on the CPU, whatever ``SfmConfig.num_threads`` says. Its CPU
+"""Threads of each COLMAP matching and verification call on the CPU, whatever ``SfmConfig.num_threads`` says. Its CPU
 matcher's nearest-neighbour search gave other matches in a few pairs on every run with two threads (office.mp4: 46
 of 3,693 pairs differed between two runs, and the two models by up to 8.9 deg); on one thread two runs gave the same
 bytes, at about 15% more time (85 s against 74 s for the stage on office.mp4;
@@ -166,7 +166,7 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) ->
     geometries are then copied into ``db`` (:func:`_merge`): the same rows as one process matching the whole list
     (a pair's matches do not depend on the others'). Pairs whose names hold spaces cannot be listed (COLMAP's list
     format): those are left unmatched, with a warning. Returns {"pairs", "new_pairs", "verified", "unlisted",
-    "processes", "seconds"}."""
+    "processes", "seconds", and in pieces "pieces_cpu_s" (each piece's CPU seconds)}."""
     pycolmap = load_pycolmap()
     t0 = time.perf_counter()
     with pycolmap.Database.open(db) as dbh:
@@ -183,7 +183,7 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) ->
         logger.warning("sfm: %d of %d pairs left unmatched: COLMAP's pair list cannot name photos with spaces in "
                        "their names", len(new) - len(listed), len(new))
     before = pair_counts(db, cfg.min_num_matches)[1]
-    n_proc = processes(cfg, len(listed))
+    n_proc, pieces_cpu = processes(cfg, len(listed)), []
     if listed:
         path = db.parent / list_name
         path.write_text("".join(f"{a} {b}\n" for a, b in listed))
@@ -194,20 +194,22 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) ->
             pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo,
                                        device=dev)
         else:
-            _match_in_pieces(cfg, db, listed, n_proc, matcher)
+            pieces_cpu = _match_in_pieces(cfg, db, listed, n_proc, matcher)
     info = {"pairs": len(uniq), "new_pairs": len(new),
             "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
-            "processes": n_proc, "seconds": round(time.perf_counter() - t0, 2)}
+            "processes": n_proc, "seconds": round(time.perf_counter() - t0, 2),
+            **({"pieces_cpu_s": [round(c, 1) for c in pieces_cpu]} if pieces_cpu else {})}
     logger.info("sfm: %s: %d pairs matched in %d process(es), %d verified, in %.1f s", list_name,
                 len(listed), n_proc, info["verified"], info["seconds"])
     return info
 
 
-def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> None:
+def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> list[float]:
     """``pairs`` cut into ``n_proc`` x :data:`PIECES_PER_PROCESS` pieces in their order, each matched by a process of
     its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
     rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
-    removed. COLMAP's log of each piece goes to COLMAP's log here."""
+    removed. COLMAP's log of each piece goes to COLMAP's log here. Returns each piece's CPU seconds, in the order
+    they ended."""
     import json
     import subprocess
     import sys
@@ -218,6 +220,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
     code = str(Path(__file__).resolve().parents[2])   # this curate, whatever the caller's path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([code, *filter(None, [os.environ.get("PYTHONPATH")])]),
                OMP_NUM_THREADS="1")
+    record: list[float] = []
     with tempfile.TemporaryDirectory(prefix="match_", dir=db.parent) as tmp:
         todo, running = list(enumerate(pieces)), {}
         try:
@@ -243,12 +246,15 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
                 _merge(db, Path(job["copy"]))
                 if text:
                     pycolmap.logging.info(text)
-                for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err")):
+                cpu = Path(job["copy"]).with_suffix(".cpu")
+                record.append(float(cpu.read_text()) if cpu.is_file() else float("nan"))
+                for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err"), str(cpu)):
                     Path(f).unlink(missing_ok=True)
         finally:
             for _, proc in running.values():
                 proc.kill()
                 proc.wait()
+    return record
 
 
 def _wait_any(running: dict) -> int:
@@ -278,6 +284,9 @@ def _match_piece(job: dict) -> None:
     with colmap_log(Path(job["copy"]).with_suffix(".log")):
         pycolmap.match_image_pairs(job["copy"], matching_options=mo, pairing_options=po, verification_options=vo,
                                    device=dev)
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    Path(job["copy"]).with_suffix(".cpu").write_text(f"{ru.ru_utime + ru.ru_stime:.3f}")
 
 
 def _merge(db: Path, piece: Path) -> None:
