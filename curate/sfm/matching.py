@@ -11,8 +11,8 @@ change the matches.
 Every matcher's pairs go the same route (:func:`match_list`): COLMAP matches one pair on one thread the same way
 every time, but not on several (:data:`MATCHING_THREADS`), so the list is cut into pieces, each matched on one
 thread in a process of its own on a copy of the database, and their matches and two-view geometries are copied
-into the database pair by pair: the same rows as one process matching the whole list, in about 1/N of the time
-on N cores (:data:`MATCHING_PROCESSES`).
+into the database pair by pair: the same rows as one process matching the whole list, on N cores
+(:data:`MATCHING_PROCESSES`; the rows checked and the time measured: docs/investigations/sfm.md#matching-in-pieces).
 """
 
 from __future__ import annotations
