@@ -79,9 +79,7 @@ def test_verification_and_mapper_are_seeded(monkeypatch, tmp_path, matcher):
     """Verification RANSAC gets cfg.seed (COLMAP's -1 reseeds every run), the mapper the strict initial pair."""
     from curate.sfm import matching, reconstruction
     got: dict = {}
-    monkeypatch.setattr(pycolmap, "match_" + matcher, lambda db, **kw: got.update(kw))
-    matching.match(small_cfg(seed=7, loop_detection=False), tmp_path / "database.db", matcher)
-    vo = got["verification_options"]
+    _, vo, _ = matching._options(small_cfg(seed=7, loop_detection=False), matcher)
     assert vo.ransac.random_seed == 7 and vo.min_num_inliers == SfmConfig().min_num_matches
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
     reconstruction.map_incremental(small_cfg(seed=7, init_min_num_inliers=150), tmp_path / "database.db", tmp_path,
@@ -413,6 +411,62 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
         n_kp = con.execute("SELECT COUNT(*) FROM keypoints WHERE rows > 0").fetchone()[0]
         n_cameras = con.execute("SELECT COUNT(*) FROM cameras").fetchone()[0]
     assert [r[0] for r in rows] == names and n_kp == n_cameras == len(names)
+
+
+@pytest.fixture(scope="module")
+def fox_features(tmp_path_factory):
+    """24 of the fox's photos' SIFT features (320 px) in a COLMAP database, not matched."""
+    from curate.sfm.features import extract
+    photos = need("fox/images")
+    names = sorted(p.name for p in photos.iterdir())[:24]
+    db = tmp_path_factory.mktemp("fox_features") / "database.db"
+    extract(small_cfg(max_image_size=320), db, photos, names, True)
+    return db
+
+
+def _match_rows(db: Path) -> dict:
+    import sqlite3
+    with sqlite3.connect(db) as con:
+        return {t: con.execute(f"SELECT * FROM {t} ORDER BY pair_id").fetchall()
+                for t in ("matches", "two_view_geometries")}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("matcher, guided", [("exhaustive", "off"), ("sequential", "on")])
+def test_matching_in_pieces_on_several_processes_writes_what_one_thread_writes(fox_features, tmp_path, monkeypatch,
+                                                                              matcher, guided):
+    """COLMAP's matcher on one thread gives the same matches every run, on two it does not (46 of 3,693 pairs of
+    office.mp4 differed): the pair list is cut into pieces matched on one thread each, in processes of their own,
+    and their rows copied into the database. Those rows are COLMAP's own matcher's (``match_exhaustive`` /
+    ``match_sequential`` on one thread), byte for byte, guided matching included, whatever the number of
+    processes and pieces."""
+    import shutil
+
+    from curate.sfm import matching
+    cfg = small_cfg(guided_matching=guided, loop_detection=False, num_threads=1)
+    ref = tmp_path / "ref" / "database.db"
+    ref.parent.mkdir()
+    shutil.copy2(fox_features, ref)
+    mo, vo, dev = matching._options(cfg, matcher)
+    if matcher == "exhaustive":
+        pycolmap.match_exhaustive(ref, matching_options=mo, verification_options=vo, device=dev)
+    else:
+        po = pycolmap.SequentialPairingOptions()
+        po.overlap, po.quadratic_overlap, po.loop_detection = cfg.sequential_overlap, cfg.sequential_quadratic, False
+        pycolmap.match_sequential(ref, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+    want = _match_rows(ref)
+    assert len(want["two_view_geometries"]) >= 80
+    monkeypatch.setattr(matching, "MIN_PAIRS_PER_PROCESS", 16)
+    for n in (1, 2, 3):
+        monkeypatch.setattr(matching, "MATCHING_PROCESSES", n)
+        db = tmp_path / f"p{n}" / "database.db"
+        db.parent.mkdir()
+        shutil.copy2(fox_features, db)
+        stats: dict = {}
+        matching.match(cfg, db, matcher, None, stats)
+        assert stats["pairs"]["processes"] == n
+        assert _match_rows(db) == want, n
+        assert not list(db.parent.glob("match_*")), "the pieces' copies are removed"
 
 
 def test_a_part_inside_the_largest_model_is_no_split():

@@ -197,8 +197,10 @@ class SfmConfig:
     """Scene box: points' [p, 100 - p] percentiles plus camera centres."""
     # --- execution (not in the stage key)
     num_threads: int = -1
-    """Threads of ingest and SIFT extraction (-1: all cores; ingest uses max(1, this) or 2); matching and mapping
-    run on one thread, so that every run gives the same model (``MATCHING_THREADS``, ``MAPPING_THREADS``)."""
+    """Threads of ingest and SIFT extraction, processes of matching (-1: all cores; ingest uses max(1, this) or 2).
+    Each matching process matches its piece of the pair list on one thread, so the matches are the same whatever
+    the number (``curate.sfm.matching.match_list``); mapping runs on one thread, so that every run gives the same
+    model (``MAPPING_THREADS``)."""
     progress: bool = True
     """tqdm bars on the terminal."""
 

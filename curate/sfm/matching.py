@@ -7,11 +7,20 @@ photos look alike (loop detection, retrieval, the pairs between takes) comes fro
 whose words are seeded, where COLMAP's vocabulary tree is not. Those pairs are then matched by COLMAP as a list
 (``match_image_pairs``). Verification RANSAC is seeded per pair (``cfg.seed``), so the threads' order does not
 change the matches.
+
+Every matcher's pairs go the same route (:func:`match_list`): COLMAP matches one pair on one thread the same way
+every time, but not on several (:data:`MATCHING_THREADS`), so the list is cut into pieces, each matched on one
+thread in a process of its own on a copy of the database, and their matches and two-view geometries are copied
+into the database pair by pair: the same rows as one process matching the whole list, on N cores
+(:data:`MATCHING_PROCESSES`; the rows checked and the time measured: docs/investigations/sfm.md#matching-in-pieces).
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import sqlite3
+import tempfile
 import time
 from pathlib import Path
 
@@ -21,12 +30,25 @@ from curate.sfm.native import load as load_pycolmap
 logger = logging.getLogger(__name__)
 
 MATCHING_THREADS = 1
-"""Threads of COLMAP's matching and verification on the CPU, whatever ``SfmConfig.num_threads`` says. Its CPU
+"""Threads of each COLMAP matching and verification call on the CPU, whatever ``SfmConfig.num_threads`` says. Its CPU
 matcher's nearest-neighbour search gave other matches in a few pairs on every run with two threads (office.mp4: 46
 of 3,693 pairs differed between two runs, and the two models by up to 8.9 deg); on one thread two runs gave the same
 bytes, at about 15% more time (85 s against 74 s for the stage on office.mp4;
 docs/investigations/sfm.md#same-input-same-model). Extraction keeps every core: its features are the same bytes
-on every run. With CUDA, COLMAP matches on the GPU (whether that is the same on every run is not measured)."""
+on every run. With CUDA, COLMAP matches on the GPU (whether that is the same on every run is not measured).
+Several cores match several pieces of the list at once instead, each on one thread (:func:`match_list`)."""
+
+MATCHING_PROCESSES = None
+"""Processes that match pieces of a pair list at once, each on one thread (:func:`match_list`): None follows
+``SfmConfig.num_threads`` (-1: every core). The rows they write are the same whatever the number."""
+
+MIN_PAIRS_PER_PROCESS = 64
+"""A list is cut into pieces of at least this many pairs: a process takes about a second to start and a pair
+about 20-60 ms to match (SIFT at 8,192 features, on one thread)."""
+
+PIECES_PER_PROCESS = 3
+"""Pieces per process: the pairs of one stretch of a walk can cost twice another's (guided matching where frames
+overlap much), so each process takes a next piece when it is done with one."""
 
 
 def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | None = None,
@@ -41,38 +63,37 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
     takes (:func:`_match_across_takes`; ``stats["cross_take"]`` says how many pairs).
     """
     pycolmap = load_pycolmap()
-    mo, vo, dev = _options(cfg, matcher)
     if matcher == "exhaustive":
-        pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
+        info = generated(cfg, db, pycolmap.ExhaustivePairGenerator, pycolmap.ExhaustivePairingOptions(), matcher)
     elif matcher == "sequential":
         po = pycolmap.SequentialPairingOptions()
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
-        pycolmap.match_sequential(db, matching_options=mo, pairing_options=po, verification_options=vo,
-                                  device=dev)
+        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher)
         index = None
         if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
             index = _index(cfg, db)
             names = index.names[::cfg.loop_detection_period]
             pairs = [(q, c) for q, cands in ranked(index, names, k=cfg.loop_detection_num_images) for c in cands]
-            info = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher)
+            loops = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher)
             if stats is not None:
-                stats["loop_detection"] = {"queries": len(names), **info}
+                stats["loop_detection"] = {"queries": len(names), **loops}
         if cfg.cross_take_matching and takes and len(takes) >= 2:
-            info = _match_across_takes(cfg, db, takes, index or _index(cfg, db), matcher)
+            across = _match_across_takes(cfg, db, takes, index or _index(cfg, db), matcher)
             if stats is not None:
-                stats["cross_take"] = info
+                stats["cross_take"] = across
     elif matcher == "retrieval":   # each photo with its most similar ones, by words trained on this capture
-        _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_num_images, matcher)
+        info = _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_num_images, matcher)
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
         po.ignore_z = True
-        pycolmap.match_spatial(db, matching_options=mo, pairing_options=po, verification_options=vo,
-                               device=dev)
+        info = generated(cfg, db, pycolmap.SpatialPairGenerator, po, matcher)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
+    if stats is not None:   # the matcher's own pairs (sequential: the neighbours)
+        stats["pairs"] = info
 
 
 def ranked(index, queries, k=None, candidates=None):
@@ -104,42 +125,192 @@ def guided(cfg: SfmConfig, matcher: str) -> bool:
 
 def _options(cfg: SfmConfig, matcher: str):
     """(matching, verification options, device) of every matcher: verification RANSAC seeded by ``cfg.seed``."""
+    return _options_of(cfg.seed, cfg.min_num_matches, guided(cfg, matcher))
+
+
+def _options_of(seed: int, min_num_matches: int, guided_matching: bool):
     pycolmap = load_pycolmap()
     mo = pycolmap.FeatureMatchingOptions()
     mo.num_threads = MATCHING_THREADS
-    mo.guided_matching = guided(cfg, matcher)
+    mo.guided_matching = guided_matching
     vo = pycolmap.TwoViewGeometryOptions()
-    vo.ransac.random_seed = cfg.seed
-    vo.min_num_inliers = cfg.min_num_matches
+    vo.ransac.random_seed = seed
+    vo.min_num_inliers = min_num_matches
     return mo, vo, pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
 
 
-def match_pairs(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
-    """Match and verify the image ``pairs`` ((name, name), either order) not matched yet, through a pair list
-    written beside ``db`` (``list_name``). Returns {"pairs", "new_pairs", "verified", "unlisted" (names with
-    spaces: COLMAP's list cannot name them)}."""
+def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str) -> dict:
+    """Match and verify the pairs COLMAP's pair ``generator`` (e.g. ``pycolmap.SequentialPairGenerator``) makes
+    with ``options`` on ``db``, each in the order it gives (:func:`match_list`): what ``pycolmap.match_sequential``
+    and its kin match, on several cores. Returns :func:`match_list`'s record."""
     pycolmap = load_pycolmap()
-    dbh = pycolmap.Database.open(db)
-    try:
+    with pycolmap.Database.open(db) as dbh:
+        name = {im.image_id: im.name for im in dbh.read_all_images()}
+        pairs = [(name[a], name[b]) for a, b in generator(options, dbh).all_pairs()]
+    return match_list(cfg, db, pairs, f"{matcher}_pairs.txt", matcher)
+
+
+def processes(cfg: SfmConfig, n_pairs: int) -> int:
+    """How many processes match ``n_pairs`` pairs (:data:`MATCHING_PROCESSES`, :data:`MIN_PAIRS_PER_PROCESS`);
+    1 with CUDA, where COLMAP matches on the GPU."""
+    want = MATCHING_PROCESSES or (cfg.num_threads if cfg.num_threads > 0 else (os.cpu_count() or 1))
+    if load_pycolmap().has_cuda:
+        return 1
+    return max(1, min(int(want), n_pairs // MIN_PAIRS_PER_PROCESS))
+
+
+def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
+    """Match and verify ``pairs`` ((name, name), each matched in the order given) not matched yet in ``db``:
+    COLMAP's ``match_image_pairs`` on one thread, in :func:`processes` processes at once, each on a piece of the
+    list and its own copy of the database (``python -m curate.sfm.matching``), whose new matches and two-view
+    geometries are then copied into ``db`` (:func:`_merge`): the same rows as one process matching the whole list
+    (a pair's matches do not depend on the others'). Pairs whose names hold spaces cannot be listed (COLMAP's list
+    format): those are left unmatched, with a warning. Returns {"pairs", "new_pairs", "verified", "unlisted",
+    "processes", "seconds", and in pieces "pieces_cpu_s" (each piece's CPU seconds)}."""
+    pycolmap = load_pycolmap()
+    t0 = time.perf_counter()
+    with pycolmap.Database.open(db) as dbh:
         ids = {im.name: im.image_id for im in dbh.read_all_images()}
-        uniq = sorted({tuple(sorted((a, b))) for a, b in pairs if a != b and a in ids and b in ids})
+        seen, uniq = set(), []
+        for a, b in pairs:
+            key = (a, b) if ids.get(a, 0) < ids.get(b, 0) else (b, a)
+            if a != b and a in ids and b in ids and key not in seen:
+                seen.add(key)
+                uniq.append((a, b))
         new = [(a, b) for a, b in uniq if not dbh.exists_matches(ids[a], ids[b])]
-    finally:
-        dbh.close()
     listed = [(a, b) for a, b in new if not any(c.isspace() for c in a + b)]
     if len(listed) < len(new):
         logger.warning("sfm: %d of %d pairs left unmatched: COLMAP's pair list cannot name photos with spaces in "
                        "their names", len(new) - len(listed), len(new))
     before = pair_counts(db, cfg.min_num_matches)[1]
+    n_proc, pieces_cpu = processes(cfg, len(listed)), []
     if listed:
-        mo, vo, dev = _options(cfg, matcher)
         path = db.parent / list_name
         path.write_text("".join(f"{a} {b}\n" for a, b in listed))
-        po = pycolmap.ImportedPairingOptions()
-        po.match_list_path = str(path)
-        pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
-    return {"pairs": len(uniq), "new_pairs": len(new), "verified": pair_counts(db, cfg.min_num_matches)[1] - before,
-            "unlisted": len(new) - len(listed)}
+        if n_proc == 1:
+            mo, vo, dev = _options(cfg, matcher)
+            po = pycolmap.ImportedPairingOptions()
+            po.match_list_path = str(path)
+            pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                                       device=dev)
+        else:
+            pieces_cpu = _match_in_pieces(cfg, db, listed, n_proc, matcher)
+    info = {"pairs": len(uniq), "new_pairs": len(new),
+            "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
+            "processes": n_proc, "seconds": round(time.perf_counter() - t0, 2),
+            **({"pieces_cpu_s": [round(c, 1) for c in pieces_cpu]} if pieces_cpu else {})}
+    logger.info("sfm: %s: %d pairs matched in %d process(es), %d verified, in %.1f s", list_name,
+                len(listed), n_proc, info["verified"], info["seconds"])
+    return info
+
+
+def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> list[float]:
+    """``pairs`` cut into ``n_proc`` x :data:`PIECES_PER_PROCESS` pieces in their order, each matched by a process of
+    its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
+    rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
+    removed. COLMAP's log of each piece goes to COLMAP's log here. Returns each piece's CPU seconds, in the order
+    they ended."""
+    import json
+    import subprocess
+    import sys
+
+    pycolmap = load_pycolmap()
+    k = min(len(pairs), n_proc * PIECES_PER_PROCESS)
+    pieces = [pairs[len(pairs) * i // k: len(pairs) * (i + 1) // k] for i in range(k)]
+    code = str(Path(__file__).resolve().parents[2])   # this curate, whatever the caller's path
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([code, *filter(None, [os.environ.get("PYTHONPATH")])]),
+               OMP_NUM_THREADS="1")
+    record: list[float] = []
+    with tempfile.TemporaryDirectory(prefix="match_", dir=db.parent) as tmp:
+        todo, running = list(enumerate(pieces)), {}
+        try:
+            while todo or running:
+                while todo and len(running) < n_proc:
+                    i, piece = todo.pop(0)
+                    job = {"db": str(db), "copy": str(Path(tmp) / f"{i}.db"), "list": str(Path(tmp) / f"{i}.txt"),
+                           "seed": cfg.seed, "min_num_matches": cfg.min_num_matches,
+                           "guided": guided(cfg, matcher)}
+                    Path(job["list"]).write_text("".join(f"{a} {b}\n" for a, b in piece))
+                    with open(Path(tmp) / f"{i}.err", "wb") as err:
+                        running[i] = (job, subprocess.Popen([sys.executable, "-m", "curate.sfm.matching",
+                                                             json.dumps(job)], env=env, stdout=subprocess.DEVNULL,
+                                                            stderr=err))
+                i = _wait_any(running)
+                job, proc = running.pop(i)
+                err = (Path(tmp) / f"{i}.err").read_text(errors="replace")
+                log = Path(job["copy"]).with_suffix(".log")
+                text = log.read_text(errors="replace") if log.is_file() else ""
+                if proc.returncode != 0:
+                    raise RuntimeError(f"sfm: matching piece {i + 1} of {k} failed ({proc.returncode}): "
+                                       f"{(err or text)[-2000:]}")
+                _merge(db, Path(job["copy"]))
+                if text:
+                    pycolmap.logging.info(text)
+                cpu = Path(job["copy"]).with_suffix(".cpu")
+                record.append(float(cpu.read_text()) if cpu.is_file() else float("nan"))
+                for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err"), str(cpu)):
+                    Path(f).unlink(missing_ok=True)
+        finally:
+            for _, proc in running.values():
+                proc.kill()
+                proc.wait()
+    return record
+
+
+def _wait_any(running: dict) -> int:
+    """The key of a process of ``running`` ({key: (job, Popen)}) that has ended, waiting for one."""
+    while True:
+        for i, (_, proc) in running.items():
+            if proc.poll() is not None:
+                return i
+        time.sleep(0.05)
+
+
+def _match_piece(job: dict) -> None:
+    """One piece of :func:`_match_in_pieces` (in its own process): ``job["db"]`` copied to ``job["copy"]``, the
+    pairs of ``job["list"]`` matched and verified there on one thread, COLMAP's log beside the copy (.log)."""
+    from curate.sfm.native import colmap_log
+    pycolmap = load_pycolmap()
+    src = sqlite3.connect(f"file:{job['db']}?mode=ro", uri=True)
+    dst = sqlite3.connect(job["copy"])
+    try:
+        src.backup(dst)
+    finally:
+        dst.close()
+        src.close()
+    mo, vo, dev = _options_of(job["seed"], job["min_num_matches"], job["guided"])
+    po = pycolmap.ImportedPairingOptions()
+    po.match_list_path = job["list"]
+    with colmap_log(Path(job["copy"]).with_suffix(".log")):
+        pycolmap.match_image_pairs(job["copy"], matching_options=mo, pairing_options=po, verification_options=vo,
+                                   device=dev)
+    import resource
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    Path(job["copy"]).with_suffix(".cpu").write_text(f"{ru.ru_utime + ru.ru_stime:.3f}")
+
+
+def _merge(db: Path, piece: Path) -> None:
+    """Copy the matches and two-view geometries of ``piece`` (a copy of ``db`` that matched more pairs) that
+    ``db`` lacks into ``db``, each row as COLMAP wrote it (rows are kept by pair id: the order COLMAP reads them
+    in, whatever the order they are written in)."""
+    con = sqlite3.connect(str(db), timeout=60)
+    try:
+        con.execute("ATTACH DATABASE ? AS piece", (str(piece),))
+        for table in ("matches", "two_view_geometries"):
+            con.execute(f"INSERT INTO main.{table} SELECT * FROM piece.{table} WHERE pair_id NOT IN "
+                        f"(SELECT pair_id FROM main.{table}) ORDER BY pair_id")
+        con.commit()
+        con.execute("DETACH DATABASE piece")
+    finally:
+        con.close()
+
+
+def match_pairs(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
+    """Match and verify the image ``pairs`` ((name, name), either order: each is matched in name order) not
+    matched yet (:func:`match_list`, the list written beside ``db`` as ``list_name``). Returns {"pairs",
+    "new_pairs", "verified", "unlisted" (names with spaces: COLMAP's list cannot name them), "processes",
+    "seconds"}."""
+    return match_list(cfg, db, sorted({tuple(sorted((a, b))) for a, b in pairs if a != b}), list_name, matcher)
 
 
 def _retrieve(cfg: SfmConfig, db: Path, index, num_images: int, matcher: str, queries: list[str] | None = None,
@@ -194,3 +365,9 @@ def pair_counts(db: Path, min_num_matches: int) -> tuple[int, int]:
     finally:
         dbh.close()
     return len(inliers), int(sum(n >= min_num_matches for n in inliers))
+
+
+if __name__ == "__main__":   # one piece of a list (_match_in_pieces): python -m curate.sfm.matching JOB_JSON
+    import json
+    import sys
+    _match_piece(json.loads(sys.argv[1]))
