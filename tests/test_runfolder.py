@@ -630,3 +630,21 @@ def test_run_json_records_absolute_inputs_so_another_directory_is_the_same_captu
     assert rec["photos"] == str(cap) and rec["poses"] == str(cap / "transforms.json")
     monkeypatch.chdir(cap)
     assert main(["run", ".", "--poses", "transforms.json", "--out", str(tmp_path / "run"), *fast]) == 0
+
+
+def test_what_a_killed_matching_left_in_the_sfm_folder_is_curates(tmp_path):
+    """A run killed (SIGKILL, power loss) while matching in pieces leaves the pieces' folder (``sfm/match_*``)
+    and the pair list (``sfm/<matcher>_pairs.txt``): both are curate's, cleared by the next run, not taken for
+    the user's files that block it."""
+    from curate.cli import main
+    sample = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
+    run = tmp_path / "run"
+    argv = ["sfm", str(sample / "images"), "--poses", str(sample / "transforms.json"), "--out", str(run),
+            "--triangulate", "off"]
+    assert main(argv) == 0
+    (run / "sfm" / "match_abc").mkdir()
+    (run / "sfm" / "match_abc" / "0.db").write_bytes(b"half a copy")
+    (run / "sfm" / "sequential_pairs.txt").write_text("a.jpg b.jpg\n")
+    (run / "sfm" / "stage.json").unlink()          # killed before its record: the stage is done again
+    assert main(argv) == 0
+    assert not (run / "sfm" / "match_abc").exists() and not (run / "sfm" / "sequential_pairs.txt").exists()

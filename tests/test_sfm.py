@@ -469,6 +469,36 @@ def test_matching_in_pieces_on_several_processes_writes_what_one_thread_writes(f
         assert not list(db.parent.glob("match_*")), "the pieces' copies are removed"
 
 
+@pytest.mark.slow
+def test_photos_with_spaces_in_their_names_are_matched_as_colmap_matches_them(fox_features, tmp_path, monkeypatch):
+    """COLMAP's pair list cannot name a photo whose name holds a space (``IMG 0001.jpg``, common on phones and
+    cameras): such a capture is matched by COLMAP's own matcher on one thread, every pair, the same rows as
+    before the pieces, not left unmatched."""
+    import shutil
+
+    from curate.sfm import matching
+    cfg = small_cfg(guided_matching="off", loop_detection=False, num_threads=2)
+    dbs = []
+    for name in ("ref", "new"):
+        db = tmp_path / name / "database.db"
+        db.parent.mkdir()
+        shutil.copy2(fox_features, db)
+        with pycolmap.Database.open(db) as dbh:
+            for im in dbh.read_all_images():
+                if im.image_id % 2 == 0:
+                    im.name = "fox " + im.name
+                    dbh.update_image(im)
+        dbs.append(db)
+    mo, vo, dev = matching._options(cfg, "exhaustive")
+    pycolmap.match_exhaustive(dbs[0], matching_options=mo, verification_options=vo, device=dev)
+    monkeypatch.setattr(matching, "MIN_PAIRS_PER_PROCESS", 16)
+    stats: dict = {}
+    matching.match(cfg, dbs[1], "exhaustive", None, stats)
+    want = _match_rows(dbs[0])
+    assert len(want["two_view_geometries"]) >= 80 and stats["pairs"]["unlisted"] == 0
+    assert _match_rows(dbs[1]) == want
+
+
 def test_a_part_inside_the_largest_model_is_no_split():
     """COLMAP may keep a first model of a few photos that the next model also registers: nothing is
     lost, so it is dropped (no split reported); a part with a photo of its own stays."""

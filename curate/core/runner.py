@@ -37,20 +37,19 @@ def run_stage(stage: "Stage", ctx: "RunContext") -> StageResult:
 
 @dataclasses.dataclass
 class Keyed:
-    """What a keyed stage's key function (:attr:`curate.core.graph.Stage.key`) returns: what its key hashes beside
-    the keys of the stages it is keyed on (:attr:`curate.core.graph.Stage.keyed_on`)."""
+    """What a keyed stage's key function (:attr:`curate.core.graph.Stage.key`) returns: the options its key hashes
+    beside the keys of the stages it is keyed on (:attr:`curate.core.graph.Stage.keyed_on`)."""
 
     parts: Any
     """The options its result depends on (a config, or a dict of them), hashed into the key."""
-    inputs: list[str] = dataclasses.field(default_factory=list)
-    """More hashes the key holds (of files the stage reads that no stage wrote)."""
     serves: Any = None
     """Other parts whose finished result serves as well (occupancy: a grid refined by a field serves a run that
     needs none); None: only its own."""
     state: Any = None
     """What the key function found that the computation needs again, handed to it as it is."""
     key: str = ""
-    """The key (:func:`stage_key` of the parts and every input), set by :func:`run_keyed`."""
+    """The key (:func:`stage_key` of the parts and the keys of the stages it is keyed on), set by
+    :func:`run_keyed`."""
 
 
 @dataclasses.dataclass
@@ -75,7 +74,7 @@ class Done:
 def run_keyed(stage: "Stage", ctx: "RunContext", key_of: Callable[["RunContext"], Keyed] | None = None
               ) -> StageResult:
     """Run ``stage`` (a :class:`curate.core.graph.Stage` with a key function) in ``ctx``'s run folder: its key (its
-    :class:`Keyed` parts and inputs, and the keys of the stages it is keyed on), skipped when its record has that key
+    :class:`Keyed` parts and the keys of the stages it is keyed on), skipped when its record has that key
     and its files are there (:func:`begin_stage`), else its folder cleared of what curate wrote, its computation
     called, and its record written (:func:`finish_stage`). The one place that keys, skips, begins and finishes.
     ``key_of``: a key function of its own instead of the stage's (the occupancy trained on a fold's photos)."""
@@ -83,9 +82,8 @@ def run_keyed(stage: "Stage", ctx: "RunContext", key_of: Callable[["RunContext"]
     d = Path(ctx.run_dir) / stage.name
     keyed = (key_of or _function(stage.key))(ctx)
     deps = [required_key(ctx.run_dir, s) for s in stage.keyed_on]
-    keyed.key = stage_key(keyed.parts, deps + list(keyed.inputs))
-    if (keyed.serves is not None and not ctx.force
-            and is_fresh(d, stage_key(keyed.serves, deps + list(keyed.inputs)), stage.spare)):
+    keyed.key = stage_key(keyed.parts, deps)
+    if keyed.serves is not None and not ctx.force and is_fresh(d, stage_key(keyed.serves, deps), stage.spare):
         return StageResult(stage.name, d, False, time.perf_counter() - t0)
     if begin_stage(d, keyed.key, ctx.force, owns=stage.owns, spare=stage.spare):
         warning = (read_stage(d) or {}).get(stage.warns) if stage.warns else None

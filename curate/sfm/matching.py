@@ -64,13 +64,14 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
     """
     pycolmap = load_pycolmap()
     if matcher == "exhaustive":
-        info = generated(cfg, db, pycolmap.ExhaustivePairGenerator, pycolmap.ExhaustivePairingOptions(), matcher)
+        info = generated(cfg, db, pycolmap.ExhaustivePairGenerator, pycolmap.ExhaustivePairingOptions(), matcher,
+                         pycolmap.match_exhaustive)
     elif matcher == "sequential":
         po = pycolmap.SequentialPairingOptions()
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
-        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher)
+        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher, pycolmap.match_sequential)
         index = None
         if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
             index = _index(cfg, db)
@@ -89,7 +90,7 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
         po.ignore_z = True
-        info = generated(cfg, db, pycolmap.SpatialPairGenerator, po, matcher)
+        info = generated(cfg, db, pycolmap.SpatialPairGenerator, po, matcher, pycolmap.match_spatial)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
     if stats is not None:   # the matcher's own pairs (sequential: the neighbours)
@@ -139,14 +140,24 @@ def _options_of(seed: int, min_num_matches: int, guided_matching: bool):
     return mo, vo, pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
 
 
-def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str) -> dict:
+def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str, whole) -> dict:
     """Match and verify the pairs COLMAP's pair ``generator`` (e.g. ``pycolmap.SequentialPairGenerator``) makes
-    with ``options`` on ``db``, each in the order it gives (:func:`match_list`): what ``pycolmap.match_sequential``
-    and its kin match, on several cores. Returns :func:`match_list`'s record."""
+    with ``options`` on ``db``, each in the order it gives (:func:`match_list`): what ``whole``
+    (``pycolmap.match_sequential`` and its kin) matches, on several cores. Returns :func:`match_list`'s record.
+    A capture with a photo whose name holds a space (``IMG 0001.jpg``), which COLMAP's pair list cannot name, is
+    matched by ``whole`` itself, on one thread: the same rows, without the pieces."""
     pycolmap = load_pycolmap()
     with pycolmap.Database.open(db) as dbh:
         name = {im.image_id: im.name for im in dbh.read_all_images()}
         pairs = [(name[a], name[b]) for a, b in generator(options, dbh).all_pairs()]
+    if any(c.isspace() for n in name.values() for c in n):
+        t0 = time.perf_counter()
+        before = pair_counts(db, cfg.min_num_matches)[1]
+        mo, vo, dev = _options(cfg, matcher)
+        whole(db, matching_options=mo, pairing_options=options, verification_options=vo, device=dev)
+        return {"pairs": len(pairs), "new_pairs": len(pairs), "unlisted": 0, "processes": 1,
+                "verified": pair_counts(db, cfg.min_num_matches)[1] - before,
+                "seconds": round(time.perf_counter() - t0, 2)}
     return match_list(cfg, db, pairs, f"{matcher}_pairs.txt", matcher)
 
 

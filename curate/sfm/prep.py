@@ -285,14 +285,21 @@ def database_bytes(n_images: int, matcher: str, cfg: SfmConfig) -> int:
 
 def check_free_space(folder: Path, n_images: int, matcher: str, cfg: SfmConfig) -> None:
     """``RuntimeError`` (one line, naming the folder) when its disk has less free space than COLMAP's database
-    will need (:func:`database_bytes`): COLMAP's SQLite cannot say "disk full" but aborts the whole process."""
+    will need (:func:`database_bytes`), with a copy of it for each process that matches a piece of the pairs
+    (:func:`curate.sfm.matching.match_list`): COLMAP's SQLite cannot say "disk full" but aborts the whole
+    process."""
+    import os
     import shutil
-    need = database_bytes(n_images, matcher, cfg)
+    procs = cfg.num_threads if cfg.num_threads > 0 else (os.cpu_count() or 1)
+    copies = procs if procs > 1 else 0      # matching in pieces: a copy of the database for each process at once
+    need = database_bytes(n_images, matcher, cfg) * (1 + copies)
     free = shutil.disk_usage(folder).free
     if free < need:
         raise RuntimeError(f"not enough free space on the disk of {folder}: SfM of {n_images} photos needs about "
-                           f"{_size(need)} for COLMAP's database, {_size(free)} are free; free some space (or give "
-                           "--out on another disk), then run the same command again")
+                           f"{_size(need)} for COLMAP's database"
+                           + (f" and a copy for each of {copies} matching processes" if copies else "")
+                           + f", {_size(free)} are free; free some space (or give --out on another disk), then "
+                           "run the same command again")
 
 
 def _size(n: int) -> str:
