@@ -209,13 +209,13 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) ->
     info = {"pairs": len(uniq), "new_pairs": len(new),
             "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
             "processes": n_proc, "seconds": round(time.perf_counter() - t0, 2),
-            **({"pieces_cpu_s": [round(c, 1) for c in pieces_cpu]} if pieces_cpu else {})}
+            **({"pieces_cpu_s": [None if c is None else round(c, 1) for c in pieces_cpu]} if pieces_cpu else {})}
     logger.info("sfm: %s: %d pairs matched in %d process(es), %d verified, in %.1f s", list_name,
                 len(listed), n_proc, info["verified"], info["seconds"])
     return info
 
 
-def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> list[float]:
+def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> list[float | None]:
     """``pairs`` cut into ``n_proc`` x :data:`PIECES_PER_PROCESS` pieces in their order, each matched by a process of
     its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
     rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
@@ -231,7 +231,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
     code = str(Path(__file__).resolve().parents[2])   # this curate, whatever the caller's path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([code, *filter(None, [os.environ.get("PYTHONPATH")])]),
                OMP_NUM_THREADS="1")
-    record: list[float] = []
+    record: list[float | None] = []
     with tempfile.TemporaryDirectory(prefix="match_", dir=db.parent) as tmp:
         todo, running = list(enumerate(pieces)), {}
         try:
@@ -258,7 +258,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
                 if text:
                     pycolmap.logging.info(text)
                 cpu = Path(job["copy"]).with_suffix(".cpu")
-                record.append(float(cpu.read_text()) if cpu.is_file() else float("nan"))
+                record.append(float(cpu.read_text()) if cpu.is_file() else None)   # not measured: no NaN in JSON
                 for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err"), str(cpu)):
                     Path(f).unlink(missing_ok=True)
         finally:
