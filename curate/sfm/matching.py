@@ -145,12 +145,13 @@ def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str, whole)
     with ``options`` on ``db``, each in the order it gives (:func:`match_list`): what ``whole``
     (``pycolmap.match_sequential`` and its kin) matches, on several cores. Returns :func:`match_list`'s record.
     A capture with a photo whose name holds a space (``IMG 0001.jpg``), which COLMAP's pair list cannot name, is
-    matched by ``whole`` itself, on one thread: the same rows, without the pieces."""
+    matched by ``whole`` itself, on one thread: the same rows, without the pieces; so is a list one process would
+    match (``num_threads`` 1, the known poses' triangulation, CUDA): COLMAP's own matcher, as before the pieces."""
     pycolmap = load_pycolmap()
     with pycolmap.Database.open(db) as dbh:
         name = {im.image_id: im.name for im in dbh.read_all_images()}
         pairs = [(name[a], name[b]) for a, b in generator(options, dbh).all_pairs()]
-    if any(c.isspace() for n in name.values() for c in n):
+    if processes(cfg, len(pairs)) == 1 or any(c.isspace() for n in name.values() for c in n):
         t0 = time.perf_counter()
         before = pair_counts(db, cfg.min_num_matches)[1]
         mo, vo, dev = _options(cfg, matcher)

@@ -132,10 +132,11 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
             if len(kept) < 2:
                 raise RuntimeError(f"features of only {len(kept)} photos")
             t = time.perf_counter()
-            # pieces matched on one thread each (curate.sfm.matching.match_list): the same points on every run;
+            # one thread, COLMAP's own matcher, as before the pieces (the pieces were not measured on this path);
             # guided matching only when asked (its "auto" is for SfM, where a sequence that splits loses frames:
             # with known poses nothing can split)
-            match(replace(cfg, guided_matching="on" if cfg.guided_matching == "on" else "off"), db, matcher)
+            match(replace(cfg, num_threads=1, guided_matching="on" if cfg.guided_matching == "on" else "off"),
+                  db, matcher)
             stats["match_seconds"] = round(time.perf_counter() - t, 2)
             stats["n_pairs_verified"] = pair_counts(db, cfg.min_num_matches)[1]
             sub = cams[kept]
