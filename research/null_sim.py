@@ -14,11 +14,12 @@ selection - rival whose mean over the capture is exactly 0 (nothing differs):
 then centred on the capture's mean so that the true difference is 0. The procedure is the product's
 (:class:`curate.evaluate.stage.Planner`'s looks with :func:`curate.core.stats.folds_moderated` at
 :data:`curate.evaluate.folds.KAPPA_PRIOR`): a look after 2 folds; undecided, the folds the projection
-(:func:`curate.evaluate.folds.folds_to_decide`) says decide it, if the time holds them (``--time-folds``: the
-folds the minutes given hold); undecided there, a last look at the folds the projection then asks for, if the time
-holds them (until issue 59's item 3, at the end of the time). A *false call* is "ahead" or "behind" at any
-look. Printed per setting: the design effect the setting has (measured over the simulations), the false-call rate
-and its 95% binomial upper bound; one JSON line last.
+(:func:`curate.evaluate.folds.folds_to_decide`) says decide it, if the time holds them (``--time-folds``: the folds
+the minutes given hold); undecided there, a last look at the folds the projection then asks for at 80% power
+(:func:`curate.evaluate.folds.next_look`), if the time holds them (until issue 59's item 3, at the end of the time).
+A *false call* is "ahead" or "behind" at any look ("resolved", an interval that holds 0 at most ``--resolution``
+wide on each side, is no call). Printed per setting: the design effect the setting has (measured over the
+simulations), the false-call rate and its 95% binomial upper bound; one JSON line last.
 
     python -m research.null_sim --reps 2000                  # the product's
     python -m research.null_sim --reps 2000 --interval old   # before issue 59
@@ -51,20 +52,20 @@ def capture(rng, photos: int, sigma: float, sigma_smooth: float, rho: float, tau
     return [f - m for f in folds]
 
 
-def procedure(diffs, margin: float, time_folds: int, prior, level: float) -> tuple[str, int]:
+def procedure(diffs, margin: float, time_folds: int, prior, level: float, resolution: float = 0.0) -> tuple[str, int]:
     """The product's looks on ``diffs`` (one rival): (the decision it ends with, the folds it used)."""
     from curate.core.stats import decision, folds_moderated
-    from curate.evaluate.folds import FIRST_LOOK, LOOKS, folds_to_decide
+    from curate.evaluate.folds import FIRST_LOOK, LOOKS, next_look
     F_max = min(len(diffs), time_folds)
     F = min(FIRST_LOOK, F_max)
     looks = 0
     while True:
         p = folds_moderated(diffs[:F], level, kappa0=prior[0], nu0=prior[1])
         looks += 1
-        d = decision(p, margin)
+        d = decision(p, margin, resolution)
         if d != "undecided" or F >= F_max or looks >= LOOKS:
             return d, F
-        g = folds_to_decide(p, margin, len(diffs), prior)
+        g = next_look(p, margin, len(diffs), resolution, last=looks == LOOKS - 1, prior=prior)
         if g is None or g > F_max:
             return d, F              # the time given would not decide it: stop, say what it needs
         F = g                        # each look at the folds the projection asks for (issue 59, item 3)
@@ -90,12 +91,16 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--prior", default=None, help="KAPPA0,NU0 (default: the product's)")
     ap.add_argument("--margin", type=float, default=0.3)
+    ap.add_argument("--resolution", type=float, default=None, help="stop a rival whose interval is at most this "
+                    "wide on each side (default: the product's EvalConfig.resolution_db; 0: never)")
     ap.add_argument("--interval", choices=("new", "old"), default="new", help="new: the product's looks and "
                     "prior; old: before issue 59 (the folds alone, looks after 4 folds and at the end)")
     a = ap.parse_args(argv)
     from curate.core.stats import folds_moderated
     from curate.evaluate.folds import KAPPA_PRIOR, look_level
     prior = tuple(float(x) for x in a.prior.split(",")) if a.prior else KAPPA_PRIOR
+    from curate.evaluate.config import EvalConfig
+    res = EvalConfig().resolution_db if a.resolution is None else a.resolution
     level = look_level(True)
     rng = np.random.default_rng(a.seed)
     settings = []
@@ -114,7 +119,7 @@ def main(argv=None) -> int:
             k = folds_moderated(diffs, nu0=0)["kappa_folds"]
             if k is not None:
                 kap.append(k)
-            d, F = (procedure(diffs, a.margin, st["time_folds"], prior, level) if a.interval == "new" else
+            d, F = (procedure(diffs, a.margin, st["time_folds"], prior, level, res) if a.interval == "new" else
                     procedure_old(diffs, a.margin, st["time_folds"]))
             calls += d in ("ahead", "behind")
             used.append(F)
@@ -128,6 +133,7 @@ def main(argv=None) -> int:
               f"{rate:.3f} (<= {hi:.3f})  folds used {row['mean_folds']:.1f}", flush=True)
     worst = max(rows, key=lambda r: r["false_calls"])
     print(json.dumps({"interval": a.interval, "prior": prior if a.interval == "new" else None, "level": level,
+                      "resolution": res if a.interval == "new" else None,
                       "reps": a.reps, "worst": worst,
                       "rows": rows}))
     return 0

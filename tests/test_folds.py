@@ -60,6 +60,21 @@ def test_decision_reads_the_interval_against_zero_and_the_margin():
     assert decision({"lo": -0.2, "hi": 0.35}, 0.3) == "undecided"
     assert decision({"lo": -math.inf, "hi": math.inf}, 0.3) == "undecided"
     assert decision(None, 0.3) is None
+
+
+def test_an_interval_measured_closely_enough_is_resolved_and_stops_its_rival():
+    """--resolution-db: an interval that holds 0 but is at most that wide on each side is 'resolved' (its rival is
+    trained no more); ahead, behind and level come first; 0 turns it off."""
+    from curate.core.stats import DECIDED
+    assert decision({"lo": -0.2, "hi": 0.7}, 0.3, 0.5) == "resolved"          # half-width 0.45
+    assert decision({"lo": -0.2, "hi": 0.7}, 0.3, 0.0) == "undecided"
+    assert decision({"lo": -0.2, "hi": 0.9}, 0.3, 0.5) == "undecided"         # half-width 0.55
+    assert decision({"lo": 0.01, "hi": 0.2}, 0.3, 0.5) == "ahead"
+    assert decision({"lo": -0.1, "hi": 0.2}, 0.3, 0.5) == "level"
+    assert decision({"lo": -math.inf, "hi": math.inf}, 0.3, 0.5) == "undecided"
+    assert "resolved" in DECIDED and "undecided" not in DECIDED
+    assert decided({"a": {"decision": "resolved"}, "b": {"decision": "level"}})
+    assert EvalConfig().resolution_db == 0.5 and EvalConfig(resolution_db=0).resolution_db == 0
     assert decided({"a": {"decision": "ahead"}, "b": {"decision": "level"}})
     assert not decided({"a": {"decision": "ahead"}, "b": {"decision": "undecided"}}) and not decided({})
 
@@ -80,17 +95,17 @@ def _procedure(diffs, time_folds):
     """The evaluation's looks of one rival (curate.evaluate.stage.Planner): after FIRST_LOOK folds; undecided, at
     the folds the projection says decide it, if the time holds them; undecided there, once more at the folds the
     projection then says (or the end of the time)."""
-    from curate.evaluate.folds import FIRST_LOOK, KAPPA_PRIOR, folds_to_decide
+    from curate.evaluate.folds import FIRST_LOOK, KAPPA_PRIOR, next_look
     level = look_level(True)
     F_max = min(len(diffs), time_folds)
     F, n_looks = min(FIRST_LOOK, F_max), 0
     while True:
         p = folds_moderated(diffs[:F], level, *KAPPA_PRIOR)
         n_looks += 1
-        d = decision(p, 0.3)
+        d = decision(p, 0.3, EvalConfig().resolution_db)
         if d != "undecided" or F >= F_max or n_looks >= LOOKS:
             return d
-        g = folds_to_decide(p, 0.3, len(diffs))
+        g = next_look(p, 0.3, len(diffs), EvalConfig().resolution_db, last=n_looks == LOOKS - 1)
         if g is None or g > F_max:
             return d
         F = g
@@ -167,6 +182,35 @@ def test_the_projection_says_how_many_folds_decide_and_they_do():
     assert far is not None and (edge is None or edge > far)
 
 
+def test_the_projection_with_a_resolution_asks_for_no_more_folds_and_they_resolve():
+    """A difference near the margin would need most of the capture to be told apart from 0 or shown level; with
+    --resolution-db 0.5 the projection asks for the folds that measure it to within 0.5 dB, and they do."""
+    from curate.evaluate.folds import KAPPA_PRIOR, folds_to_decide
+    rng = np.random.default_rng(5)
+    every = [rng.normal(0.25, 1.6, 27) for _ in range(14)]
+    level = look_level(True)
+    p2 = folds_moderated(every[:2], level, *KAPPA_PRIOR)
+    assert decision(p2, 0.3, 0.5) == "undecided"
+    g0, g = folds_to_decide(p2, 0.3, 14), folds_to_decide(p2, 0.3, 14, resolution=0.5)
+    assert g is not None and 2 < g and (g0 is None or g < g0)
+    p = folds_moderated(every[:g + 1], level, *KAPPA_PRIOR)
+    assert decision(p, 0.3, 0.5) in ("resolved", "ahead", "level") and (p["hi"] - p["lo"]) / 2 <= 0.5
+
+
+def test_a_rivals_last_look_is_planned_where_a_difference_that_holds_is_likely_to_decide():
+    """The last look goes where a mean that holds decides with about 80% chance (later than the even chance of the
+    looks before it), to the capture's last fold where only that gives an even chance, and nowhere (not pursued)
+    where not even that does."""
+    from curate.evaluate.folds import folds_to_decide, next_look
+    rng = np.random.default_rng(11)
+    p = folds_moderated([rng.normal(0.45, 2.5, 27) for _ in range(3)], look_level(True), *KAPPA_PRIOR)
+    even, last = next_look(p, 0.3, 14), next_look(p, 0.3, 14, last=True)
+    assert even == folds_to_decide(p, 0.3, 14) and even is not None and last is not None and last > even
+    assert next_look(p, 0.3, even, last=True) == even          # only the folds left give an even chance
+    assert next_look(p, 0.3, even - 1, last=True) is None      # not even they do
+    assert next_look({**p, "mean": 3.0, "lo": 1.0, "hi": 5.0}, 0.3, 14, last=True) == 3   # decided now
+
+
 def test_the_plan_takes_the_rivals_the_time_decides_fewest_folds_first():
     from curate.evaluate.folds import plan_rivals
     needs = {"random": 3, "fvs": 6, "stride": None}
@@ -217,7 +261,8 @@ def test_one_held_out_view_gives_no_infinite_figure():
 
 
 @pytest.mark.parametrize("bad", [{"folds": -1}, {"minutes": 0}, {"minutes": float("nan")}, {"margin_db": -0.1},
-                                 {"methods": ("selection", "oracle")}, {"folds": 1.5}])
+                                 {"methods": ("selection", "oracle")}, {"folds": 1.5}, {"resolution_db": -0.5},
+                                 {"resolution_db": float("inf")}])
 def test_bad_evaluation_options_are_refused(bad):
     with pytest.raises(ValueError):
         EvalConfig(**bad)
@@ -350,6 +395,61 @@ def test_the_planner_stops_when_every_rival_is_decided_and_says_the_cost_first(t
     assert "random subsets: ahead, decided after 2 folds" in said[0]
 
 
+def test_the_planner_stops_a_rival_measured_to_the_resolution_and_trains_on_without_one():
+    """A comparison whose interval after two folds holds 0 but is under --resolution-db wide on each side is
+    resolved: the evaluation stops ("decided") and records it; with --resolution-db 0 the same folds are undecided
+    and the plan trains that rival on."""
+    from curate.evaluate.stage import Planner
+    from curate.evaluate.units import Unit
+    rng = np.random.default_rng(3)
+    folds, res = [], {}
+    for o in (0, 7):
+        hold = list(range(o, 373, 14))
+        d = rng.normal(0.2, 1.0, len(hold))
+        folds.append(Fold(o, hold, [], 2, "path", [0, 1],
+                          [Unit(f"f{o:02d}_{m}", m, None, [0, 1], o) for m in ("selection", "random")]))
+        for m, x in (("selection", 20 + d), ("random", np.full(len(hold), 20.0))):
+            res[f"f{o:02d}_{m}"] = {"n_train": 2, "psnr": 0, "ssim": 0, "per_view": [
+                {"name": f"{c}", "psnr": float(v), "ssim": 0.5} for c, v in zip(hold, x)]}
+    diffs = [np.array([v["psnr"] - 20.0 for v in res[f"f{o:02d}_selection"]["per_view"]]) for o in (0, 7)]
+    p = folds_moderated(diffs, look_level(True, 14), *KAPPA_PRIOR)
+    assert p["lo"] < 0 < p["hi"] and 0.3 < (p["hi"] - p["lo"]) / 2 <= 0.5     # the case this test is about
+    said = []
+    planner = Planner(EvalConfig(minutes=60.0), 14, look_level(True, 14), True, say=said.append)
+    planner.trained(10.0, 2)
+    lk = planner.look(folds, res)
+    assert lk.stop and lk.why == "decided" and planner.decided_at == {"random": 2}
+    assert planner.record()["looks"][0]["decided"] == {"random": "resolved"}
+    assert "random subsets: resolved, decided after 2 folds" in said[-1]
+    planner = Planner(EvalConfig(minutes=60.0, resolution_db=0.0), 14, look_level(True, 14), True, say=said.append)
+    planner.trained(10.0, 2)
+    lk = planner.look(folds, res)
+    assert not lk.stop and "random" not in planner.decided_at and lk.until["random"] > 2
+
+
+def test_a_rivals_last_look_waits_for_the_folds_the_selection_is_trained_to_anyway():
+    """Random subsets at their second look (undecided) plan their last; FVS is already planned to 10 folds, so the
+    selection is trained there anyway: the last look of random subsets is put there too, not earlier."""
+    from curate.evaluate.stage import Planner
+    from curate.evaluate.units import Unit
+    rng = np.random.default_rng(4)
+    folds, res = [], {}
+    for o in fold_order(14)[:3]:
+        hold = list(range(o, 373, 14))
+        folds.append(Fold(o, hold, [], 2, "path", [0, 1],
+                          [Unit(f"f{o:02d}_{m}", m, None, [0, 1], o) for m in ("selection", "random", "fvs")]))
+        for m, x in (("selection", 20 + rng.normal(0.6, 2.5, len(hold))), ("random", np.full(len(hold), 20.0)),
+                     ("fvs", np.full(len(hold), 20.0))):
+            res[f"f{o:02d}_{m}"] = {"n_train": 2, "psnr": 0, "ssim": 0, "per_view": [
+                {"name": f"{c}", "psnr": float(v), "ssim": 0.5} for c, v in zip(hold, x)]}
+    planner = Planner(EvalConfig(minutes=600.0), 14, look_level(True, 14), True, say=lambda m: None)
+    planner.trained(10.0, 2)
+    planner.n_looks, planner.until = {"random": 1, "fvs": 1}, {"random": 3, "fvs": 10}
+    lk = planner.look(folds, res)
+    need = planner.record()["looks"][0]["needs_folds"]["random"]
+    assert not lk.stop and planner.until["random"] == 10 == need and planner.until["fvs"] == 10
+
+
 def test_the_planner_trains_on_what_the_time_decides_and_stops_when_nothing_is_left(tmp_path):
     """Undecided after two folds: a rival the time left would decide is trained on to the look the projection
     plans; with no time left, the evaluation stops there and says what it needs."""
@@ -414,6 +514,22 @@ def test_an_undecided_verdict_says_how_many_more_minutes_here_would_decide_it():
     q = verdict(rep)["quality"]
     assert "would not decide the rest" in q and "even every photo held out would not decide" not in q
     assert "--eval-minutes 4`" in q
+
+
+def test_a_resolved_verdict_says_how_closely_it_was_measured_and_asks_for_no_more_folds():
+    from curate.report.verdict import verdict
+    rep = {"n_candidates": 371, "run_dir": "RUN", "selection": {"chosen": list(range(56)), "method": "path"},
+           "evaluation": {"status": "current"}, "methods": {"selection": {}},
+           "paired": {"selection-random": {"mean": 0.66, "lo": 0.07, "hi": 1.24, "decision": "ahead"},
+                      "selection-fvs": {"mean": 0.15, "lo": -0.32, "hi": 0.62, "decision": "resolved",
+                                        "margin": 0.3, "resolution": 0.5}},
+           "estimate": {"budget": 52, "n_pool": 344, "n_holdout": 106, "holdout_every": 14, "n_folds": 4,
+                        "planned_folds": 14, "stopped": "decided", "minutes": 15, "resolution_db": 0.5}}
+    v = verdict(rep)
+    assert v["against"] == {"random": "ahead of", "fvs": "not told apart from"}
+    assert "not told apart from farthest-view sampling (FVS), measured to ±0.47 dB (+0.15 dB" in v["quality"]
+    assert "more folds" not in v["quality"]
+    assert "when every rival was decided or its difference measured to ±0.5 dB" in v["quality"]
 
 
 def test_the_evaluation_trains_the_cheaper_field_and_the_refining_field_keeps_its_own():

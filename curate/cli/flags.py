@@ -84,6 +84,7 @@ TRAIN = [Opt("--holdout-every", "evaluate.holdout_every", parse=int),
 EVAL = [Opt("--eval-minutes", "evaluate.minutes", parse=float, metavar="MIN"),
         Opt("--folds", "evaluate.folds", parse=int),
         Opt("--equivalence-db", "evaluate.margin_db", parse=float, metavar="DB"),
+        Opt("--resolution-db", "evaluate.resolution_db", parse=float, metavar="DB"),
         Opt("--random-seeds", "evaluate.random_seeds", parse=int),
         Opt("--workers", "evaluate.workers", parse=int)]
 NO_EVAL = [Opt("--no-evaluate", "run_evaluation", const=False,

@@ -171,9 +171,15 @@ def moderated_variance(v0: float, v_cr: float, n_folds: int, dof_within: float, 
     return var, (var * var / den if den > 0 else float(w))
 
 
-def decision(p: dict | None, margin: float) -> str | None:
+DECIDED = ("ahead", "behind", "level", "resolved")
+"""The decisions (:func:`decision`) at which the evaluation stops training a rival: all but 'undecided'."""
+
+
+def decision(p: dict | None, margin: float, resolution: float = 0.0) -> str | None:
     """What an interval ``p`` (``lo``, ``hi``) decides about a difference: 'ahead' (above 0), 'behind' (below
-    0), 'level' (inside ``[-margin, margin]``), 'undecided' (none of these); None without an interval."""
+    0), 'level' (inside ``[-margin, margin]``), 'resolved' (it holds 0 but is at most ``resolution`` wide on
+    each side: the difference is measured that closely, its sign is not), 'undecided' (none of these); None
+    without an interval."""
     if not p or p.get("lo") is None or p.get("hi") is None:
         return None
     lo, hi = float(p["lo"]), float(p["hi"])
@@ -183,4 +189,6 @@ def decision(p: dict | None, margin: float) -> str | None:
         return "ahead"
     if hi < 0:
         return "behind"
-    return "level" if -margin <= lo and hi <= margin else "undecided"
+    if -margin <= lo and hi <= margin:
+        return "level"
+    return "resolved" if (hi - lo) / 2 <= resolution else "undecided"

@@ -45,6 +45,13 @@ or the folds run out first). Each rival has its own looks, on the folds where it
 trained. Each look uses a ``1 - 0.05 / LOOKS`` interval, so that stopping at a decided look keeps each verdict's
 error at 5% (Bonferroni over the looks; docs/evaluation.md#folds-until-decided)."""
 
+LAST_LOOK_POWER = 0.84
+"""A rival's last look is planned where a mean difference that holds would decide it with about 80% chance (the
+interval's edge that many standard errors inside the mean: :func:`folds_to_decide`'s ``power``), not an even
+one: undecided there, a rival is trained no more. Planned at an even chance, the last look left random subsets
+undecided on the drone flight (projected 5 folds, needed 7) and on the fox (its interval's lower end at -0.04
+dB; docs/evaluation.md#resolved)."""
+
 FIRST_LOOK = 2
 """Folds after which the evaluation first decides whether to stop (and plans what to train next). Folds
 interleave (every 14th photo from offsets 0, 7, 3, 10): each samples the whole capture, and the interval's prior
@@ -199,7 +206,7 @@ def per_view(results: dict, folds: list[Fold], method: str) -> dict[int, dict]:
 
 
 def summarize(results: dict, folds: list[Fold], level: float, margin: float, prior: tuple = KAPPA_PRIOR,
-              rival_folds: dict | None = None) -> tuple[dict, dict, float | None]:
+              rival_folds: dict | None = None, resolution: float = 0.0) -> tuple[dict, dict, float | None]:
     """(methods, paired, gap_closed) over the finished ``folds``.
 
     ``methods[m]``: held-out ``psnr`` / ``ssim`` (means over every held-out photo of the folds that trained
@@ -208,10 +215,9 @@ def summarize(results: dict, folds: list[Fold], level: float, margin: float, pri
     shows), ``units``; random also ``psnr_std`` over its draws' means. ``paired["selection-<rival>"]``:
     :func:`curate.core.stats.folds_moderated` of the per-view differences at ``level`` with ``prior``
     (``(kappa0, nu0)``; ``(1, 0)``: the folds alone, :func:`curate.core.stats.folds_paired`'s interval), with
-    ``decision`` (:func:`curate.core.stats.decision` at ``margin``); ``rival_folds[rival]``: the number of leading
-    folds its comparison uses (the look that decided it; default all). ``gap_closed``: (selection - random) /
-    (all - random)
-    over the same photos, None when all photos do not beat random subsets.
+    ``decision`` (:func:`curate.core.stats.decision` at ``margin`` and ``resolution``); ``rival_folds[rival]``:
+    the number of leading folds its comparison uses (the look that decided it; default all). ``gap_closed``:
+    (selection - random) / (all - random) over the same photos, None when all photos do not beat random subsets.
     """
     from curate.core.stats import decision, folds_moderated
     methods: dict[str, dict] = {}
@@ -240,7 +246,8 @@ def summarize(results: dict, folds: list[Fold], level: float, margin: float, pri
         p = folds_moderated(diffs, level, kappa0=prior[0], nu0=prior[1])
         if not p["n"]:
             continue
-        paired[f"selection-{r}"] = {**_finite_or_none(p), "decision": decision(p, margin), "margin": margin}
+        paired[f"selection-{r}"] = {**_finite_or_none(p), "decision": decision(p, margin, resolution),
+                                    "margin": margin, "resolution": resolution}
     gap = None
     if all(m in methods for m in ("selection", "random", "all")):
         rnd, al = per_view(results, folds, "random"), per_view(results, folds, "all")
@@ -257,19 +264,23 @@ def _finite_or_none(p: dict) -> dict:
     return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in p.items()}
 
 
-def folds_to_decide(p: dict, margin: float, max_folds: int, prior: tuple = KAPPA_PRIOR) -> int | None:
+def folds_to_decide(p: dict, margin: float, max_folds: int, prior: tuple = KAPPA_PRIOR,
+                    resolution: float = 0.0, power: float = 0.0) -> int | None:
     """The fewest folds at which the interval ``p`` (:func:`curate.core.stats.folds_moderated`'s, at its
-    ``level``) is expected to decide (exclude 0, or lie within ``margin``) if its mean, the views' spread within
+    ``level``) is expected to decide (exclude 0, lie within ``margin``, or be at most ``resolution`` wide on each
+    side: :func:`curate.core.stats.decision`) if its mean, the views' spread within
     folds and the folds' design effect stay as measured and every fold holds as many views as the mean so far;
     ``p["n_folds"]`` when it has decided; None when even ``max_folds`` would not (or ``p`` has no spread to
-    project)."""
+    project). ``power``: a margin of that many standard errors of the pooled mean beyond the interval's edge
+    (0: the folds at which a mean that holds just decides, about an even chance; :data:`LAST_LOOK_POWER` for a
+    rival's last look)."""
     import math
 
-    from curate.core.stats import decision, moderated_variance, t_quantile
+    from curate.core.stats import DECIDED, decision, moderated_variance, t_quantile
     F, N = int(p.get("n_folds") or 0), int(p.get("n") or 0)
     if F == 0 or N == 0:
         return None
-    if decision(p, margin) in ("ahead", "behind", "level"):
+    if decision(p, margin, resolution) in DECIDED:
         return F
     sw, m = p.get("sd_within"), abs(float(p["mean"]))
     if sw is None or not math.isfinite(sw):
@@ -281,10 +292,24 @@ def folds_to_decide(p: dict, margin: float, max_folds: int, prior: tuple = KAPPA
         n = N * g / F
         v0 = sw * sw / n
         var, dof = moderated_variance(v0, k_folds * v0, g, n - g, kappa0, nu0)
-        half = t_quantile(0.5 + p["level"] / 2, dof) * math.sqrt(var) if var > 0 else 0.0
-        if half < m or m + half <= margin:
+        se = math.sqrt(var) if var > 0 else 0.0
+        half = t_quantile(0.5 + p["level"] / 2, dof) * se
+        reach = half + power * se
+        if reach < m or m + reach <= margin or half <= resolution:
             return g
     return None
+
+
+def next_look(p: dict, margin: float, max_folds: int, resolution: float = 0.0, last: bool = False,
+              prior: tuple = KAPPA_PRIOR) -> int | None:
+    """The fold count of a rival's next look after the interval ``p``: :func:`folds_to_decide`'s even chance; for
+    its ``last`` look, the folds at :data:`LAST_LOOK_POWER` (all ``max_folds`` where only they give an even
+    chance). None: not even ``max_folds`` give an even chance (not pursued)."""
+    even = folds_to_decide(p, margin, max_folds, prior, resolution)
+    if not last or even is None:
+        return even
+    sure = folds_to_decide(p, margin, max_folds, prior, resolution, power=LAST_LOOK_POWER)
+    return int(max_folds) if sure is None else sure
 
 
 def plan_rivals(needs: dict[str, int | None], n_folds: int, fold_units: int, unit_s: float, workers: int,
@@ -314,8 +339,9 @@ def plan_rivals(needs: dict[str, int | None], n_folds: int, fold_units: int, uni
 
 
 def decided(paired: dict) -> bool:
-    """Every rival compared is decided: ahead, behind or level (none undecided)."""
-    return bool(paired) and all(p.get("decision") in ("ahead", "behind", "level") for p in paired.values())
+    """Every rival compared is decided: ahead, behind, level or resolved (none undecided)."""
+    from curate.core.stats import DECIDED
+    return bool(paired) and all(p.get("decision") in DECIDED for p in paired.values())
 
 
 def curve_budgets(k: int, n_pool: int) -> list[int]:

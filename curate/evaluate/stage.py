@@ -7,8 +7,9 @@ registered photo from its own offset, the same method (same options) chooses the
 left, and the same field is trained on that choice, on random subsets of its size, on farthest-view sampling
 (FVS), on every n-th frame (photos in capture order) and on all the photos left, each scored on the fold's
 held-out photos. The differences are paired per held-out photo and pooled over the folds. Folds are added
-(:mod:`curate.evaluate.schedule`) until every rival is decided (ahead, behind, or level within
-``margin_db``), every photo has been held out once, or ``minutes`` are spent; ``--folds N`` trains exactly N.
+(:mod:`curate.evaluate.schedule`) until every rival is decided (ahead, behind, level within ``margin_db``, or
+its interval at most ``resolution_db`` wide on each side), every photo has been held out once, or ``minutes`` are
+spent; ``--folds N`` trains exactly N.
 Each training is a stage of its own (``RUN/evaluate/<unit>/stage.json``), so a killed evaluation resumes, and
 a later one with more time reuses them.
 
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-STOPPED = {"decided": "every rival decided", "every photo": "every photo held out once",
+STOPPED = {"decided": "every rival decided or resolved", "every photo": "every photo held out once",
            "folds asked": "the folds asked for done", "time": "the time given was spent",
            "needs time": "the folds the time holds would not decide what is undecided"}
 """Why the evaluation stopped adding folds (``protocol.stopped``), in words."""
@@ -64,7 +65,8 @@ def protocol(cfg: "RunConfig", folds: list, exported: list[int], n_registered: i
     f0 = folds[0]
     return {"holdout_every": ev.holdout_every, "n_registered": n_registered, "exported_budget": len(exported),
             "folds": [f.record(exported) for f in folds], "n_folds": len(folds), "planned_folds": planned,
-            "looks": looks, "level": level, "margin_db": ev.margin_db, "minutes": ev.minutes, "stopped": stopped,
+            "looks": looks, "level": level, "margin_db": ev.margin_db, "resolution_db": ev.resolution_db,
+            "minutes": ev.minutes, "stopped": stopped,
             "seconds": round(seconds, 1), "budget": f0.budget, "method": f0.method, "n_pool": len(f0.pool),
             "shared_with_export": f0.record(exported)["shared_with_export"],
             "holdout": sorted(c for f in folds for c in f.holdout)}
@@ -157,7 +159,8 @@ def evaluate(ctx: "RunContext") -> StageResult:
                                     executor=executor, on_trained=planner.trained, on_fold=planner.forecast)
     if stopped == "all folds" or (stopped == "decided" and not adaptive):   # --folds N: all N ran, as asked
         stopped = "every photo" if len(order) == min(ev.holdout_every, n) else "folds asked"
-    methods, paired, gap = summarize(res, folds, level, ev.margin_db, rival_folds=planner.rival_folds())
+    methods, paired, gap = summarize(res, folds, level, ev.margin_db, rival_folds=planner.rival_folds(),
+                                     resolution=ev.resolution_db)
     planner.needs_said(paired, len(folds), stopped)
     seconds = time.perf_counter() - t0
     summary = {"key": key, "inputs": inputs_of(run_dir, "evaluate"), "methods": methods, "paired": paired,
@@ -220,6 +223,11 @@ class Planner:
         self.needs_minutes: float | None = None
         self.forecast_folds: dict | None = None
 
+    def to_decide(self, p: dict, max_folds: int, last: bool = False) -> int | None:
+        """:func:`curate.evaluate.folds.next_look` of ``p`` at this evaluation's margin and resolution."""
+        from curate.evaluate.folds import next_look
+        return next_look(p, self.ev.margin_db, max_folds, self.ev.resolution_db, last)
+
     def unit_s(self) -> float | None:
         import numpy as np
         return float(np.median(self.seconds)) if self.seconds else None
@@ -244,11 +252,11 @@ class Planner:
         """After the first fold (no look: nothing is decided on it): how many folds each comparison is expected
         to need, and how long that takes here, from the prior's interval of one fold."""
         from curate.evaluate.config import RIVALS
-        from curate.evaluate.folds import folds_to_decide, summarize
+        from curate.evaluate.folds import summarize
         if len(folds) != 1 or not self.adaptive:
             return
-        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db)
-        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned)
+        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, resolution=self.ev.resolution_db)
+        needs = {r: self.to_decide(paired[f"selection-{r}"], self.planned)
                  for r in RIVALS if f"selection-{r}" in paired}
         unit_s = self.unit_s()             # None: every training so far was reused (no cost measured here)
         self.forecast_folds = needs
@@ -273,11 +281,13 @@ class Planner:
         a rival is looked at :data:`curate.evaluate.folds.LOOKS` times at most. The selection is trained in every
         fold any rival still needs (the comparisons are paired per fold). Stops when no rival is left."""
         from curate.evaluate.config import RIVALS
-        from curate.evaluate.folds import LOOKS, folds_to_decide, plan_rivals, summarize
+        from curate.core.stats import DECIDED
+        from curate.evaluate.folds import LOOKS, plan_rivals, summarize
         from curate.evaluate.schedule import Look
         F = len(folds)
         self.looked.append(F)
-        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, rival_folds=self.rival_folds())
+        _, paired, _ = summarize(results, folds, self.level, self.ev.margin_db, rival_folds=self.rival_folds(),
+                                 resolution=self.ev.resolution_db)
         due, pending = [], {}
         for r in RIVALS:
             p = paired.get(f"selection-{r}")
@@ -287,7 +297,7 @@ class Planner:
                 pending[r] = self.until[r]            # its own look is later
                 continue
             self.n_looks[r] = self.n_looks.get(r, 0) + 1
-            if p["decision"] in ("ahead", "behind", "level"):
+            if p["decision"] in DECIDED:
                 self.decided_at[r] = F
             elif self.n_looks[r] >= LOOKS or F >= self.planned or not self.adaptive:
                 self.closed_at[r] = F                  # its last look: undecided
@@ -298,13 +308,22 @@ class Planner:
         if not self.adaptive:
             self.plans.append(rec)
             return Look()
-        needs = {r: folds_to_decide(paired[f"selection-{r}"], self.ev.margin_db, self.planned) for r in due}
+        needs = {r: self.to_decide(paired[f"selection-{r}"], self.planned, last=self.n_looks[r] == LOOKS - 1)
+                 for r in due}
         left = 60 * self.ev.minutes - (time.monotonic() - self.t0)
         unit_s = self.unit_s() or 0.0
         floor = {r: min(max(needs[r], self.extend.get(r, 0)), self.planned) for r in due
                  if needs[r] is not None and self.n_looks[r] == LOOKS - 1 and self.extend.get(r, 0) > needs[r]}
         needs.update(floor)                         # a later evaluation adds the folds an earlier one said it needs
         taken, _ = plan_rivals(needs, F, self.ev.random_seeds, unit_s, self.workers, left, committed=pending)
+        # a rival's last look goes no earlier than the last fold the selection is trained to for the others: its
+        # own trainings there are all it costs, and the folds it gains are power (the drone flight's random
+        # subsets, looked at last after 7 folds, were 0.02 dB short of deciding; FVS was trained to 10 anyway)
+        horizon = max([needs[r] for r in taken] + list(pending.values()), default=F)
+        later = {r: horizon for r in taken if self.n_looks[r] == LOOKS - 1 and needs[r] < horizon}
+        if later and set(plan_rivals({**{r: needs[r] for r in taken}, **later}, F, self.ev.random_seeds, unit_s,
+                                     self.workers, left, committed=pending)[0]) == set(taken):
+            needs.update(later)
         for r in due:
             if r in taken:
                 self.until[r] = needs[r]
@@ -334,7 +353,6 @@ class Planner:
     def plan_said(self, F: int, paired: dict, needs: dict, taken: list, pending: dict) -> str:
         """What a look decided and plans, one part per rival (the plan lines the terminal shows)."""
         from curate.evaluate.config import RIVALS
-        from curate.evaluate.folds import folds_to_decide
         unit_s, seeds = self.unit_s(), self.ev.random_seeds
         parts = []
         for r in RIVALS:
@@ -358,7 +376,7 @@ class Planner:
                 parts.append(f"{w}: undecided after {self.closed_at.get(r, F)} folds")
                 continue
             if needs[r] is None:
-                far = folds_to_decide(p, self.ev.margin_db, FAR_FOLDS) if p.get("mean") is not None else None
+                far = self.to_decide(p, FAR_FOLDS) if p.get("mean") is not None else None
                 parts.append(f"{w}: would need ~{far} folds, more than the capture's {self.planned}: not pursued"
                              if far else f"{w}: would stay undecided even with every photo held out: not pursued")
                 continue
@@ -372,13 +390,12 @@ class Planner:
         (``paired[...]["needs"]``: ``folds`` more, ``minutes``; ``folds`` None: not even with every photo held
         out); and the minutes all of them need together (``needs_minutes``: the folds trained with the selection
         and each rival that still needs them)."""
-        from curate.evaluate.folds import folds_to_decide
         unit_s = self.unit_s()
         need: dict[str, int] = {}
         for key, p in paired.items():
             if p.get("decision") != "undecided" or p.get("mean") is None:
                 continue
-            g = folds_to_decide(p, self.ev.margin_db, self.planned)
+            g = self.to_decide(p, self.planned)
             more = None if g is None else max(g - int(p.get("n_folds") or n_folds), 0)
             r = key.split("-", 1)[1]
             units = self.ev.random_seeds if r == "random" else 1

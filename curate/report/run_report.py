@@ -310,10 +310,13 @@ def _method_table(run: _Run) -> str:
                    '<th>95% interval</th><th class="l">in words</th><th>photos</th></tr>' + "".join(pr) + "</table>")
         if est.get("n_folds"):
             margin = est.get("margin_db") or 0.3
+            res = est.get("resolution_db")
+            resolved = (f" (measured to ±{res:g} dB or closer: the evaluation stopped training that rival, its "
+                        "difference is known that closely, its sign is not)" if res else "")
             out.append(f'<p class="small">Ahead or behind: the interval excludes 0. Level with: it lies within '
-                       f'±{margin:g} dB. Not told apart: neither; more folds would narrow it. The interval counts '
-                       "each fold as one draw (its trainings share their noise), and is widened so that stopping at "
-                       f"the first decided look keeps the verdict's error at 5% (each look at "
+                       f'±{margin:g} dB. Not told apart: neither{resolved}; more folds would narrow it. The interval '
+                       "counts each fold as one draw (its trainings share their noise), and is widened so that "
+                       f"stopping at the first decided look keeps the verdict's error at 5% (each look at "
                        f"{100 * (est.get('level') or 0.95):.1f}%).</p>")
     gap = run.rep.get("gap_closed")
     if gap is not None:

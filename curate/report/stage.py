@@ -111,7 +111,7 @@ def write_report(ctx: "RunContext") -> StageResult:
                            "n_holdout": len(pr.get("holdout", [])), "holdout_every": pr.get("holdout_every"),
                            "method": pr.get("method"), "shared_with_export": pr.get("shared_with_export"),
                            **{k: pr.get(k) for k in ("n_folds", "planned_folds", "stopped", "minutes", "level",
-                                                     "margin_db", "seconds") if k in pr}}
+                                                     "margin_db", "resolution_db", "seconds") if k in pr}}
         need = (pr.get("plan") or {}).get("needs_minutes")
         if need is not None:  # what the undecided comparisons need here, as the evaluation projected it
             rep["estimate"]["needs_minutes"] = need

@@ -1,6 +1,7 @@
 """The verdict on a run, in words: what was exported, how much of the scene it sees, and how it
 compares with random subsets, farthest-view sampling (FVS) and every n-th frame, each with its 95% interval
-and what that interval decides (ahead, behind, level within a margin, or not told apart).
+and what that interval decides (ahead, behind, level within a margin, or not told apart: measured closely enough
+to stop, resolved, or not).
 
 One function, :func:`verdict`, over ``report.json``; the report's first screen and the terminal's
 last lines of ``curate run`` both print it, so they never disagree. No heavy imports.
@@ -17,7 +18,8 @@ RIVALS = (("random", "random subsets of the same size", "random"), ("fvs", "fart
 FEW_VIEWS = 20
 """Under this many held-out photos in all, the verdict says the capture is too small to judge closely."""
 
-WORDS = {"ahead": "ahead of", "behind": "behind", "level": "level with", "undecided": "not told apart from"}
+WORDS = {"ahead": "ahead of", "behind": "behind", "level": "level with", "resolved": "not told apart from",
+         "undecided": "not told apart from"}
 """What a decision (:func:`curate.core.stats.decision`) reads as, before the rival's name."""
 
 MARGIN_DB = 0.3
@@ -36,7 +38,7 @@ def decided_as(p: dict | None) -> str | None:
 def compare(p: dict | None) -> str | None:
     """'ahead of' / 'behind' / 'level with' / 'not told apart from' for a paired difference ``p`` (``mean``,
     ``lo``, ``hi``: its interval): ahead or behind where the interval excludes 0, level with where it lies
-    within the margin of 0, not told apart otherwise; None without one."""
+    within the margin of 0, not told apart otherwise (resolved or undecided); None without one."""
     d = decided_as(p)
     return WORDS[d] if d else None
 
@@ -89,7 +91,9 @@ def estimate_said(est: dict, run_dir: str) -> str:
            "photos.")
     stopped = est.get("stopped")
     if stopped == "decided":
-        out += " It stopped adding folds when every rival was decided.)"
+        res = est.get("resolution_db")
+        out += (" It stopped adding folds when every rival was decided"
+                + (f" or its difference measured to ±{res:g} dB" if res else "") + ".)")
     elif stopped == "needs time" and not est.get("needs_minutes") and not est.get("needs_folds"):
         out += (f" It stopped after {n_f} folds: from what they show, even every photo held out would not decide the "
                 "rest.)")
@@ -141,7 +145,8 @@ def verdict(rep: dict) -> dict:
             if w is None:
                 continue
             against[key] = w
-            within = f", within {p.get('margin', MARGIN_DB):g} dB" if decided_as(p) == "level" else ""
+            within = (f", within {p.get('margin', MARGIN_DB):g} dB" if decided_as(p) == "level" else
+                      f", measured to ±{(p['hi'] - p['lo']) / 2:.2f} dB" if decided_as(p) == "resolved" else "")
             parts.append(f"{w} {words}{within} ({_db(p['mean'])}, {_interval(p)}{_needs(p)})")
             short.append(f"{w} {brief} {_db(p['mean'])}" + (f" [{p['lo']:+.2f}, {p['hi']:+.2f}]" if _finite(p) else ""))
             if decided_as(p) == "undecided":
