@@ -530,6 +530,10 @@ def test_a_resolved_verdict_says_how_closely_it_was_measured_and_asks_for_no_mor
     assert "not told apart from farthest-view sampling (FVS), measured to ±0.47 dB (+0.15 dB" in v["quality"]
     assert "more folds" not in v["quality"]
     assert "when every rival was decided or its difference measured to ±0.5 dB" in v["quality"]
+    rep["estimate"] = {**rep["estimate"], "stopped": "folds asked"}         # --folds 4, every rival decided there
+    assert "trained the 4 folds asked for" not in verdict(rep)["quality"]
+    rep["paired"]["selection-fvs"] = {**rep["paired"]["selection-fvs"], "decision": "undecided"}
+    assert "It trained the 4 folds asked for: `curate evaluate RUN --folds 0` adds folds" in verdict(rep)["quality"]
 
 
 def test_the_evaluation_trains_the_cheaper_field_and_the_refining_field_keeps_its_own():

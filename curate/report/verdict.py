@@ -75,8 +75,9 @@ def _finite(p: dict) -> bool:
     return all(isinstance(p.get(k), (int, float)) and math.isfinite(p[k]) for k in ("lo", "hi"))
 
 
-def estimate_said(est: dict, run_dir: str) -> str:
-    """How the estimate was made and why it stopped, for a person (``report.json``'s ``estimate``)."""
+def estimate_said(est: dict, run_dir: str, undecided: bool = True) -> str:
+    """How the estimate was made and why it stopped, for a person (``report.json``'s ``estimate``); ``undecided``:
+    some comparison is left undecided (more folds are offered only then)."""
     if not est.get("budget"):
         return ""
     n_f, planned = est.get("n_folds"), est.get("planned_folds")
@@ -104,7 +105,7 @@ def estimate_said(est: dict, run_dir: str) -> str:
                  f" It stopped after {n_f} folds: the {est.get('minutes', 0):g} minutes given would not decide the "
                  "rest")
                 + f": `curate evaluate {run_dir} --eval-minutes {more:g}` adds folds, reusing the trainings done.)")
-    elif stopped == "folds asked" and n_f < (est.get("holdout_every") or n_f):
+    elif stopped == "folds asked" and n_f < (est.get("holdout_every") or n_f) and undecided:
         out += (f" It trained the {n_f} folds asked for: `curate evaluate {run_dir} --folds 0` adds folds until "
                 "every rival is decided.)")
     else:
@@ -163,7 +164,7 @@ def verdict(rep: dict) -> dict:
             few = (" Every photo has been held out once: on this capture the held-out photos differ too much from "
                    "one another to tell these subsets apart.")
         quality = ("On held-out photos the selection is " + "; ".join(parts) + gap_txt + "."
-                   + estimate_said(est, rep.get("run_dir", "RUN")) + few) if parts else \
+                   + estimate_said(est, rep.get("run_dir", "RUN"), bool(undecided)) + few) if parts else \
             "The evaluation has no paired comparison (too few held-out views)."
         short_line = "; ".join(short) + (f"; gap closed {100 * gap:.0f}%" if gap_txt else "") + \
             (f"; {est['n_folds']} of {est['planned_folds']} folds" if est.get("n_folds") else "")
