@@ -109,11 +109,11 @@ def photo_scene(textures: tuple[str, ...], tex_metres: float) -> PhotoScene:
 
 
 def _render_chunk(args) -> int:
-    textures, tex_metres, n, folder, idx = args
+    textures, tex_metres, n, folder, idx, width = args
     from PIL import Image
     from research.bench.bench_mapping import object_orbit
     scene = photo_scene(textures, tex_metres)
-    cams = object_orbit(n, 0)
+    cams = object_orbit(n, 0, width=width, height=round(width * 533 / 800))
     for i in idx:
         rgb, _ = scene.render(cams[int(i)])
         dst = Path(folder) / cams.names[i]
@@ -122,16 +122,17 @@ def _render_chunk(args) -> int:
     return len(idx)
 
 
-def render(work: Path, textures: list[str], tex_metres: float, n: int, jobs: int) -> Path:
-    """The capture's folder (``object_photo_s0_n<n>``, named so bench_mapping's truth reader finds the seed)."""
+def render(work: Path, textures: list[str], tex_metres: float, n: int, jobs: int, width: int = 800) -> Path:
+    """The capture's folder (``object_photo_s0_n<n>``, named so bench_mapping's truth reader finds the seed;
+    ``_w<width>`` added past 800 pixels)."""
     from multiprocessing import Pool
     from research.bench.bench_mapping import object_orbit
-    folder = work / "frames" / f"object_photo_s0_n{n}"
+    folder = work / "frames" / (f"object_photo_s0_n{n}" + (f"_w{width}" if width != 800 else ""))
     folder.mkdir(parents=True, exist_ok=True)
-    cams = object_orbit(n, 0)
+    cams = object_orbit(n, 0, width=width, height=round(width * 533 / 800))
     np.save(folder / "truth.npy", cams.c2w)
     todo = [i for i in range(n) if not (folder / cams.names[i]).is_file()]
-    chunks = [(tuple(textures), tex_metres, n, str(folder), todo[a:a + 5]) for a in range(0, len(todo), 5)]
+    chunks = [(tuple(textures), tex_metres, n, str(folder), todo[a:a + 5], width) for a in range(0, len(todo), 5)]
     done = 0
     if chunks:
         with Pool(jobs) as pool:
@@ -166,9 +167,11 @@ def main(argv=None) -> int:
     ap.add_argument("--mappers", nargs="*", default=[])
     ap.add_argument("--sfm-args", nargs="*", default=[], help="extra `curate sfm` flags")
     ap.add_argument("--render-only", action="store_true")
+    ap.add_argument("--width", type=int, default=800, help="photo width (height 2/3 of it); 1600: the full SIFT "
+                    "budget's features")
     a = ap.parse_args(argv)
     from research.bench.bench_mapping import run_map, run_sfm
-    frames = render(a.work, [str(Path(t).resolve()) for t in a.textures], a.tex_metres, a.n, a.jobs)
+    frames = render(a.work, [str(Path(t).resolve()) for t in a.textures], a.tex_metres, a.n, a.jobs, a.width)
     if a.render_only:
         return 0
     (a.work / "results").mkdir(parents=True, exist_ok=True)

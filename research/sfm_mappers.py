@@ -33,7 +33,8 @@ def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tup
     if kind in ("incremental", "incremental:colmap_ba"):   # curate's options; ':colmap_ba': COLMAP's BA schedule
         from curate.sfm.reconstruction import incremental_options
         from curate.sfm.config import SfmConfig
-        cfg = SfmConfig(seed=seed, **({"global_ba_above": 10**9} if kind.endswith("colmap_ba") else {}))
+        colmap_ba = {"global_ba_above": 10**9, "global_ba_above_observations": 10**12}
+        cfg = SfmConfig(seed=seed, **(colmap_ba if kind.endswith("colmap_ba") else {}))
         n = len(pycolmap.Database.open(db).read_all_images())
         models = pycolmap.incremental_mapping(db, images, out, options=incremental_options(cfg, n))
     elif kind == "auto":  # curate's own choice (SfmConfig.mapper = 'auto'), what `curate sfm` keeps

@@ -124,21 +124,54 @@ def test_guided_matching_is_on_for_a_sequence_of_frames_by_default(asked, sequen
         small_cfg(guided_matching="sometimes")
 
 
-def test_large_pools_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
-    """A pool past global_ba_above photos gets the sparser global adjustment schedule (the global
-    adjustments are most of a long walk's mapping time); a small pool keeps COLMAP's own, as before.
-    Every pool keeps COLMAP's two local refinements: one folded office.mp4 cut into two takes
-    (docs/sfm.md)."""
+def test_expected_observations_count_each_matched_keypoint_once(tmp_path):
+    """The observations the matches promise: keypoints with a verified inlier match, each counted once however many
+    pairs it is matched in, in pairs with at least min_num_matches inliers; a database without pairs promises 0."""
+    from curate.sfm.reconstruction import expected_observations
+    db = pycolmap.Database.open(tmp_path / "d.db")
+    cid = db.write_camera(pycolmap.Camera(model="SIMPLE_PINHOLE", width=100, height=100, params=[100, 50, 50]))
+    ids = []
+    for i in range(3):
+        ids.append(db.write_image(pycolmap.Image(name=f"{i}.jpg", camera_id=cid)))
+        db.write_keypoints(ids[-1], np.random.default_rng(i).random((40, 2)).astype(np.float32) * 100)
+    db.close()
+    assert expected_observations(tmp_path / "d.db", 15) == 0
+    db = pycolmap.Database.open(tmp_path / "d.db")
+    for (a, b), pairs in (((0, 1), [(k, k) for k in range(20)]), ((1, 2), [(k, k + 1) for k in range(10, 30)]),
+                          ((0, 2), [(k, k) for k in range(5)])):          # the last: under 15 inliers
+        g = pycolmap.TwoViewGeometry()
+        g.config = 2
+        g.inlier_matches = np.array(pairs, dtype=np.uint32)
+        db.write_two_view_geometry(ids[a], ids[b], g)
+    db.close()
+    # image 0: keypoints 0-19; image 1: 0-19 and 10-29 (30 distinct); image 2: 11-30
+    assert expected_observations(tmp_path / "d.db", 15) == 20 + 30 + 20
+    assert expected_observations(tmp_path / "d.db", 21) == 0
+
+
+def test_matches_with_many_observations_adjust_the_whole_model_less_often(monkeypatch, tmp_path):
+    """Matches that promise more observations than global_ba_above_observations get the sparser global adjustment
+    schedule (a global adjustment costs its observations, not its photos), whatever the count of photos, as do pools
+    past global_ba_above photos; the rest keep COLMAP's own. Every pool keeps COLMAP's two local refinements: one
+    folded office.mp4 cut into two takes (docs/sfm.md)."""
     from curate.sfm import reconstruction as sfm
     colmap_default = pycolmap.IncrementalPipelineOptions()
     got: dict = {}
     monkeypatch.setattr(pycolmap, "incremental_mapping", lambda *a, **kw: got.update(kw) or {})
-    cfg = small_cfg(global_ba_above=300)
+    cfg = small_cfg()
     assert cfg.global_ba_growth > colmap_default.ba_global_frames_ratio   # the default is the sparser schedule
-    for n, ratio, refinements in [(300, colmap_default.ba_global_frames_ratio,
-                                   colmap_default.ba_global_max_refinements),
-                                  (301, cfg.global_ba_growth, cfg.global_ba_refinements)]:
-        sfm.map_incremental(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False)
+    promised = {"n": 0}
+    monkeypatch.setattr(sfm, "expected_observations", lambda db, m: promised["n"])
+    cheaper = (cfg.global_ba_growth, cfg.global_ba_refinements)
+    colmap = (colmap_default.ba_global_frames_ratio, colmap_default.ba_global_max_refinements)
+    for obs, n, (ratio, refinements) in [(cfg.global_ba_above_observations, cfg.global_ba_above, colmap),
+                                         (cfg.global_ba_above_observations + 1, 40, cheaper),
+                                         (1000, cfg.global_ba_above + 1, cheaper)]:
+        promised["n"] = obs
+        schedule: dict = {}
+        sfm.map_incremental(cfg, tmp_path / "database.db", tmp_path, tmp_path / "m", n, progress=False,
+                            schedule=schedule)
+        assert schedule == {"expected_observations": obs, "global_ba_growth": pytest.approx(ratio)}
         o = got["options"]
         assert o.ba_global_frames_ratio == pytest.approx(ratio) and o.ba_global_points_ratio == pytest.approx(ratio)
         assert o.ba_global_max_refinements == refinements

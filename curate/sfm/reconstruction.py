@@ -38,10 +38,33 @@ def seeded_pipeline_options(cfg: SfmConfig):
     return opts
 
 
-def incremental_options(cfg: SfmConfig, n_images: int):
-    """The incremental mapper's options for a pool of ``n_images`` photos: :func:`seeded_pipeline_options`,
-    the initial pair's inliers (``cfg.init_min_num_inliers``), the principal point held; past
-    ``cfg.global_ba_above`` photos, a global bundle adjustment each time the model grows by the factor
+def expected_observations(db: Path, min_num_matches: int = 15) -> int:
+    """The observations the matches of ``db`` promise a model: keypoints with at least one verified inlier match,
+    in the image pairs with at least ``min_num_matches`` inliers (what the incremental mapper reads). A model
+    keeps 47-84% of them (the skull, office.mp4, the fox, the drone flight); the cost of a global adjustment
+    follows the observations, not the photos (docs/sfm.md#large-pools)."""
+    import numpy as np
+    pycolmap = load_pycolmap()
+    with pycolmap.Database.open(db) as dbh:
+        seen = {im.image_id: np.zeros(dbh.num_keypoints_for_image(im.image_id), bool)
+                for im in dbh.read_all_images()}
+        ids, geoms = dbh.read_two_view_geometries()
+    for pid, g in zip(ids, geoms):
+        m = g.inlier_matches
+        if m is None or len(m) < max(min_num_matches, 1):
+            continue
+        a, b = pycolmap.pair_id_to_image_pair(pid)
+        if a in seen and b in seen:
+            seen[a][m[:, 0]] = True
+            seen[b][m[:, 1]] = True
+    return int(sum(int(v.sum()) for v in seen.values()))
+
+
+def incremental_options(cfg: SfmConfig, n_images: int, n_observations: int = 0):
+    """The incremental mapper's options for a pool of ``n_images`` photos whose matches promise ``n_observations``
+    (:func:`expected_observations`): :func:`seeded_pipeline_options`, the initial pair's inliers
+    (``cfg.init_min_num_inliers``), the principal point held; past ``cfg.global_ba_above`` photos or
+    ``cfg.global_ba_above_observations``, a global bundle adjustment each time the model grows by the factor
     ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
     Each new photo's local adjustment keeps COLMAP's two refinements (one folded office.mp4 cut into two
     takes: docs/sfm.md).
@@ -52,24 +75,31 @@ def incremental_options(cfg: SfmConfig, n_images: int):
     opts = seeded_pipeline_options(cfg)
     opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
     opts.ba_refine_principal_point = False
-    if n_images > cfg.global_ba_above:
+    if n_images > cfg.global_ba_above or n_observations > cfg.global_ba_above_observations:
         opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth
         opts.ba_global_max_refinements = cfg.global_ba_refinements
     return opts
 
 
 def map_incremental(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool,
-         adjustments: list | None = None):
+         adjustments: list | None = None, schedule: dict | None = None):
     """{id: Reconstruction} of COLMAP's incremental mapper on the matches of ``db``, with curate's options
     (:func:`incremental_options`). Pools of more photos than Ceres' direct-solve limit (1,000) are mapped by
     :func:`curate.sfm.mapping.incremental_mapping`, the same steps with each global adjustment's solver chosen
     from the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
-    global adjustment past the limit (photos, fill per photo, solver, seconds)."""
+    global adjustment past the limit (photos, fill per photo, solver, seconds); ``schedule`` (when given) the
+    observations the matches promise and the growth between global adjustments (``expected_observations``,
+    ``global_ba_growth``: COLMAP's or ``cfg.global_ba_growth``)."""
     pycolmap = load_pycolmap()
     from tqdm import tqdm
 
     from curate.sfm import mapping
-    opts = incremental_options(cfg, n_images)
+    n_obs = expected_observations(db, cfg.min_num_matches)
+    opts = incremental_options(cfg, n_images, n_obs)
+    logger.info("sfm: %d photos, the matches promise %d observations: a global adjustment each time the model grows "
+                "by %g", n_images, n_obs, opts.ba_global_frames_ratio)
+    if schedule is not None:
+        schedule.update(expected_observations=n_obs, global_ba_growth=round(float(opts.ba_global_frames_ratio), 3))
     limit = mapping.ceres_direct_limit()
     bar = tqdm(total=n_images, desc="mapping", unit="img", disable=not progress, leave=False)
     count = [0]
@@ -116,7 +146,8 @@ def model_sizes(models: dict) -> list[int]:
 
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
     """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
-    kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), and past 1,000 photos
+    kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), for the incremental mapper
+    ``ba_schedule`` (:func:`map_incremental`'s ``schedule``), and past 1,000 photos
     ``global_adjustments`` (the incremental mapper's solver of each global adjustment, :func:`map_incremental`).
 
     ``auto`` runs the incremental mapper and, when its largest model holds less than
@@ -137,7 +168,9 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     if cfg.mapper != "global":
         t = time.perf_counter()
         adjustments: list = []
-        inc = map_incremental(cfg, db, images, work / "incremental", n_images, cfg.progress, adjustments)
+        schedule: dict = {}
+        inc = map_incremental(cfg, db, images, work / "incremental", n_images, cfg.progress, adjustments, schedule)
+        stats["ba_schedule"] = schedule
         tried["incremental"] = {"model_sizes": model_sizes(inc), "seconds": round(time.perf_counter() - t, 2)}
         if adjustments:
             stats["global_adjustments"] = adjustments

@@ -484,7 +484,8 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
             elif kind == "hierarchical":
                 models = map_hierarchical(cfg, db, sfm / "images", Path(tmp) / "m")
             elif kind == "incremental:colmap_ba":   # COLMAP's global adjustment schedule at every pool size
-                models = C.map_incremental(SfmConfig(progress=False, global_ba_above=10**9), db, sfm / "images",
+                colmap_ba = SfmConfig(progress=False, global_ba_above=10**9, global_ba_above_observations=10**12)
+                models = C.map_incremental(colmap_ba, db, sfm / "images",
                                            Path(tmp) / "m", n_kept, False)
             elif kind == "auto":
                 stats: dict = {}
