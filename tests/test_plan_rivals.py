@@ -176,15 +176,16 @@ def _null_ish(seed: int, mean: float):
 
 
 def test_a_later_evaluation_trains_to_the_folds_the_earlier_verdict_asked_for():
-    """Undecided at its second look (7 folds), random subsets are projected to need 9: their last look is there.
-    When an earlier evaluation of the same selection said they need 12 (``curate evaluate RUN --eval-minutes M``
-    after a verdict that said so), the last look is at 12 instead, so the command adds the folds it promised."""
+    """Undecided at its second look (5 folds), random subsets' last look is projected at 9 folds (at 80% power;
+    --resolution-db 0, so that only the sign or the margin decides). When an earlier evaluation of the same
+    selection said they need 12 (``curate evaluate RUN --eval-minutes M`` after a verdict that said so), the last
+    look is at 12 instead, so the command adds the folds it promised."""
     from curate.evaluate.stage import Planner
-    folds, res = _null_ish(0, 0.35)
+    folds, res = _null_ish(2, 0.45)
     for extend, last in (({}, 9), ({"random": 12}, 12)):
-        pl = Planner(EvalConfig(minutes=60), 14, look_level(True, 14), True, say=lambda m: None)
+        pl = Planner(EvalConfig(minutes=60, resolution_db=0.0), 14, look_level(True, 14), True, say=lambda m: None)
         pl.extend = extend
         first = pl.look(folds[:2], res)
-        assert not first.stop and first.until["random"] == 7
-        second = pl.look(folds[:7], res)
+        assert not first.stop and first.until["random"] == 5
+        second = pl.look(folds[:5], res)
         assert not second.stop and second.until["random"] == second.until["selection"] == last
