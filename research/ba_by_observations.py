@@ -13,6 +13,9 @@ templering, office; or a rendered capture's folder with its ``truth.npy``).
 
     python -m research.ba_by_observations RUN [RUN ...] [--truth RUN=PATH ...] [--repeat N]
 
+With ``--repeat N`` each schedule maps N times; each repeat after the first records how far its poses are from the
+first's (``against_first``).
+
 Options that choose the schedule are set on :class:`curate.sfm.config.SfmConfig` by name (``--colmap`` and
 ``--cheaper``, FIELD=VALUE each), so the script runs on the code before and after the rule changed.
 """
@@ -105,11 +108,15 @@ def main(argv=None) -> int:
     truths = dict(t.split("=", 1) for t in a.truth)
     for run in a.runs:
         row: dict = {"run": str(run), "expected_observations": expected_observations(run / "sfm" / "database.db")}
-        cams = {}
+        cams, first = {}, {}
         for k in range(a.repeat):
             for label, ov in (("colmap", _overrides(a.colmap)), ("cheaper", _overrides(a.cheaper))):
                 rec = map_once(run, ov)
                 cams[label] = rec.pop("cams")
+                if k == 0:
+                    first[label] = cams[label]
+                else:                               # the same matches mapped again: how far it moved
+                    rec["against_first"] = _errors(cams[label], first[label])
                 row.setdefault(label, []).append(rec)
                 print(f"{run.name} {label} #{k}: {rec}", file=sys.stderr, flush=True)
         row["cheaper_vs_colmap"] = _errors(cams["cheaper"], cams["colmap"])
