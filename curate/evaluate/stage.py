@@ -232,6 +232,15 @@ class Planner:
         import numpy as np
         return float(np.median(self.seconds)) if self.seconds else None
 
+    def rival_units(self, r: str) -> int:
+        """Trainings of rival ``r`` in a fold: ``--random-seeds`` for random subsets, one for the others."""
+        return self.ev.random_seeds if r == "random" else 1
+
+    def rival_fold_s(self, r: str, unit_s: float) -> float:
+        """Seconds here of one more fold for rival ``r`` alone: its trainings and the selection's, ``unit_s`` each,
+        ``workers`` at a time."""
+        return (1 + self.rival_units(r)) * unit_s / max(self.workers, 1)
+
     def fold_s(self, n_units: int) -> float | None:
         u = self.unit_s()
         return None if u is None else n_units * u / max(self.workers, 1)
@@ -268,8 +277,7 @@ class Planner:
             if unit_s is None:
                 parts.append(f"{RIVAL_WORDS[r]}: about {g} folds")
                 continue
-            per = (1 + (self.ev.random_seeds if r == "random" else 1)) * unit_s / max(self.workers, 1)
-            parts.append(f"{RIVAL_WORDS[r]}: about {g} folds ({_minutes(g * per)} here)")
+            parts.append(f"{RIVAL_WORDS[r]}: about {g} folds ({_minutes(g * self.rival_fold_s(r, unit_s))} here)")
         self.say("evaluate: from the first fold, a decision needs " + "; ".join(parts))
 
     def look(self, folds: list, results: dict):
@@ -353,7 +361,7 @@ class Planner:
     def plan_said(self, F: int, paired: dict, needs: dict, taken: list, pending: dict) -> str:
         """What a look decided and plans, one part per rival (the plan lines the terminal shows)."""
         from curate.evaluate.config import RIVALS
-        unit_s, seeds = self.unit_s(), self.ev.random_seeds
+        unit_s = self.unit_s()
         parts = []
         for r in RIVALS:
             p = paired.get(f"selection-{r}")
@@ -366,10 +374,9 @@ class Planner:
             if r in pending:
                 parts.append(f"{w}: looked at again after {pending[r]} folds, as planned")
                 continue
-            per = (1 + (seeds if r == "random" else 1)) * (unit_s or 0.0) / max(self.workers, 1)
+            more = None if needs.get(r) is None else needs[r] - F
+            cost = f", ~{_minutes(more * self.rival_fold_s(r, unit_s))} here" if unit_s and more is not None else ""
             if r in taken:
-                more = needs[r] - F
-                cost = f", ~{_minutes(more * per)} here" if unit_s else ""
                 parts.append(f"{w}: {more} more folds{cost}")
                 continue
             if r not in needs:                          # closed at an earlier look, or its last look now
@@ -380,8 +387,6 @@ class Planner:
                 parts.append(f"{w}: would need ~{far} folds, more than the capture's {self.planned}: not pursued"
                              if far else f"{w}: would stay undecided even with every photo held out: not pursued")
                 continue
-            more = needs[r] - F
-            cost = f", ~{_minutes(more * per)} here" if unit_s else ""
             parts.append(f"{w}: would need {more} more folds{cost}, beyond --eval-minutes: not pursued")
         return f"evaluate: after {F} folds: " + "; ".join(parts)
 
@@ -398,16 +403,14 @@ class Planner:
             g = self.to_decide(p, self.planned)
             more = None if g is None else max(g - int(p.get("n_folds") or n_folds), 0)
             r = key.split("-", 1)[1]
-            units = self.ev.random_seeds if r == "random" else 1
-            minutes = None if (more is None or unit_s is None) else \
-                more * (1 + units) * unit_s / max(self.workers, 1) / 60
+            minutes = None if (more is None or unit_s is None) else more * self.rival_fold_s(r, unit_s) / 60
             p["needs"] = {"folds": more, "minutes": None if minutes is None else round(minutes, 1)}
             self.needs[key] = p["needs"]
             if more:
                 need[r] = more
         if need and unit_s is not None:
             self.needs_minutes = round(sum(
-                1 + sum(self.ev.random_seeds if r == "random" else 1 for r in need if need[r] >= g)
+                1 + sum(self.rival_units(r) for r in need if need[r] >= g)
                 for g in range(1, max(need.values()) + 1)) * unit_s / max(self.workers, 1) / 60, 1)
 
     def record(self) -> dict:
