@@ -63,11 +63,10 @@ def key(ctx: "RunContext") -> "Keyed":
 def occupancy_parts(cfg: "RunConfig", run_dir: Path, train_on: Sequence[int] | None = None) -> "Keyed":
     """What the occupancy's key holds: its options, the box, the cameras the field trains on (``train_on``), and
     the field's training settings only when the plan needs a field (:attr:`curate.core.plan.Plan.field`; a grid
-    refined by a field serves a run that needs none). ``state``: (the SfM result, whether a field is needed, why)."""
+    refined by a field serves a run that needs none). ``state``: (whether a field is needed, why). Nothing of the SfM
+    result is read here: a stage that is up to date is skipped on its key alone."""
     from curate.core.plan import plan_of_run
     from curate.core.runner import Keyed
-    from curate.sfm.io import load_sfm
-    sfm = load_sfm(run_dir)
     plan = plan_of_run(cfg, run_dir)
     field_needed, why = plan.field, plan.field_why
     parts = {"occupancy": cfg.occupancy, "refine": cfg.refine, "band": cfg.surface_band, "train": train_settings(cfg)}
@@ -76,8 +75,8 @@ def occupancy_parts(cfg: "RunConfig", run_dir: Path, train_on: Sequence[int] | N
     if train_on is not None:
         parts["train_on"] = [int(i) for i in train_on]
     if field_needed:
-        return Keyed(parts, state=(sfm, True, why))
-    return Keyed({**parts, "train": None}, serves=parts, state=(sfm, False, why))
+        return Keyed(parts, state=(True, why))
+    return Keyed({**parts, "train": None}, serves=parts, state=(False, why))
 
 
 def occupancy(cfg: "RunConfig", run_dir: Path, force: bool = False, train_on: Sequence[int] | None = None
@@ -99,12 +98,13 @@ def compute(ctx: "RunContext", keyed: "Keyed") -> "Done":
     from curate.core.stage import write_json_atomic, writing
     from curate.field.train import default_box, train_field
     from curate.occupancy.masks import occupancy_from_points, refine_occupancy
-    from curate.sfm.io import image_paths
+    from curate.sfm.io import image_paths, load_sfm
 
     cfg, run_dir = ctx.cfg, Path(ctx.run_dir)
     d = RunPaths(run_dir).occupancy
     ev = cfg.evaluate
-    sfm, field_needed, why = keyed.state
+    sfm = load_sfm(run_dir)
+    field_needed, why = keyed.state
     train_on = keyed.parts.get("train_on")
     train_part = keyed.parts["train"]
     box = default_box(sfm.cameras)
