@@ -86,14 +86,6 @@ def _errors(est, ref) -> dict:
             "n_over_5deg": int((np.asarray(e["rotation_deg"]) > 5).sum())}
 
 
-def _overrides(items: list[str]) -> dict:
-    out = {}
-    for it in items:
-        k, v = it.split("=", 1)
-        out[k] = type(getattr(__import__("curate.sfm.config", fromlist=["SfmConfig"]).SfmConfig(), k))(float(v))
-    return out
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path)
@@ -105,12 +97,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1)
     a = ap.parse_args(argv)
     from curate.sfm.reconstruction import expected_observations
+    from research.sfm_mappers import sfm_config_overrides
     truths = dict(t.split("=", 1) for t in a.truth)
     for run in a.runs:
         row: dict = {"run": str(run), "expected_observations": expected_observations(run / "sfm" / "database.db")}
         cams, first = {}, {}
         for k in range(a.repeat):
-            for label, ov in (("colmap", _overrides(a.colmap)), ("cheaper", _overrides(a.cheaper))):
+            for label, ov in (("colmap", sfm_config_overrides(a.colmap)), ("cheaper", sfm_config_overrides(a.cheaper))):
                 rec = map_once(run, ov)
                 cams[label] = rec.pop("cams")
                 if k == 0:
