@@ -529,6 +529,8 @@ def test_a_resolved_verdict_says_how_closely_it_was_measured_and_asks_for_no_mor
     assert v["against"] == {"random": "ahead of", "fvs": "not told apart from"}
     assert "not told apart from farthest-view sampling (FVS), measured to ±0.47 dB (+0.15 dB" in v["quality"]
     assert "more folds" not in v["quality"]
+    rep["paired"]["selection-fvs"]["level"] = 1 - 0.05 / 3                # a look of an evaluation that adds folds
+    assert "(+0.15 dB, 98.3% interval -0.32 to +0.62)" in verdict(rep)["quality"]
     assert "when every rival was decided or its difference measured to ±0.5 dB" in v["quality"]
     rep["estimate"] = {**rep["estimate"], "stopped": "folds asked"}         # --folds 4, every rival decided there
     assert "trained the 4 folds asked for" not in verdict(rep)["quality"]

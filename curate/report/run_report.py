@@ -306,8 +306,10 @@ def _method_table(run: _Run) -> str:
             pr.append(f'<tr><td class="l">{esc(names.get(k, k))}</td><td>{fmt_num(p.get("mean"), 2, True)}</td>'
                       f'<td>{fmt_num(p.get("lo"), 2, True)} .. {fmt_num(p.get("hi"), 2, True)}</td>'
                       f'<td class="l">{esc(compare(p) or "—")}</td><td>{esc(p.get("n", "—"))}</td></tr>')
+        level = f'{100 * float(est.get("level") or 0.95):.3g}%'
         out.append('<table><tr><th class="l">difference, per held-out photo</th><th>mean (dB)</th>'
-                   '<th>95% interval</th><th class="l">in words</th><th>photos</th></tr>' + "".join(pr) + "</table>")
+                   f'<th>{level} interval</th><th class="l">in words</th><th>photos</th></tr>'
+                   + "".join(pr) + "</table>")
         if est.get("n_folds"):
             margin = est.get("margin_db") or 0.3
             res = est.get("resolution_db")

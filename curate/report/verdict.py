@@ -1,5 +1,6 @@
 """The verdict on a run, in words: what was exported, how much of the scene it sees, and how it
-compares with random subsets, farthest-view sampling (FVS) and every n-th frame, each with its 95% interval
+compares with random subsets, farthest-view sampling (FVS) and every n-th frame, each with its interval (95%, or 98.3%
+at the looks of an evaluation that stops when decided)
 and what that interval decides (ahead, behind, level within a margin, or not told apart: measured closely enough
 to stop, resolved, or not).
 
@@ -51,7 +52,13 @@ def _interval(p: dict) -> str:
     lo, hi = p.get("lo"), p.get("hi")
     if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
         return "no interval: too few held-out views"
-    return f"95% interval {lo:+.2f} to {hi:+.2f}"
+    return f"{_level(p)} interval {lo:+.2f} to {hi:+.2f}"
+
+
+def _level(p: dict) -> str:
+    """The interval's confidence as a reader sees it: "95%", or "98.3%" for the looks of an evaluation that adds
+    folds until decided (:func:`curate.evaluate.folds.look_level`); 95% when a report does not record it."""
+    return f"{100 * float(p.get('level') or 0.95):.3g}%"
 
 
 def _needs(p: dict) -> str:
