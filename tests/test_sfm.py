@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -500,6 +501,82 @@ def test_matching_in_pieces_on_several_processes_writes_what_one_thread_writes(f
         assert stats["pairs"]["processes"] == n
         assert _match_rows(db) == want, n
         assert not list(db.parent.glob("match_*")), "the pieces' copies are removed"
+
+
+@pytest.mark.slow
+def test_with_many_features_only_the_pairs_with_few_matches_are_guided(fox_features, tmp_path, monkeypatch):
+    """Guided matching costs several unguided matches where photos have many features (4 times at 4,500 a photo)
+    and adds little to a pair that has plenty: there auto guides only the pairs whose unguided verification keeps
+    fewer than ``guided_only_below_inliers`` matches. Each such pair's rows are the rows guiding every pair writes
+    (a pair that fails unguided is not matched again: its rows are the same guided), each other pair's the
+    unguided rows, byte for byte, on one process or two; the record counts the pairs matched again;
+    photos with fewer features than ``guided_selective_above_features`` have every pair guided."""
+    import shutil
+    import sqlite3
+
+    from curate.sfm import matching
+    cfg = small_cfg(guided_matching="on", loop_detection=False, num_threads=1)
+    po = pycolmap.SequentialPairingOptions()
+    po.overlap, po.quadratic_overlap, po.loop_detection = cfg.sequential_overlap, cfg.sequential_quadratic, False
+    refs = {}
+    for guided in ("on", "off"):
+        ref = tmp_path / guided / "database.db"
+        ref.parent.mkdir()
+        shutil.copy2(fox_features, ref)
+        mo, vo, dev = matching._options(small_cfg(guided_matching=guided), "sequential")
+        pycolmap.match_sequential(ref, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+        refs[guided] = {t: {r[0]: r for r in rows} for t, rows in _match_rows(ref).items()}
+    inliers = {pid: r[1] for pid, r in refs["off"]["two_view_geometries"].items()}
+    below = int(np.median(list(inliers.values())))
+    weak = {pid for pid, n in inliers.items() if n < below}   # those that fail unguided are the same guided
+    assert 10 <= len(weak) <= len(inliers) - 10 and any(n < cfg.min_num_matches for n in inliers.values())
+    assert any(refs["on"]["two_view_geometries"][p] != refs["off"]["two_view_geometries"][p] for p in inliers)
+    monkeypatch.setattr(matching, "MIN_PAIRS_PER_PROCESS", 16)
+    for n in (1, 2):
+        monkeypatch.setattr(matching, "MATCHING_PROCESSES", n)
+        db = tmp_path / f"p{n}" / "database.db"
+        db.parent.mkdir()
+        shutil.copy2(fox_features, db)
+        stats: dict = {}
+        matching.match(cfg, db, "sequential", None, stats, guided_below=below)
+        assert stats["pairs"]["processes"] == n
+        assert stats["pairs"]["guided_pairs"] == sum(cfg.min_num_matches <= inliers[p] for p in weak)
+        got = _match_rows(db)
+        for t in ("matches", "two_view_geometries"):
+            assert [r[0] for r in got[t]] == sorted(refs["off"][t]), (n, t)
+            for r in got[t]:
+                assert r == refs["on" if r[0] in weak else "off"][t][r[0]], (n, t, r[0])
+        assert not list(db.parent.glob("match_*")) and not list(db.parent.glob("*_guided.txt"))
+    with sqlite3.connect(fox_features) as con:
+        counts = sorted(r[0] for r in con.execute("SELECT rows FROM keypoints"))
+    median = counts[len(counts) // 2]   # half the photos have at least as many
+    auto = small_cfg(guided_only_below_inliers=below)
+    assert matching.weak_first(replace(auto, guided_selective_above_features=median), fox_features) == below
+    assert matching.weak_first(replace(auto, guided_selective_above_features=median + 1), fox_features) == 0
+    assert matching.weak_first(replace(auto, guided_only_below_inliers=0, guided_selective_above_features=0),
+                               fox_features) == 0
+    with pytest.raises(ValueError, match="guided_only_below_inliers"):
+        small_cfg(guided_only_below_inliers=-1)
+
+
+@pytest.mark.slow
+def test_sfm_records_which_pairs_auto_guided(tmp_path):
+    """`curate sfm` with guided matching by auto passes the photos' threshold to the matcher and records it and
+    the pairs it guided: past ``guided_selective_above_features`` only some pairs, under it (or with ``on``) all."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for p in sorted(need("fox/images").iterdir())[:12]:
+        (photos / p.name).symlink_to(p)
+    seen = {}
+    for name, kw in (("weak", {"guided_selective_above_features": 0, "guided_only_below_inliers": 150}),
+                     ("all", {"guided_selective_above_features": 10 ** 6}),
+                     ("on", {"guided_matching": "on", "guided_selective_above_features": 0})):
+        run_sfm(small_cfg(max_image_size=320, **kw), photos, tmp_path / name)
+        st = json.loads((tmp_path / name / "sfm" / "stage.json").read_text())["stats"]
+        seen[name] = (st["guided_only_below_inliers"], st["pairs"]["guided_pairs"], st["pairs"]["new_pairs"])
+    below, guided, pairs = seen["weak"]
+    assert below == 150 and 0 < guided < pairs, seen
+    assert seen["all"] == (0, pairs, pairs) and seen["on"] == (0, pairs, pairs), seen
 
 
 @pytest.mark.slow

@@ -43,7 +43,7 @@ from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmCon
 from curate.sfm.continuity import drop_off_path, jumps_along
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
-from curate.sfm.matching import match, pair_counts, rematch_left_out
+from curate.sfm.matching import match, pair_counts, rematch_left_out, weak_first
 from curate.sfm.model import cameras_from_reconstruction, write_model
 from curate.sfm.native import colmap_log, load as load_pycolmap
 from curate.sfm.parts import without_contained
@@ -140,7 +140,9 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
         logger.info("sfm: %s matching ...", matcher)
         t = time.perf_counter()
-        match(replace(cfg, guided_matching="on" if guided else "off"), db, matcher, takes_of(kept), stats)
+        below = weak_first(cfg, db) if guided and cfg.guided_matching == "auto" else 0
+        stats["guided_only_below_inliers"] = below
+        match(replace(cfg, guided_matching="on" if guided else "off"), db, matcher, takes_of(kept), stats, below)
         timings["match"] = round(time.perf_counter() - t, 2)
         stats["n_pairs_matched"], stats["n_pairs_verified"] = pair_counts(db, cfg.min_num_matches)
         logger.info("sfm: %s matching, %d of %d pairs verified in %.1f s", matcher, stats["n_pairs_verified"],

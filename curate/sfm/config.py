@@ -137,11 +137,22 @@ class SfmConfig:
     guided_matching: Guided = "auto"
     """COLMAP's guided matching: each pair matched again along its verified geometry (more matches, slower);
     auto: on for a sequence of frames (a video, numbered photos), where a fast turn or blur leaves consecutive
-    frames few matches.
+    frames few matches; where photos have over 3,000 features, only for the pairs with under 300 verified matches.
 
     office.mp4 with a second cut out at a turn: one model of 361 of 361 frames with it, models of 205 (placed 32
     deg off) and 166 without; at half the frame rate 171 of 187 in one model against 83 (docs/sfm.md#same-model).
     Before 0.3 a boolean: true is on, false off."""
+    guided_only_below_inliers: int = 300
+    """Guided matching chosen by auto, on photos of many features (a median of at least
+    ``guided_selective_above_features``): each pair is matched first without guidance and matched again along its
+    verified geometry only where fewer than this many matches pass verification (a fast turn, blur, a far pair),
+    its rows then those that guiding every pair writes; a pair with more keeps its unguided matches. At 4,500
+    features a photo a guided match costs 4 times an unguided one and adds about a fifth to a pair's 1,400 matches
+    (docs/investigations/sfm.md#guided-where-weak). 0: every pair guided."""
+    guided_selective_above_features: int = 3000
+    """The median of SIFT features a photo from which auto's guided matching is selective
+    (``guided_only_below_inliers``). Under it (office.mp4's frames: 1,127) a guided match costs under twice an
+    unguided one and most pairs are weak, so matching every pair twice would cost more: every pair is guided."""
     # --- mapping
     mapper: Mapper = "auto"
     """How matches become cameras: incremental (COLMAP's), global (COLMAP's global mapper, formerly GLOMAP), or auto:
@@ -237,6 +248,8 @@ class SfmConfig:
                              "global_ba_above_observations >= 0")
         if not self.direct_ba_max_fill >= 0:
             raise ValueError("SfmConfig.direct_ba_max_fill must be >= 0")
+        if self.guided_only_below_inliers < 0 or self.guided_selective_above_features < 0:
+            raise ValueError("SfmConfig.guided_only_below_inliers and guided_selective_above_features must be >= 0")
         if self.retrieval_num_images < 1 or self.retrieval_rematch_num_images < 1:
             raise ValueError("SfmConfig.retrieval_num_images and retrieval_rematch_num_images must be >= 1")
         if self.cross_take_period < 1 or self.cross_take_num_images < 1:

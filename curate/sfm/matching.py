@@ -13,6 +13,10 @@ every time, but not on several (:data:`MATCHING_THREADS`), so the list is cut in
 thread in a process of its own on a copy of the database, and their matches and two-view geometries are copied
 into the database pair by pair: the same rows as one process matching the whole list, on N cores
 (:data:`MATCHING_PROCESSES`; the rows checked and the time measured: docs/investigations/sfm.md#matching-in-pieces).
+
+Guided matching chosen by auto, on photos of many features (:func:`weak_first`), guides only the pairs that
+unguided matching leaves few verified matches: a guided match costs 3-4 unguided ones there
+(docs/investigations/sfm.md#guided-where-weak).
 """
 
 from __future__ import annotations
@@ -52,8 +56,10 @@ overlap much), so each process takes a next piece when it is done with one."""
 
 
 def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | None = None,
-           stats: dict | None = None) -> None:
+           stats: dict | None = None, guided_below: int = 0) -> None:
     """Match and verify the image pairs of ``matcher``; verification RANSAC is seeded by ``cfg.seed``.
+    ``guided_below`` > 0 with guided matching: each pair guided only where fewer verified matches (:func:`weak_first`;
+    0: every pair guided).
 
     COLMAP's default verification seed (-1) draws a new one per run: the office walk then got
     a different set of verified pairs, and a different model, on every run.
@@ -65,32 +71,33 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
     pycolmap = load_pycolmap()
     if matcher == "exhaustive":
         info = generated(cfg, db, pycolmap.ExhaustivePairGenerator, pycolmap.ExhaustivePairingOptions(), matcher,
-                         pycolmap.match_exhaustive)
+                         pycolmap.match_exhaustive, guided_below)
     elif matcher == "sequential":
         po = pycolmap.SequentialPairingOptions()
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
-        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher, pycolmap.match_sequential)
+        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher, pycolmap.match_sequential,
+                         guided_below)
         index = None
         if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
             index = _index(cfg, db)
             names = index.names[::cfg.loop_detection_period]
             pairs = [(q, c) for q, cands in ranked(index, names, k=cfg.loop_detection_num_images) for c in cands]
-            loops = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher)
+            loops = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher, guided_below)
             if stats is not None:
                 stats["loop_detection"] = {"queries": len(names), **loops}
         if cfg.cross_take_matching and takes and len(takes) >= 2:
-            across = _match_across_takes(cfg, db, takes, index or _index(cfg, db), matcher)
+            across = _match_across_takes(cfg, db, takes, index or _index(cfg, db), matcher, guided_below)
             if stats is not None:
                 stats["cross_take"] = across
     elif matcher == "retrieval":   # each photo with its most similar ones, by words trained on this capture
-        info = _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_num_images, matcher)
+        info = _retrieve(cfg, db, _index(cfg, db), cfg.retrieval_num_images, matcher, guided_below=guided_below)
     elif matcher == "spatial":
         po = pycolmap.SpatialPairingOptions()
         po.max_num_neighbors = cfg.spatial_neighbors
         po.ignore_z = True
-        info = generated(cfg, db, pycolmap.SpatialPairGenerator, po, matcher, pycolmap.match_spatial)
+        info = generated(cfg, db, pycolmap.SpatialPairGenerator, po, matcher, pycolmap.match_spatial, guided_below)
     else:
         raise ValueError(f"unknown matcher {matcher!r}")
     if stats is not None:   # the matcher's own pairs (sequential: the neighbours)
@@ -118,6 +125,21 @@ def _index(cfg: SfmConfig, db: Path):
     return index
 
 
+def weak_first(cfg: SfmConfig, db: Path) -> int:
+    """``cfg.guided_only_below_inliers`` where the photos of ``db`` hold a median of at least
+    ``cfg.guided_selective_above_features`` SIFT features, else 0 (every pair guided): what :func:`match`'s
+    ``guided_below`` is when guided matching was chosen by auto. Where features are many a guided match costs
+    several unguided ones (4 times at 4,500 a photo, under twice at 1,100) and most pairs have plenty without
+    it."""
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    try:
+        n = sorted(r[0] for r in con.execute("SELECT rows FROM keypoints"))
+    finally:
+        con.close()
+    median = n[len(n) // 2] if n else 0
+    return cfg.guided_only_below_inliers if median >= cfg.guided_selective_above_features else 0
+
+
 def guided(cfg: SfmConfig, matcher: str) -> bool:
     """Whether ``matcher``'s pairs are matched again along their verified geometry (``cfg.guided_matching``;
     ``auto``: for a sequence of frames)."""
@@ -140,26 +162,29 @@ def _options_of(seed: int, min_num_matches: int, guided_matching: bool):
     return mo, vo, pycolmap.Device.auto if pycolmap.has_cuda else pycolmap.Device.cpu
 
 
-def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str, whole) -> dict:
+def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str, whole, guided_below: int = 0) -> dict:
     """Match and verify the pairs COLMAP's pair ``generator`` (e.g. ``pycolmap.SequentialPairGenerator``) makes
     with ``options`` on ``db``, each in the order it gives (:func:`match_list`): what ``whole``
     (``pycolmap.match_sequential`` and its kin) matches, on several cores. Returns :func:`match_list`'s record.
     A capture with a photo whose name holds a space (``IMG 0001.jpg``), which COLMAP's pair list cannot name, is
     matched by ``whole`` itself, on one thread: the same rows, without the pieces; so is a list one process would
-    match (``num_threads`` 1, the known poses' triangulation, CUDA): COLMAP's own matcher, as before the pieces."""
+    match (``num_threads`` 1, the known poses' triangulation, CUDA): COLMAP's own matcher, as before the pieces,
+    unless only the weak pairs are guided (``guided_below``): that is the list's two passes whatever the processes."""
     pycolmap = load_pycolmap()
     with pycolmap.Database.open(db) as dbh:
         name = {im.image_id: im.name for im in dbh.read_all_images()}
         pairs = [(name[a], name[b]) for a, b in generator(options, dbh).all_pairs()]
-    if processes(cfg, len(pairs)) == 1 or any(c.isspace() for n in name.values() for c in n):
+    weak_only = guided(cfg, matcher) and guided_below > 0
+    if (processes(cfg, len(pairs)) == 1 and not weak_only) or any(c.isspace() for n in name.values() for c in n):
         t0 = time.perf_counter()
         before = pair_counts(db, cfg.min_num_matches)[1]
         mo, vo, dev = _options(cfg, matcher)
         whole(db, matching_options=mo, pairing_options=options, verification_options=vo, device=dev)
         return {"pairs": len(pairs), "new_pairs": len(pairs), "unlisted": 0, "processes": 1,
+                "guided_pairs": len(pairs) if guided(cfg, matcher) else 0,
                 "verified": pair_counts(db, cfg.min_num_matches)[1] - before,
                 "seconds": round(time.perf_counter() - t0, 2)}
-    return match_list(cfg, db, pairs, f"{matcher}_pairs.txt", matcher)
+    return match_list(cfg, db, pairs, f"{matcher}_pairs.txt", matcher, guided_below)
 
 
 def processes(cfg: SfmConfig, n_pairs: int) -> int:
@@ -171,14 +196,16 @@ def processes(cfg: SfmConfig, n_pairs: int) -> int:
     return max(1, min(int(want), n_pairs // MIN_PAIRS_PER_PROCESS))
 
 
-def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
+def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, guided_below: int = 0) -> dict:
     """Match and verify ``pairs`` ((name, name), each matched in the order given) not matched yet in ``db``:
     COLMAP's ``match_image_pairs`` on one thread, in :func:`processes` processes at once, each on a piece of the
     list and its own copy of the database (``python -m curate.sfm.matching``), whose new matches and two-view
     geometries are then copied into ``db`` (:func:`_merge`): the same rows as one process matching the whole list
     (a pair's matches do not depend on the others'). Pairs whose names hold spaces cannot be listed (COLMAP's list
-    format): those are left unmatched, with a warning. Returns {"pairs", "new_pairs", "verified", "unlisted",
-    "processes", "seconds", and in pieces "pieces_cpu_s" (each piece's CPU seconds)}."""
+    format): those are left unmatched, with a warning. With guided matching and ``guided_below`` > 0, each pair is
+    guided only where unguided matching verifies fewer matches (:func:`_match_file`). Returns {"pairs",
+    "new_pairs", "verified", "unlisted", "processes", "seconds", "guided_pairs" (pairs matched with guidance),
+    and in pieces "pieces_cpu_s" (each piece's CPU seconds)}."""
     pycolmap = load_pycolmap()
     t0 = time.perf_counter()
     with pycolmap.Database.open(db) as dbh:
@@ -196,32 +223,33 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) ->
                        "their names", len(new) - len(listed), len(new))
     before = pair_counts(db, cfg.min_num_matches)[1]
     n_proc, pieces_cpu = processes(cfg, len(listed)), []
+    below = guided_below if guided(cfg, matcher) else 0
+    n_guided = len(listed) if guided(cfg, matcher) and not below else 0
     if listed:
         path = db.parent / list_name
         path.write_text("".join(f"{a} {b}\n" for a, b in listed))
         if n_proc == 1:
-            mo, vo, dev = _options(cfg, matcher)
-            po = pycolmap.ImportedPairingOptions()
-            po.match_list_path = str(path)
-            pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo,
-                                       device=dev)
+            n = _match_file(db, path, cfg.seed, cfg.min_num_matches, guided(cfg, matcher), below)
+            n_guided = n if below else n_guided
         else:
-            pieces_cpu = _match_in_pieces(cfg, db, listed, n_proc, matcher)
+            pieces_cpu, n = _match_in_pieces(cfg, db, listed, n_proc, matcher, below)
+            n_guided = n if below else n_guided
     info = {"pairs": len(uniq), "new_pairs": len(new),
             "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
-            "processes": n_proc, "seconds": round(time.perf_counter() - t0, 2),
+            "processes": n_proc, "guided_pairs": n_guided, "seconds": round(time.perf_counter() - t0, 2),
             **({"pieces_cpu_s": [None if c is None else round(c, 1) for c in pieces_cpu]} if pieces_cpu else {})}
     logger.info("sfm: %s: %d pairs matched in %d process(es), %d verified, in %.1f s", list_name,
                 len(listed), n_proc, info["verified"], info["seconds"])
     return info
 
 
-def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str) -> list[float | None]:
+def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str,
+                     guided_below: int = 0) -> tuple[list[float | None], int]:
     """``pairs`` cut into ``n_proc`` x :data:`PIECES_PER_PROCESS` pieces in their order, each matched by a process of
     its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
     rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
-    removed. COLMAP's log of each piece goes to COLMAP's log here. Returns each piece's CPU seconds, in the order
-    they ended."""
+    removed. COLMAP's log of each piece goes to COLMAP's log here. Returns (each piece's CPU seconds, in the order
+    they ended; the pairs matched with guidance where only the weak were, :func:`_match_file`)."""
     import json
     import subprocess
     import sys
@@ -233,6 +261,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([code, *filter(None, [os.environ.get("PYTHONPATH")])]),
                OMP_NUM_THREADS="1")
     record: list[float | None] = []
+    n_guided = 0
     with tempfile.TemporaryDirectory(prefix="match_", dir=db.parent) as tmp:
         todo, running = list(enumerate(pieces)), {}
         try:
@@ -241,7 +270,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
                     i, piece = todo.pop(0)
                     job = {"db": str(db), "copy": str(Path(tmp) / f"{i}.db"), "list": str(Path(tmp) / f"{i}.txt"),
                            "seed": cfg.seed, "min_num_matches": cfg.min_num_matches,
-                           "guided": guided(cfg, matcher)}
+                           "guided": guided(cfg, matcher), "guided_below": guided_below}
                     Path(job["list"]).write_text("".join(f"{a} {b}\n" for a, b in piece))
                     with open(Path(tmp) / f"{i}.err", "wb") as err:
                         running[i] = (job, subprocess.Popen([sys.executable, "-m", "curate.sfm.matching",
@@ -258,15 +287,16 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
                 _merge(db, Path(job["copy"]))
                 if text:
                     pycolmap.logging.info(text)
-                cpu = Path(job["copy"]).with_suffix(".cpu")
+                cpu, weak = Path(job["copy"]).with_suffix(".cpu"), Path(job["copy"]).with_suffix(".guided")
                 record.append(float(cpu.read_text()) if cpu.is_file() else None)   # not measured: no NaN in JSON
-                for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err"), str(cpu)):
+                n_guided += int(weak.read_text()) if weak.is_file() else 0
+                for f in (job["copy"], job["list"], str(log), str(Path(tmp) / f"{i}.err"), str(cpu), str(weak)):
                     Path(f).unlink(missing_ok=True)
         finally:
             for _, proc in running.values():
                 proc.kill()
                 proc.wait()
-    return record
+    return record, n_guided
 
 
 def _wait_any(running: dict) -> int:
@@ -282,7 +312,6 @@ def _match_piece(job: dict) -> None:
     """One piece of :func:`_match_in_pieces` (in its own process): ``job["db"]`` copied to ``job["copy"]``, the
     pairs of ``job["list"]`` matched and verified there on one thread, COLMAP's log beside the copy (.log)."""
     from curate.sfm.native import colmap_log
-    pycolmap = load_pycolmap()
     src = sqlite3.connect(f"file:{job['db']}?mode=ro", uri=True)
     dst = sqlite3.connect(job["copy"])
     try:
@@ -290,15 +319,52 @@ def _match_piece(job: dict) -> None:
     finally:
         dst.close()
         src.close()
-    mo, vo, dev = _options_of(job["seed"], job["min_num_matches"], job["guided"])
-    po = pycolmap.ImportedPairingOptions()
-    po.match_list_path = job["list"]
     with colmap_log(Path(job["copy"]).with_suffix(".log")):
-        pycolmap.match_image_pairs(job["copy"], matching_options=mo, pairing_options=po, verification_options=vo,
-                                   device=dev)
+        n = _match_file(Path(job["copy"]), Path(job["list"]), job["seed"], job["min_num_matches"], job["guided"],
+                        job.get("guided_below", 0))
     import resource
     ru = resource.getrusage(resource.RUSAGE_SELF)
     Path(job["copy"]).with_suffix(".cpu").write_text(f"{ru.ru_utime + ru.ru_stime:.3f}")
+    Path(job["copy"]).with_suffix(".guided").write_text(str(n))
+
+
+def _match_file(db: Path, pairs_path: Path, seed: int, min_num_matches: int, guided_matching: bool,
+                guided_below: int = 0) -> int:
+    """Match and verify the pairs listed in ``pairs_path`` (COLMAP's ``match_image_pairs``, one thread) in ``db``.
+    With ``guided_matching`` and ``guided_below`` > 0, in two passes: every pair unguided, then the pairs with at
+    least ``min_num_matches`` and fewer than ``guided_below`` verified matches have their rows removed and are
+    matched again with guidance, so that every pair's rows are those guiding every pair writes or, past
+    ``guided_below``, the unguided ones (a pair's rows depend on that pair alone). A pair that fails verification
+    unguided is not matched again: COLMAP guides only along a verified geometry, so its rows are the same either
+    way (30 of 30 such pairs of the drone flight byte for byte). Returns the pairs matched with guidance."""
+    pycolmap = load_pycolmap()
+    po = pycolmap.ImportedPairingOptions()
+    po.match_list_path = str(pairs_path)
+    weak_only = guided_matching and guided_below > 0
+    mo, vo, dev = _options_of(seed, min_num_matches, guided_matching and not weak_only)
+    pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo, device=dev)
+    if not weak_only:
+        return len(pairs_path.read_text().splitlines()) if guided_matching else 0
+    weak = []
+    with pycolmap.Database.open(db) as dbh:
+        ids = {im.name: im.image_id for im in dbh.read_all_images()}
+        for line in pairs_path.read_text().splitlines():
+            a, b = (ids[n] for n in line.split())
+            n = len(dbh.read_two_view_geometry(a, b).inlier_matches) if dbh.exists_two_view_geometry(a, b) else 0
+            if min_num_matches <= n < guided_below:
+                weak.append(line)
+                dbh.delete_matches(a, b)
+                if dbh.exists_two_view_geometry(a, b):
+                    dbh.delete_two_view_geometry(a, b)
+    if weak:
+        again = pairs_path.with_name(pairs_path.stem + "_guided.txt")
+        again.write_text("".join(f"{line}\n" for line in weak))
+        po.match_list_path = str(again)
+        mo, vo, dev = _options_of(seed, min_num_matches, True)
+        pycolmap.match_image_pairs(db, matching_options=mo, pairing_options=po, verification_options=vo,
+                                   device=dev)
+        again.unlink()
+    return len(weak)
 
 
 def _merge(db: Path, piece: Path) -> None:
@@ -317,20 +383,21 @@ def _merge(db: Path, piece: Path) -> None:
         con.close()
 
 
-def match_pairs(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str) -> dict:
+def match_pairs(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, guided_below: int = 0) -> dict:
     """Match and verify the image ``pairs`` ((name, name), either order: each is matched in name order) not
     matched yet (:func:`match_list`, the list written beside ``db`` as ``list_name``). Returns {"pairs",
     "new_pairs", "verified", "unlisted" (names with spaces: COLMAP's list cannot name them), "processes",
     "seconds"}."""
-    return match_list(cfg, db, sorted({tuple(sorted((a, b))) for a, b in pairs if a != b}), list_name, matcher)
+    return match_list(cfg, db, sorted({tuple(sorted((a, b))) for a, b in pairs if a != b}), list_name, matcher,
+                      guided_below)
 
 
 def _retrieve(cfg: SfmConfig, db: Path, index, num_images: int, matcher: str, queries: list[str] | None = None,
-              list_name: str = "retrieval_pairs.txt") -> dict:
+              list_name: str = "retrieval_pairs.txt", guided_below: int = 0) -> dict:
     """Match each photo (those of ``queries``; all when None) with its ``num_images`` most similar photos."""
     qs = index.names if queries is None else [q for q in queries if q in set(index.names)]
     pairs = [(q, c) for q, cands in ranked(index, qs, k=num_images) for c in cands]
-    return match_pairs(cfg, db, pairs, list_name, matcher)
+    return match_pairs(cfg, db, pairs, list_name, matcher, guided_below)
 
 
 def rematch_left_out(cfg: SfmConfig, db: Path, left_out: list[str]) -> dict:
@@ -345,7 +412,8 @@ def rematch_left_out(cfg: SfmConfig, db: Path, left_out: list[str]) -> dict:
             "unlisted": info["unlisted"], "seconds": round(time.perf_counter() - t0, 2)}
 
 
-def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], index, matcher: str) -> dict:
+def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], index, matcher: str,
+                        guided_below: int = 0) -> dict:
     """Match every ``cfg.cross_take_period``-th frame of each take with its ``cfg.cross_take_num_images``
     most similar frames of each other take (:func:`curate.sfm.prep.cross_take_pairs`).
 
@@ -361,7 +429,7 @@ def _match_across_takes(cfg: SfmConfig, db: Path, takes: dict[str, list[str]], i
     take_of = {n: t for t, names in takes.items() for n in names if n in set(index.names)}
     queries = [n for names in takes.values() for n in names[::cfg.cross_take_period] if n in take_of]
     pairs = cross_take_pairs(ranked(index, queries, candidates=sorted(take_of)), take_of, cfg.cross_take_num_images)
-    info = {"queries": len(queries), **match_pairs(cfg, db, pairs, "cross_take_pairs.txt", matcher),
+    info = {"queries": len(queries), **match_pairs(cfg, db, pairs, "cross_take_pairs.txt", matcher, guided_below),
             "seconds": round(time.perf_counter() - t0, 2)}
     logger.info("sfm: cross-take matching (%d takes): %d frames queried, %d new pairs, %d verified in %.1f s",
                 len(takes), info["queries"], info["new_pairs"], info["verified"], info["seconds"])
