@@ -223,17 +223,14 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, gu
                        "their names", len(new) - len(listed), len(new))
     before = pair_counts(db, cfg.min_num_matches)[1]
     n_proc, pieces_cpu = processes(cfg, len(listed)), []
-    below = guided_below if guided(cfg, matcher) else 0
-    n_guided = len(listed) if guided(cfg, matcher) and not below else 0
+    n_guided = 0   # what _match_file returns, summed over the pieces
     if listed:
         path = db.parent / list_name
         path.write_text("".join(f"{a} {b}\n" for a, b in listed))
         if n_proc == 1:
-            n = _match_file(db, path, cfg.seed, cfg.min_num_matches, guided(cfg, matcher), below)
-            n_guided = n if below else n_guided
+            n_guided = _match_file(db, path, cfg.seed, cfg.min_num_matches, guided(cfg, matcher), guided_below)
         else:
-            pieces_cpu, n = _match_in_pieces(cfg, db, listed, n_proc, matcher, below)
-            n_guided = n if below else n_guided
+            pieces_cpu, n_guided = _match_in_pieces(cfg, db, listed, n_proc, matcher, guided_below)
     info = {"pairs": len(uniq), "new_pairs": len(new),
             "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
             "processes": n_proc, "guided_pairs": n_guided, "seconds": round(time.perf_counter() - t0, 2),
@@ -249,7 +246,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
     its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
     rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
     removed. COLMAP's log of each piece goes to COLMAP's log here. Returns (each piece's CPU seconds, in the order
-    they ended; the pairs matched with guidance where only the weak were, :func:`_match_file`)."""
+    they ended; the pairs matched with guidance, :func:`_match_file`)."""
     import json
     import subprocess
     import sys
@@ -321,7 +318,7 @@ def _match_piece(job: dict) -> None:
         src.close()
     with colmap_log(Path(job["copy"]).with_suffix(".log")):
         n = _match_file(Path(job["copy"]), Path(job["list"]), job["seed"], job["min_num_matches"], job["guided"],
-                        job.get("guided_below", 0))
+                        job["guided_below"])
     import resource
     ru = resource.getrusage(resource.RUSAGE_SELF)
     Path(job["copy"]).with_suffix(".cpu").write_text(f"{ru.ru_utime + ru.ru_stime:.3f}")
