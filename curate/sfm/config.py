@@ -197,6 +197,12 @@ class SfmConfig:
     """Verified inliers of the mapper's initial pair (COLMAP: 100; it halves this, twice at most, when no pair
     qualifies). office: a 124-inlier planar initial pair got a wrong relative pose, a kink that bent the walk by 17
     deg."""
+    register_min_inliers: int = 20
+    """Fewest 2D-3D inliers for the incremental mapper to register a photo, and fewest points of the model a photo
+    must see to be tried at all (COLMAP's ``abs_pose_min_num_inliers``: 30). At 30 a stretch of a video whose
+    frames each see under 30 of the model's points is never tried, though its frames overlap: office.mp4 split
+    at a fast turn, 12 frames left to a wrong part of their own; at 20 the walk is one model of 371 and the cut
+    walk one of 361 (docs/investigations/sfm.md#registering-at-20)."""
     seed: int = 0
     """Random seed of COLMAP (verification RANSAC, mapper) and of the visual words' k-means: same photos
     and config, same matches and model."""
@@ -246,6 +252,9 @@ class SfmConfig:
                 or self.global_ba_above_observations < 0:
             raise ValueError("SfmConfig.global_ba_growth must be > 1, global_ba_refinements >= 1, global_ba_above and "
                              "global_ba_above_observations >= 0")
+        if self.register_min_inliers < 4:
+            raise ValueError("SfmConfig.register_min_inliers must be >= 4 (a pose from 2D-3D matches needs more than "
+                             f"three), got {self.register_min_inliers}")
         if not self.direct_ba_max_fill >= 0:
             raise ValueError("SfmConfig.direct_ba_max_fill must be >= 0")
         if self.guided_only_below_inliers < 0 or self.guided_selective_above_features < 0:

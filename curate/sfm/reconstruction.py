@@ -63,7 +63,8 @@ def expected_observations(db: Path, min_num_matches: int = 15) -> int:
 def incremental_options(cfg: SfmConfig, n_images: int, n_observations: int = 0):
     """The incremental mapper's options for a pool of ``n_images`` photos whose matches promise ``n_observations``
     (:func:`expected_observations`): :func:`seeded_pipeline_options`, the initial pair's inliers
-    (``cfg.init_min_num_inliers``), the principal point held; past ``cfg.global_ba_above`` photos or
+    (``cfg.init_min_num_inliers``), the inliers that register a photo (``cfg.register_min_inliers``), the principal
+    point held; past ``cfg.global_ba_above`` photos or
     ``cfg.global_ba_above_observations``, a global bundle adjustment each time the model grows by the factor
     ``cfg.global_ba_growth`` (COLMAP: 1.1), refined ``cfg.global_ba_refinements`` times at most (COLMAP: 5).
     Each new photo's local adjustment keeps COLMAP's two refinements (one folded office.mp4 cut into two
@@ -74,6 +75,7 @@ def incremental_options(cfg: SfmConfig, n_images: int, n_observations: int = 0):
     (docs/investigations/sfm.md#mapping-past-1000)."""
     opts = seeded_pipeline_options(cfg)
     opts.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    opts.mapper.abs_pose_min_num_inliers = cfg.register_min_inliers
     opts.ba_refine_principal_point = False
     if n_images > cfg.global_ba_above or n_observations > cfg.global_ba_above_observations:
         opts.ba_global_frames_ratio = opts.ba_global_points_ratio = cfg.global_ba_growth

@@ -451,6 +451,7 @@ def map_hierarchical(cfg, db: Path, images: Path, out: Path, cluster: int = 500)
     io.num_threads, io.random_seed, io.min_num_matches = cfg.num_threads, cfg.seed, cfg.min_num_matches
     io.mapper.random_seed, io.triangulation.random_seed = cfg.seed, cfg.seed
     io.mapper.init_min_num_inliers = cfg.init_min_num_inliers
+    io.mapper.abs_pose_min_num_inliers = cfg.register_min_inliers
     io.ba_refine_principal_point = False
     out.mkdir(parents=True, exist_ok=True)
     return pycolmap.hierarchical_mapping(db, images, out, options=o)
