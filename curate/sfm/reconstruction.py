@@ -156,7 +156,8 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
     were left out), the global mapper on a copy of the same matches. Its largest model is
     checked against every incremental part (:func:`curate.sfm.parts.part_agreement`, orientation
-    disagreement <= ``cfg.max_part_disagreement_deg`` on 90% of the part's photos). Of it stay the parts
+    disagreement <= ``cfg.max_part_disagreement_deg`` on 90% of the part's photos); where every part it could be
+    checked against disagrees, none of it is kept (``mappers_tried.global.refuted``). Of it stay the parts
     it agrees with that :func:`curate.sfm.parts.join_parts` can tie to the largest of them, and the frames
     of no checked part that pass :func:`curate.sfm.parts.verify_frames` against those (against every other
     frame where no part agrees).
@@ -200,6 +201,16 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     checks = part_agreement(glob, inc)
     tried["global"]["part_disagreement_deg"] = [d for d, _ in checks]
     ok = [d is not None and d <= cfg.max_part_disagreement_deg for d, _ in checks]
+    if any(d is not None for d, _ in checks) and not any(ok):
+        # every part it could be checked against says it is bent: none of it can be trusted, its frames' own
+        # checks included (they lean on its points: the blurred walk kept 50 frames 141 deg off)
+        tried["global"]["refuted"] = True
+        logger.warning("sfm: the global mapper's model disagrees with every incremental part it shares 10 photos with "
+                       "(deg: %s; limit %g): keeping the incremental models",
+                       ", ".join("unchecked" if d is None else f"{d:g}" for d, _ in checks),
+                       cfg.max_part_disagreement_deg)
+        stats["mapper"] = "incremental"
+        return inc
     best = max(glob.values(), key=lambda r: r.num_reg_images())
     refuted: set = set()
     if checks:  # keep of the global model the parts it agrees with and can tie together, and the frames that pass
