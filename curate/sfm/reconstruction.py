@@ -160,7 +160,7 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     checked against disagrees, none of it is kept (``mappers_tried.global.refuted``). Of it stay the parts
     it agrees with that :func:`curate.sfm.parts.join_parts` can tie to the largest of them, and the frames
     of no checked part that pass :func:`curate.sfm.parts.verify_frames` against those (against every other
-    frame where no part agrees).
+    frame where no part could be checked).
     It replaces the incremental models when it then holds at least ``cfg.min_global_gain`` of the
     ``n_images`` photos (and at least one) more than their largest: on the real walks measured the
     global model is the less accurate, and a take that joins neither model (a foreign one) leaves the
