@@ -201,14 +201,13 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
     checks = part_agreement(glob, inc)
     tried["global"]["part_disagreement_deg"] = [d for d, _ in checks]
     ok = [d is not None and d <= cfg.max_part_disagreement_deg for d, _ in checks]
+    dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}" for d, _ in checks)
     if any(d is not None for d, _ in checks) and not any(ok):
         # every part it could be checked against says it is bent: none of it can be trusted, its frames' own
         # checks included (they lean on its points: the blurred walk kept 50 frames 141 deg off)
         tried["global"]["refuted"] = True
         logger.warning("sfm: the global mapper's model disagrees with every incremental part it shares 10 photos with "
-                       "(deg: %s; limit %g): keeping the incremental models",
-                       ", ".join("unchecked" if d is None else f"{d:g}" for d, _ in checks),
-                       cfg.max_part_disagreement_deg)
+                       "(deg: %s; limit %g): keeping the incremental models", dis, cfg.max_part_disagreement_deg)
         stats["mapper"] = "incremental"
         return inc
     best = max(glob.values(), key=lambda r: r.num_reg_images())
@@ -229,8 +228,6 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
             if im.name not in keep and im.has_pose:
                 best.deregister_frame(im.frame_id)
         tried["global"]["pruned_to"] = int(best.num_reg_images())
-    dis = ", ".join("unchecked (under 10 photos in common)" if d is None else f"{d:g}"
-                    for d in tried["global"]["part_disagreement_deg"])
     need = max(1, math.ceil(cfg.min_global_gain * n_images - 1e-9)) if i else 1   # no incremental model: any will do
     tried["global"]["gain"], tried["global"]["gain_needed"] = int(best.num_reg_images() - i), need
     if best.num_reg_images() - i < need:
