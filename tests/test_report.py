@@ -206,6 +206,21 @@ def test_the_report_says_why_a_larger_global_model_was_not_used(tmp_path, gain, 
         assert "it must gain" not in body and "curate used COLMAP's global mapper" in body
 
 
+@pytest.mark.parametrize("glob", [False, True])
+def test_the_report_says_which_parts_joined_the_largest(tmp_path, glob):
+    """A third of office.mp4's frame rate: the incremental mapper split it (81, 50, 4), the 50-frame part shared 16
+    frames with the largest and joined it (115); the SfM section says so, with or without the global mapper's try."""
+    run = make_run(tmp_path)
+    tried = {"incremental": {"model_sizes": [81, 50, 4], "joined_sizes": [115, 4]}}
+    if glob:
+        tried["global"] = {"model_sizes": [124], "refuted": True}
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"mapper": "incremental", "mappers_tried": tried}}))
+    body = html.unescape(write_html(run).read_text())
+    assert ("the incremental mapper split the capture into models of 81, 50, 4 photos; the parts that share frames "
+            "with the largest and agree on them joined it (115 photos)") in body
+    assert ("the global mapper mapped 124 in one model" in body) is glob and "curate used COLMAP's incremental" in body
+
+
 def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):
     """A video that stopped decoding before its end: where it stopped, above the figures."""
     run = make_run(tmp_path)

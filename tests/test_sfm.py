@@ -202,6 +202,12 @@ class _Model:
     def num_reg_images(self):
         return sum(im.has_pose for im in self.images.values())
 
+    def reg_image_ids(self):
+        return [k for k, im in self.images.items() if im.has_pose]
+
+    def image(self, k):
+        return self.images[k]
+
     def deregister_frame(self, frame_id):
         self.images[frame_id].has_pose = False
 

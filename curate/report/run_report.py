@@ -476,14 +476,18 @@ def _capture(run: _Run) -> str:
         rows.append(("registered", f"{reg} with a pose" + (" (poses given)" if given else f", by {how}" if how else "")
                      + (f"; {len(unreg)} not registered (listed below)" if unreg else "")))
     tried = st.get("mappers_tried") or {}
-    if "global" in tried and "incremental" in tried:
-        inc, glo = tried["incremental"], tried["global"]
+    inc, glo = tried.get("incremental") or {}, tried.get("global")
+    joined = inc.get("joined_sizes")
+    if inc and (glo is not None or joined):
+        glo = glo or {}
         rows.append(("mapping", f"the incremental mapper split the capture into models of "
-                     f"{', '.join(map(str, inc.get('model_sizes', [])))} photos; the global mapper mapped "
-                     f"{(glo.get('model_sizes') or ['?'])[0]} in one model"
-                     + (f", kept where it agrees with the parts and can tie them together ({glo.get('pruned_to')} "
-                        f"photos)" if
-                        glo.get("pruned_to") else "") + f"; curate used {how or mapper}" + _gain_said(mapper, glo)))
+                     f"{', '.join(map(str, inc.get('model_sizes', [])))} photos"
+                     + (f"; the parts that share frames with the largest and agree on them joined it ({joined[0]} "
+                        f"photos)" if joined else "")
+                     + (f"; the global mapper mapped {(glo.get('model_sizes') or ['?'])[0]} in one model" +
+                        (f", kept where it agrees with the parts and can tie them together ({glo.get('pruned_to')} "
+                         f"photos)" if glo.get("pruned_to") else "") if glo else "")
+                     + f"; curate used {how or mapper}" + _gain_said(mapper, glo)))
     rows.append(("candidates", f"{r.get('n_candidates', reg)}: the selection chooses among every registered photo"))
     if st.get("n_points") is not None:
         rows.append(("3D points", f"{st['n_points']} sparse points"))

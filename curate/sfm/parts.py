@@ -162,3 +162,133 @@ def part_disagreements(glob: dict, parts: dict) -> list[tuple[np.ndarray, Camera
         both = np.array([(gi[n], k) for k, n in enumerate(pc.names) if n in gi], dtype=int).reshape(-1, 2)
         out.append((rotation_disagreement(gc.rotations[both[:, 0]], pc.rotations[both[:, 1]]), pc))
     return out
+
+
+SHARE_MIN_FRAMES = 10
+""":func:`join_shared`: the fewest frames two parts must both have registered to be joined (the incremental
+mapper registers frames of an earlier model again in a later one, up to COLMAP's ``max_model_overlap``, 20)."""
+SHARE_MAX_STEP = VERIFY_MAX_STEP
+""":func:`join_shared`: the largest distance between a shared frame's centre in the two aligned parts, as a
+fraction of the median depth of the points it sees (90% of the shared frames)."""
+
+
+def _frames(rec, names: list[str], known: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """[n, 3, 3] camera-to-world rotations, [n, 3] centres and [n] median depths of the points each sees (NaN
+    where none and ``known`` has none for it), of the registered frames ``names`` of ``rec``."""
+    by_name = {rec.image(i).name: rec.image(i) for i in rec.reg_image_ids()}
+    R, c, d = [], [], []
+    for n in names:
+        im = by_name[n]
+        w2c = np.asarray(im.cam_from_world().rotation.matrix())
+        centre = np.asarray(im.projection_center())
+        xyz = np.array([rec.point3D(p.point3D_id).xyz for p in im.points2D if p.has_point3D()]).reshape(-1, 3)
+        R.append(w2c.T)
+        c.append(centre)
+        d.append(float(np.median(np.linalg.norm(xyz - centre, axis=1))) if len(xyz) else (known or {}).get(n, np.nan))
+    return np.asarray(R), np.asarray(c), np.asarray(d)
+
+
+def shared_frame_alignment(anchor, part, names: list[str], depths: dict | None = None):
+    """The similarity (``pycolmap.Sim3d``) that brings ``part`` onto ``anchor`` by the frames ``names`` both
+    registered, and how far each of those frames then disagrees: ([n] degrees of orientation, [n] centre
+    distance as a fraction of the scene depth in ``anchor``). None where no frame sees a point in either model.
+    ``depths`` ({name: depth}): of frames of ``anchor`` that see no point (joined before, not yet triangulated).
+
+    Least squares (Umeyama, ``pycolmap.estimate_sim3d``: closed form, no random sample) over each frame's
+    centre and the three points one scene depth along its axes (the median over the frames of each model's
+    depths: one length per model, as the points each part triangulated differ): the orientations count as much
+    as the centres, so a stretch of frames in a line (a walk's) still fixes the roll about it."""
+    pycolmap = load_pycolmap()
+    Ra, ca, da = _frames(anchor, names, depths)
+    Rp, cp, dp = _frames(part, names)
+    da, dp = da[np.isfinite(da)], dp[np.isfinite(dp)]
+    if not len(da) or not len(dp) or not np.median(da) > 0 or not np.median(dp) > 0:
+        return None
+    da, dp = float(np.median(da)), float(np.median(dp))
+    axes = lambda R, c, d: np.concatenate([c[:, None], c[:, None] + d * np.swapaxes(R, 1, 2)],  # noqa: E731
+                                          axis=1).reshape(-1, 3)
+    sim = pycolmap.estimate_sim3d(axes(Rp, cp, dp), axes(Ra, ca, da))
+    if sim is None:
+        return None
+    M = np.asarray(sim.matrix())
+    Q = M[:, :3] / float(sim.scale)
+    rot = rotation_angle_deg(Ra @ np.swapaxes(Q @ Rp, 1, 2))
+    step = np.linalg.norm(cp @ M[:, :3].T + M[:, 3] - ca, axis=1) / da
+    return sim, rot, step
+
+
+def join_shared(models: dict, max_rot_deg: float, max_step: float = SHARE_MAX_STEP,
+                min_shared: int = SHARE_MIN_FRAMES):
+    """The incremental parts of ``models`` ({id: Reconstruction}) joined where they share frames, the way
+    COLMAP's model merger joins two models (align them by what they share, keep the first's poses, add the
+    second's other frames); pycolmap exposes the alignment, not the merge.
+
+    The largest part anchors; each other part, largest first and again until none joins, that shares at
+    least ``min_shared`` registered frames with it is aligned to it by those frames
+    (:func:`shared_frame_alignment`) and joins when they agree: on 90% of them within ``max_rot_deg`` degrees
+    of orientation and ``max_step`` of their depth (:data:`SHARE_MAX_STEP`), and on every one within twice that.
+    A wrong part disagrees on the frames it shares (office.mp4, an earlier build: a 35-frame part, 13.5 deg at
+    the 90th percentile, its other frames 16 deg from the truth); a right one agrees (a third of its frame rate:
+    81 and 50 frames sharing 16, 1.6 deg; docs/investigations/sfm.md#joined-parts).
+    Its frames the anchor lacks are added at their aligned poses, with their keypoints and no points:
+    the caller triangulates them (``pycolmap.triangulate_points``).
+
+    Returns (the anchor with the frames added, a copy, or None when no part joined; the ids of the parts
+    joined; [{"photos", "shared", "rot_deg", "step", "joined", "added"} per other part, largest first]).
+    """
+    pycolmap = load_pycolmap()
+    order = sorted(models, key=lambda k: -models[k].num_reg_images())
+    if len(order) < 2:
+        return None, [], []
+    anchor = models[order[0]]   # copied at the first join
+    names = lambda r: {r.image(i).name: i for i in r.reg_image_ids()}  # noqa: E731
+    records = {k: {"photos": int(models[k].num_reg_images()), "shared": 0, "rot_deg": None, "step": None,
+                   "joined": False, "added": 0} for k in order[1:]}
+    left, joined, depths = list(order[1:]), [], {}
+    while left:
+        done = []
+        for k in left:
+            part, held = models[k], names(anchor)
+            mine = names(part)
+            shared = sorted(set(held) & set(mine))
+            rec = records[k]
+            rec["shared"] = len(shared)
+            if len(shared) < min_shared or len(shared) == len(mine):   # too few to align, or nothing to add
+                continue
+            fit = shared_frame_alignment(anchor, part, shared, depths)
+            if fit is None:
+                continue
+            sim, rot, step = fit
+            rec["rot_deg"] = [round(float(x), 2) for x in np.percentile(rot, [50, 90, 100])]
+            rec["step"] = [round(float(x), 4) for x in np.percentile(step, [50, 90, 100])]
+            if not (np.percentile(rot, 90) <= max_rot_deg and rot.max() <= 2 * max_rot_deg
+                    and np.percentile(step, 90) <= max_step and step.max() <= 2 * max_step):
+                continue
+            if not joined and not done:
+                anchor = pycolmap.Reconstruction(anchor)
+            moved = pycolmap.Reconstruction(part)
+            moved.transform(sim)
+            new = sorted(n for n in mine if n not in held)
+            dmoved = _frames(moved, new, depths)[2]
+            for n, d in zip(new, dmoved):
+                _add_frame(anchor, moved, mine[n])
+                depths[n] = d
+            rec["joined"], rec["added"] = True, len(new)
+            done.append(k)
+        if not done:
+            break
+        joined += done
+        left = [k for k in left if k not in done]
+    return (anchor if joined else None), joined, [records[k] for k in order[1:]]
+
+
+def _add_frame(out, src, image_id: int) -> None:
+    """Add the registered image ``image_id`` of ``src`` to ``out`` at its pose in ``src``: same id, name and
+    camera (added when missing), every keypoint, no 3D point."""
+    pycolmap = load_pycolmap()
+    im = src.image(image_id)
+    if not out.exists_camera(im.camera_id):
+        out.add_camera_with_trivial_rig(src.camera(im.camera_id))
+    kp = np.array([p.xy for p in im.points2D], np.float64).reshape(-1, 2)
+    out.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=image_id,
+                                                    keypoints=kp), im.cam_from_world())

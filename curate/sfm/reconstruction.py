@@ -13,7 +13,7 @@ from pathlib import Path
 
 from curate.sfm.config import SfmConfig
 from curate.sfm.native import load as load_pycolmap
-from curate.sfm.parts import join_parts, part_agreement, verify_frames
+from curate.sfm.parts import join_parts, join_shared, part_agreement, verify_frames
 
 logger = logging.getLogger(__name__)
 
@@ -146,14 +146,41 @@ def model_sizes(models: dict) -> list[int]:
     return sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
 
 
+def join_split(cfg: SfmConfig, db: Path, images: Path, out: Path, models: dict, record: dict) -> dict:
+    """``models`` (the incremental mapper's {id: Reconstruction}) with the parts that share frames with the
+    largest joined into it where they agree (:func:`curate.sfm.parts.join_shared`, within
+    ``cfg.max_part_disagreement_deg``), the frames they add triangulated from the matches of ``db`` with every pose
+    held (``pycolmap.triangulate_points``, one thread, seeded: :func:`seeded_pipeline_options`; no adjustment after:
+    one moved two of the three joined models measured further from the truth, docs/investigations/sfm.md#joined-parts).
+    ``record`` gets ``joins`` (one row per other part) and, where one joined, ``joined_sizes`` and ``join_seconds``.
+    The joined model is the first of those returned."""
+    t = time.perf_counter()
+    joined, ids, record["joins"] = join_shared(models, cfg.max_part_disagreement_deg)
+    if joined is None:
+        return models
+    pycolmap = load_pycolmap()
+    out.mkdir(parents=True, exist_ok=True)
+    rec = pycolmap.triangulate_points(joined, db, images, out, clear_points=False, options=seeded_pipeline_options(cfg),
+                                      refine_intrinsics=False)
+    anchor = max(models, key=lambda k: models[k].num_reg_images())
+    rest = [r for k, r in models.items() if k != anchor and k not in ids]
+    found = dict(enumerate([rec] + sorted(rest, key=lambda r: -r.num_reg_images())))
+    record["joined_sizes"] = model_sizes(found)
+    record["join_seconds"] = round(time.perf_counter() - t, 2)
+    logger.warning("sfm: %d part(s) of the split capture share frames with the largest and agree on them: joined, "
+                   "%d photos in one model (models %s)", len(ids), rec.num_reg_images(), record["joined_sizes"])
+    return found
+
+
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
     """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
     kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), for the incremental mapper
     ``ba_schedule`` (:func:`map_incremental`'s ``schedule``), and past 1,000 photos
     ``global_adjustments`` (the incremental mapper's solver of each global adjustment, :func:`map_incremental`).
 
-    ``auto`` runs the incremental mapper and, when its largest model holds less than
-    ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
+    ``auto`` runs the incremental mapper; where it split, joins to its largest model the parts that share frames
+    with it and agree on them (:func:`join_split`: ``mappers_tried.incremental.joins``); when the largest then
+    holds less than ``cfg.min_registered_fraction`` of the ``n_images`` photos (the capture split, or frames
     were left out), the global mapper on a copy of the same matches. Its largest model is
     checked against every incremental part (:func:`curate.sfm.parts.part_agreement`, orientation
     disagreement <= ``cfg.max_part_disagreement_deg`` on 90% of the part's photos); where every part it could be
@@ -177,13 +204,15 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
         tried["incremental"] = {"model_sizes": model_sizes(inc), "seconds": round(time.perf_counter() - t, 2)}
         if adjustments:
             stats["global_adjustments"] = adjustments
-        largest = tried["incremental"]["model_sizes"][:1] or [0]
+        if cfg.mapper == "auto" and len(inc) > 1:   # the parts that share frames with the largest and agree, joined
+            inc = join_split(cfg, db, images, work / "joined", inc, tried["incremental"])
+            stats["mappers_tried"] = tried
+        largest = model_sizes(inc)[:1] or [0]
         if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
             stats["mapper"] = "incremental"
             return inc
         logger.warning("sfm: the incremental mapper kept %d of %d photos in its largest model (models %s); "
-                       "trying the global mapper on the same matches", largest[0], n_images,
-                       tried["incremental"]["model_sizes"])
+                       "trying the global mapper on the same matches", largest[0], n_images, model_sizes(inc))
     t = time.perf_counter()
     gdb = work / "global.db"
     shutil.copy2(db, gdb)
@@ -193,7 +222,7 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
         stats["mapper"] = "global"
         return glob
     stats["mappers_tried"] = tried
-    i = (tried["incremental"]["model_sizes"][:1] or [0])[0]
+    i = (model_sizes(inc)[:1] or [0])[0]
     if not glob or tried["global"]["model_sizes"][0] <= i:
         logger.warning("sfm: the global mapper kept no more photos in one model; keeping the incremental models")
         stats["mapper"] = "incremental"
