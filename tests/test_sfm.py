@@ -513,6 +513,54 @@ def test_matching_in_pieces_on_several_processes_writes_what_one_thread_writes(f
 
 
 @pytest.mark.slow
+def test_a_real_part_that_shares_frames_joins_with_its_points_triangulated(fox_features, tmp_path):
+    """24 fox photos mapped in one model, then cut into two parts sharing 10 photos (0-16 and 7-23), the second moved
+    to another world frame, as the incremental mapper leaves a split: joined (curate.sfm.reconstruction.join_split,
+    with the capture's own matches), every photo is back at its pose in the model, the first part's poses untouched,
+    and each added photo sees points triangulated from the matches."""
+    import shutil
+
+    from curate.sfm import reconstruction
+    cfg = small_cfg(loop_detection=False)
+    db = tmp_path / "database.db"
+    shutil.copy2(fox_features, db)
+    mo, vo, dev = reconstruction_matching_options(cfg)
+    pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
+    images = need("fox/images")
+    whole = reconstruction.map_incremental(cfg, db, images, tmp_path / "map", 24, progress=False)
+    whole = max(whole.values(), key=lambda r: r.num_reg_images())
+    ids = sorted(whole.reg_image_ids(), key=lambda i: whole.image(i).name)
+    assert len(ids) == 24
+    pose = {whole.image(i).name: np.asarray(whole.image(i).cam_from_world().matrix()) for i in ids}
+    a, b = pycolmap.Reconstruction(whole), pycolmap.Reconstruction(whole)
+    for i in ids[17:]:
+        a.deregister_frame(a.image(i).frame_id)
+    for i in ids[:7]:
+        b.deregister_frame(b.image(i).frame_id)
+    b.transform(pycolmap.Sim3d(0.3, pycolmap.Rotation3d(np.array([0.2, -0.4, 0.1])), np.array([1.0, 2.0, -3.0])))
+    record: dict = {}
+    joined = reconstruction.join_split(cfg, db, images, tmp_path / "joined", {0: a, 1: b}, record)
+    rec = joined[0]
+    assert len(joined) == 1 and rec.num_reg_images() == 24 and record["joins"][0]["shared"] == 10
+    scale = np.linalg.norm(np.ptp([whole.image(i).projection_center() for i in ids], axis=0))
+    for i in ids:
+        im = rec.image(i)
+        got = np.asarray(im.cam_from_world().matrix())
+        assert np.abs(got[:, :3] - pose[im.name][:, :3]).max() < 2e-3, im.name          # rotation, within 0.1 deg
+        assert np.abs(got[:, 3] - pose[im.name][:, 3]).max() < 2e-3 * scale, im.name
+        if i in ids[:17]:
+            assert np.abs(got - np.asarray(a.image(i).cam_from_world().matrix())).max() < 1e-12   # held
+        else:
+            assert im.num_points3D >= 30, (im.name, im.num_points3D)
+    assert rec.num_points3D() > a.num_points3D()
+
+
+def reconstruction_matching_options(cfg):
+    from curate.sfm import matching
+    return matching._options(cfg, "exhaustive")
+
+
+@pytest.mark.slow
 def test_with_many_features_only_the_pairs_with_few_matches_are_guided(fox_features, tmp_path, monkeypatch):
     """Guided matching costs several unguided matches where photos have many features (4 times at 4,500 a photo)
     and adds little to a pair that has plenty: there auto guides only the pairs whose unguided verification keeps

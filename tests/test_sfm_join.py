@@ -168,3 +168,7 @@ def test_map_capture_joins_first_and_skips_the_global_mapper_when_the_joined_mod
     models = sfm.map_capture(SfmConfig(progress=False, mapper="incremental"), tmp_path / "database.db", tmp_path,
                              tmp_path / "m2", 40, stats)
     assert sfm.model_sizes(models) == [25, 25] and "mappers_tried" not in stats and len(calls) == 1
+    parts = {0: _model(c2w, pts, range(40)), 1: _model(c2w, pts, range(37, 40))}   # a split no join changes
+    stats = {}
+    models = sfm.map_capture(SfmConfig(progress=False), tmp_path / "database.db", tmp_path, tmp_path / "m3", 40, stats)
+    assert sfm.model_sizes(models) == [40, 3] and "mappers_tried" not in stats and len(calls) == 1

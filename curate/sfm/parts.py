@@ -284,9 +284,15 @@ def join_shared(models: dict, max_rot_deg: float, max_step: float = SHARE_MAX_ST
 
 def _add_frame(out, src, image_id: int) -> None:
     """Add the registered image ``image_id`` of ``src`` to ``out`` at its pose in ``src``: same id, name and
-    camera (added when missing), every keypoint, no 3D point."""
+    camera (added when missing), every keypoint, no 3D point; where ``out`` holds the image unregistered, its
+    frame is registered at that pose."""
     pycolmap = load_pycolmap()
     im = src.image(image_id)
+    if out.exists_image(image_id):
+        mine = out.image(image_id)
+        out.frame(mine.frame_id).set_cam_from_world(mine.camera_id, im.cam_from_world())
+        out.register_frame(mine.frame_id)
+        return
     if not out.exists_camera(im.camera_id):
         out.add_camera_with_trivial_rig(src.camera(im.camera_id))
     kp = np.array([p.xy for p in im.points2D], np.float64).reshape(-1, 2)

@@ -206,7 +206,8 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
             stats["global_adjustments"] = adjustments
         if cfg.mapper == "auto" and len(inc) > 1:   # the parts that share frames with the largest and agree, joined
             inc = join_split(cfg, db, images, work / "joined", inc, tried["incremental"])
-            stats["mappers_tried"] = tried
+            if "joined_sizes" in tried["incremental"]:   # said where a part joined or the global mapper ran
+                stats["mappers_tried"] = tried
         largest = model_sizes(inc)[:1] or [0]
         if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
             stats["mapper"] = "incremental"
