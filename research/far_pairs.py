@@ -1,0 +1,71 @@
+"""What a run's far sequential pairs cost and give: the pairs of ``sequential_pairs.txt`` at least ``MIN_OFFSET``
+frames apart (in name order) that are not loop pairs, matched alone on one thread as the stage matches them
+(:func:`curate.sfm.matching._match_file`, guided), and the run's matches mapped without them (the stage's
+incremental mapper). Prints JSON.
+
+    python -m research.far_pairs RUN MIN_OFFSET WORK
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import shutil
+import sqlite3
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> dict:
+    import pycolmap
+
+    from curate.sfm import matching
+    from curate.sfm.config import SfmConfig
+    from curate.sfm.reconstruction import map_incremental
+    run, min_off, work = (lambda a: (Path(a[0]), int(a[1]), Path(a[2])))(argv or sys.argv[1:])
+    work.mkdir(parents=True, exist_ok=True)
+    sfm = run / "sfm"
+    seq = [ln.split() for ln in (sfm / "sequential_pairs.txt").read_text().splitlines() if ln.strip()]
+    names = sorted({a for p in seq for a in p})
+    idx = {n: i for i, n in enumerate(names)}
+    loop_file = sfm / "loop_pairs.txt"
+    loop = {tuple(sorted(ln.split())) for ln in loop_file.read_text().splitlines() if ln.strip()} \
+        if loop_file.is_file() else set()
+    drop = [p for p in seq if abs(idx[p[0]] - idx[p[1]]) >= min_off and tuple(sorted(p)) not in loop]
+    cfg = SfmConfig(progress=False)
+    db = work / "cost.db"
+    shutil.copy2(sfm / "database.db", db)
+    with sqlite3.connect(db) as con:
+        con.execute("DELETE FROM matches")
+        con.execute("DELETE FROM two_view_geometries")
+    lst = work / "drop.txt"
+    lst.write_text("".join(f"{a} {b}\n" for a, b in drop))
+    t, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    matching._match_file(db, lst, cfg.seed, cfg.min_num_matches, True, 0)
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    out = {"run": str(run), "min_offset": min_off, "pairs": len(drop),
+           "match_wall_s": round(time.perf_counter() - t, 1),
+           "match_cpu_s": round(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime, 1)}
+    db2 = work / "without.db"
+    shutil.copy2(sfm / "database.db", db2)
+    with pycolmap.Database.open(db2) as d:
+        ids = {im.name: im.image_id for im in d.read_all_images()}
+        out["verified"] = sum(d.exists_two_view_geometry(ids[a], ids[b]) and
+                              len(d.read_two_view_geometry(ids[a], ids[b]).inlier_matches) >= cfg.min_num_matches
+                              for a, b in drop)
+        for a, b in drop:
+            if d.exists_two_view_geometry(ids[a], ids[b]):
+                d.delete_two_view_geometry(ids[a], ids[b])
+            d.delete_matches(ids[a], ids[b])
+    (work / "sparse").mkdir(exist_ok=True)
+    t = time.perf_counter()
+    models = map_incremental(cfg, db2, sfm / "images", work / "sparse", len(ids), False)
+    out["models_without"] = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
+    out["map_s"] = round(time.perf_counter() - t, 1)
+    print(json.dumps(out))
+    return out
+
+
+if __name__ == "__main__":
+    main()
