@@ -65,7 +65,7 @@ def run_case(case: str, run: Path, sparse: Path, tj: dict, office: Path, max_rot
             row["joined_truth"] = summary(err.values())
             row["right"] = bool(row["added_truth"] and row["added_truth"]["median"] <= 5)
         rows.append(row)
-    joined, ids, recs_ = join_shared(dict(enumerate(parts)), max_rot_deg)   # all parts, as the stage joins them
+    joined, ids, _ = join_shared(dict(enumerate(parts)), max_rot_deg)   # all parts, as the stage joins them
     row = {"case": case, "part": "all", "models": [int(p.num_reg_images()) for p in parts], "joined_parts": ids,
            "largest_truth": summary(base.values())}
     if joined is not None:

@@ -520,11 +520,11 @@ def test_a_real_part_that_shares_frames_joins_with_its_points_triangulated(fox_f
     and each added photo sees points triangulated from the matches."""
     import shutil
 
-    from curate.sfm import reconstruction
+    from curate.sfm import matching, reconstruction
     cfg = small_cfg(loop_detection=False)
     db = tmp_path / "database.db"
     shutil.copy2(fox_features, db)
-    mo, vo, dev = reconstruction_matching_options(cfg)
+    mo, vo, dev = matching._options(cfg, "exhaustive")
     pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo, device=dev)
     images = need("fox/images")
     whole = reconstruction.map_incremental(cfg, db, images, tmp_path / "map", 24, progress=False)
@@ -553,11 +553,6 @@ def test_a_real_part_that_shares_frames_joins_with_its_points_triangulated(fox_f
         else:
             assert im.num_points3D >= 30, (im.name, im.num_points3D)
     assert rec.num_points3D() > a.num_points3D()
-
-
-def reconstruction_matching_options(cfg):
-    from curate.sfm import matching
-    return matching._options(cfg, "exhaustive")
 
 
 @pytest.mark.slow

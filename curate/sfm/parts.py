@@ -168,8 +168,9 @@ SHARE_MIN_FRAMES = 10
 """:func:`join_shared`: the fewest frames two parts must both have registered to be joined (the incremental
 mapper registers frames of an earlier model again in a later one, up to COLMAP's ``max_model_overlap``, 20)."""
 SHARE_MAX_STEP = VERIFY_MAX_STEP
-""":func:`join_shared`: the largest distance between a shared frame's centre in the two aligned parts, as a
-fraction of the median depth of the points it sees (90% of the shared frames)."""
+""":func:`join_shared`: the largest distance between a shared frame's centre in the two aligned parts (90% of the
+shared frames), as a fraction of the scene depth: the median over the shared frames of the median depth of the
+points each sees."""
 
 
 def _frames(rec, names: list[str], known: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -174,7 +174,7 @@ def join_split(cfg: SfmConfig, db: Path, images: Path, out: Path, models: dict, 
 
 def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: int, stats: dict):
     """{id: Reconstruction} of the mapper ``cfg.mapper`` chooses; ``stats`` gets ``mapper`` (the one
-    kept), when both ran ``mappers_tried`` ({mapper: model sizes, seconds}), for the incremental mapper
+    kept), when both ran or a part joined ``mappers_tried`` ({mapper: model sizes, seconds}), for the incremental mapper
     ``ba_schedule`` (:func:`map_incremental`'s ``schedule``), and past 1,000 photos
     ``global_adjustments`` (the incremental mapper's solver of each global adjustment, :func:`map_incremental`).
 
