@@ -35,6 +35,7 @@ def main(argv=None) -> dict:
     ap.add_argument("truth", type=Path)
     ap.add_argument("--office", type=Path, required=True)
     ap.add_argument("--drop", default=None, help="A-B:C-D: leave out the loop pairs between these frame ranges")
+    ap.add_argument("--drop-planar", action="store_true", help="leave out every planar-or-panoramic loop pair (4-6)")
     ap.add_argument("--show", default="0-100000", help="frames (truth index) whose errors are printed")
     ap.add_argument("--work", type=Path, required=True)
     a = ap.parse_args(argv)
@@ -62,13 +63,18 @@ def main(argv=None) -> dict:
     out["verified_loop_pairs"] = len(rows)
     out["by_config"] = {str(c): sum(r["config"] == c for r in rows) for c in sorted({r["config"] for r in rows})}
     lo, hi = _span(a.show)
-    if a.drop:
-        (p0, p1), (q0, q1) = (_span(s) for s in a.drop.split(":"))
-        inside = lambda t, s0, s1: s0 <= t <= s1  # noqa: E731
-        cut = [(x, y) for x, y in loop if (inside(gt[x], p0, p1) and inside(gt[y], q0, q1))
-               or (inside(gt[y], p0, p1) and inside(gt[x], q0, q1))]
-        out["dropped"] = [r for r in rows if (inside(r["frames"][0], p0, p1) and inside(r["frames"][1], q0, q1)) or
-                          (inside(r["frames"][1], p0, p1) and inside(r["frames"][0], q0, q1))]
+    if a.drop or a.drop_planar:
+        if a.drop:
+            (p0, p1), (q0, q1) = (_span(s) for s in a.drop.split(":"))
+            inside = lambda t, s0, s1: s0 <= t <= s1  # noqa: E731
+            cut = [(x, y) for x, y in loop if (inside(gt[x], p0, p1) and inside(gt[y], q0, q1))
+                   or (inside(gt[y], p0, p1) and inside(gt[x], q0, q1))]
+            out["dropped"] = [r for r in rows if (inside(r["frames"][0], p0, p1) and inside(r["frames"][1], q0, q1))
+                              or (inside(r["frames"][1], p0, p1) and inside(r["frames"][0], q0, q1))]
+        else:
+            planar = {tuple(r["frames"]) for r in rows if r["config"] in (4, 5, 6)}
+            cut = [(x, y) for x, y in loop if (gt[x], gt[y]) in planar]
+            out["dropped"] = len(cut)
         a.work.mkdir(parents=True, exist_ok=True)
         db = a.work / "database.db"
         shutil.copy2(sfm / "database.db", db)
