@@ -213,12 +213,14 @@ def test_the_report_says_which_parts_joined_the_largest(tmp_path, glob):
     run = make_run(tmp_path)
     tried = {"incremental": {"model_sizes": [81, 50, 4], "joined_sizes": [115, 4]}}
     if glob:
-        tried["global"] = {"model_sizes": [124], "refuted": True}
+        tried["global"] = {"model_sizes": [124], "refuted": True, "part_disagreement_deg": [13.21, None]}
     (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"mapper": "incremental", "mappers_tried": tried}}))
     body = html.unescape(write_html(run).read_text())
     assert ("the incremental mapper split the capture into models of 81, 50, 4 photos; the parts that share frames "
             "with the largest and agree on them joined it (115 photos)") in body
     assert ("the global mapper mapped 124 in one model" in body) is glob and "curate used COLMAP's incremental" in body
+    assert ("curate used COLMAP's incremental mapper: the global model disagrees with every incremental part it "
+            "could be checked against (13.21 deg)" in body) is glob
 
 
 def test_a_video_cut_short_is_boxed_at_the_top(tmp_path):

@@ -487,7 +487,10 @@ def _capture(run: _Run) -> str:
                      + (f"; the global mapper mapped {(glo.get('model_sizes') or ['?'])[0]} in one model" +
                         (f", kept where it agrees with the parts and can tie them together ({glo.get('pruned_to')} "
                          f"photos)" if glo.get("pruned_to") else "") if glo else "")
-                     + f"; curate used {how or mapper}" + _gain_said(mapper, glo)))
+                     + f"; curate used {how or mapper}" + _gain_said(mapper, glo)
+                     + (f": the global model disagrees with every incremental part it could be checked against "
+                        f"({', '.join(f'{d:g}' for d in glo.get('part_disagreement_deg') or [] if d is not None)} deg)"
+                        if glo.get("refuted") else "")))
     rows.append(("candidates", f"{r.get('n_candidates', reg)}: the selection chooses among every registered photo"))
     if st.get("n_points") is not None:
         rows.append(("3D points", f"{st['n_points']} sparse points"))
