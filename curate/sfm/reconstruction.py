@@ -212,7 +212,7 @@ def map_capture(cfg: SfmConfig, db: Path, images: Path, work: Path, n_images: in
         if cfg.mapper == "incremental" or largest[0] >= cfg.min_registered_fraction * n_images:
             stats["mapper"] = "incremental"
             return inc
-        logger.warning("sfm: the incremental mapper kept %d of %d photos in its largest model (models %s); "
+        logger.warning("sfm: the largest incremental model holds %d of %d photos (models %s); "
                        "trying the global mapper on the same matches", largest[0], n_images, model_sizes(inc))
     t = time.perf_counter()
     gdb = work / "global.db"
