@@ -230,3 +230,67 @@ def test_numbered_photos_are_checked_for_a_fold_in_name_order_and_other_photos_n
             assert w.startswith(f"photos (in name order): the camera path jumps from {names[29]} to {names[30]} ("), w
         else:
             assert jumps == {}
+
+
+# ------------------------------------------------------------------ steps against their own matches
+def _turn(axis, deg: float) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+    a = np.asarray(axis, float)
+    return Rotation.from_rotvec(a / np.linalg.norm(a) * np.radians(deg)).as_matrix()
+
+
+def _two_views(R_deg: float = 4.0, t=(0.2, 0.0, 0.02), n: int = 200, seed: int = 0):
+    """[n, 2] normalised points of a scene seen from frame a (at the origin) and frame b (cam_b_from_cam_a [3, 4]:
+    turned ``R_deg`` about y, moved ``t``): what a pair of consecutive frames' verified matches are."""
+    rng = np.random.default_rng(seed)
+    X = np.c_[rng.uniform(-2, 2, (n, 2)), rng.uniform(3, 8, n)]
+    P = np.c_[_turn([0, 1, 0], R_deg), np.asarray(t, float)]
+    Xb = X @ P[:, :3].T + P[:, 3]
+    return X[:, :2] / X[:, 2:], Xb[:, :2] / Xb[:, 2:], P
+
+
+def test_a_step_fits_its_matches_at_the_true_pose_and_not_turned():
+    """The model's step between two frames explains their matches where it is the true relative pose (with a
+    translation or none); turned by 3 deg, it explains under half of them, by 10 deg or more, almost none (at 500 px,
+    4 px is 0.46 deg; an error along the epipolar lines goes unseen, so a small turn keeps some)."""
+    from curate.sfm.continuity import STEP_MAX_ERROR_PX, STEP_MIN_SHARE, step_errors_px
+    for t in [(0.2, 0.0, 0.02), (0.0, 0.0, 0.0), (1e-9, 0.0, 0.0)]:      # a walk's step, a pure turn, almost one
+        xa, xb, P = _two_views(t=t)
+        assert np.max(step_errors_px(xa, xb, P, 500.0)) < 1e-6
+        for deg, most in ((3.0, STEP_MIN_SHARE), (10.0, 0.1), (25.0, 0.1)):
+            Q = P.copy()
+            Q[:, :3] = _turn([0.3, 1, 0.2], deg) @ P[:, :3]
+            e = step_errors_px(xa, xb, Q, 500.0)
+            assert np.mean(e <= STEP_MAX_ERROR_PX) < most, (t, deg, np.median(e))
+
+
+def test_step_errors_are_never_nan():
+    from curate.sfm.continuity import step_errors_px
+    xa, xb, P = _two_views()
+    assert step_errors_px(xa[:0], xb[:0], P, 500.0).shape == (0,)
+    bad = xa.copy()
+    bad[:5] = np.nan
+    e = step_errors_px(bad, xb, P, 500.0)
+    assert not np.isnan(e).any() and np.isinf(e[:5]).all() and np.isfinite(e[5:]).all()
+    nan_pose = P.copy()
+    nan_pose[0, 3] = np.nan                                              # a pose with a NaN: nothing fits
+    assert np.isinf(step_errors_px(xa, xb, nan_pose, 500.0)).all()
+    back = np.c_[np.diag([-1.0, 1.0, -1.0]), np.zeros(3)]                 # turned half round, no translation
+    assert np.isinf(step_errors_px(xa, xb, back, 500.0)).all()
+
+
+def test_steps_their_matches_refute_are_named_in_a_warning():
+    from curate.sfm.warn import step_warning
+    bad = [{"from": "walk_000019.900.jpg", "to": "walk_000020.000.jpg", "inliers": 317, "fit": 0.18},
+           {"from": "walk_000020.000.jpg", "to": "walk_000020.100.jpg", "inliers": 308, "fit": 0.44}]
+    parts = [{"model": "sparse/0", "n_registered": 50, "steps_checked": 44, "unexplained_steps": {"walk.mp4": bad}}]
+    w = step_warning({"parts": parts})
+    assert w.startswith("video walk.mp4: 2 of 44 steps between consecutive frames are not what the frames' own "
+                        "matches say (walk_000019.900.jpg to walk_000020.000.jpg fits 18% of their 317 verified "
+                        "matches and 1 more): SfM placed the cameras there wrongly"), w
+    other = [{"model": "sparse/0", "n_registered": 300, "steps_checked": 299},
+             {"model": "sparse/1", "n_registered": 40, "steps_checked": 39,
+              "unexplained_steps": {"frames": bad[:1]}}]
+    w = step_warning({"parts": other, "takes": [{"take": "frames", "kind": "photos"}]})
+    assert w.startswith("in the other model of 40 photos, frames (in name order): 1 of 39 steps "), w
+    assert step_warning({"parts": other[:1]}) is None and step_warning({}) is None

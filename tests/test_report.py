@@ -185,6 +185,22 @@ def test_a_folded_video_take_is_boxed_at_the_top(tmp_path):
     assert body.index("warnbox") < body.index("<dl")
 
 
+def test_steps_their_own_matches_refute_are_boxed_at_the_top(tmp_path):
+    """A model with steps between consecutive frames that their own verified matches refute (the blurred walk's
+    wrong model): said above the figures, with the worst step and how many were checked."""
+    run = make_run(tmp_path)
+    bad = [{"from": "walk_000002.200.jpg", "to": "walk_000002.300.jpg", "inliers": 303, "fit": 0.17},
+           {"from": "walk_000002.700.jpg", "to": "walk_000002.800.jpg", "inliers": 544, "fit": 0.22}]
+    (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"parts": [
+        {"model": "sparse/0", "n_registered": 26, "steps_checked": 22, "unexplained_steps": {"walk.mp4": bad}}]}}))
+    body = write_html(run).read_text()
+    body = body[body.index("<body"):]
+    assert body.count('class="warnbox"') == 1
+    assert ("video walk.mp4: 2 of 22 steps between consecutive frames are not what the frames&#x27; own matches say "
+            "(walk_000002.200.jpg to walk_000002.300.jpg fits 17% of their 303 verified matches and 1 more)") in body
+    assert body.index("warnbox") < body.index("<dl")
+
+
 @pytest.mark.parametrize("gain, says", [
     (2, "curate used COLMAP's incremental mapper: the global model, the less accurate of the two, held 2 photos "
         "more than the incremental one, under the 22 it must gain to replace it"),

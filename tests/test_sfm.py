@@ -1014,26 +1014,65 @@ def test_retrieval_maps_again_only_when_the_model_leaves_photos_out_and_keeps_th
 
 
 # ------------------------------------------------------------------ the same input, the same model (issue 58)
-@pytest.mark.slow
-def test_a_video_that_turns_fast_stays_one_model_and_three_runs_give_the_same_model(tmp_path):
+@pytest.fixture(scope="module")
+def fast_turn_runs(tmp_path_factory):
     """41 frames of office.mp4 at half its frame rate, across a turn where consecutive frames share 63 verified
-    inliers: without guided matching the incremental mapper split them (35, 21 and 3 frames) and the capture
-    rested on the global mapper; with it (the default for a sequence of frames) it maps them in one model. Three
-    runs, the last on one thread, register the same frames with the same poses: the capture's own visual words
-    are seeded and the mappers run on one thread."""
+    inliers, mapped three times in fresh run folders (the last on one thread): (root, [Cameras], [stats])."""
     from research.takes import _decode, write_video
+    root = tmp_path_factory.mktemp("fast_turn")
     frames = _decode(need("office") / "office.mp4")
-    write_video([frames[i] for i in range(40, 122, 2)], tmp_path / "cap" / "walk.mp4")
+    write_video([frames[i] for i in range(40, 122, 2)], root / "cap" / "walk.mp4")
     del frames
     cams, stats = [], []
     for k, threads in enumerate((-1, -1, 1)):
-        run_sfm(SfmConfig(progress=False, num_threads=threads), tmp_path / "cap" / "walk.mp4", tmp_path / f"run{k}")
-        cams.append(load_sfm(tmp_path / f"run{k}").cameras)
-        stats.append(json.loads((tmp_path / f"run{k}" / "sfm" / "stage.json").read_text())["stats"])
+        run_sfm(SfmConfig(progress=False, num_threads=threads), root / "cap" / "walk.mp4", root / f"run{k}")
+        cams.append(load_sfm(root / f"run{k}").cameras)
+        stats.append(json.loads((root / f"run{k}" / "sfm" / "stage.json").read_text())["stats"])
+    return root, cams, stats
+
+
+@pytest.mark.slow
+def test_a_video_that_turns_fast_stays_one_model_and_three_runs_give_the_same_model(fast_turn_runs):
+    """Without guided matching the incremental mapper split the fast turn's frames (35, 21 and 3 frames) and the
+    capture rested on the global mapper; with it (the default for a sequence of frames) it maps them in one model.
+    Three runs, the last on one thread, register the same frames with the same poses: the capture's own visual
+    words are seeded and the mappers run on one thread."""
+    _, cams, stats = fast_turn_runs
     assert stats[0]["mapper"] == "incremental" and "mappers_tried" not in stats[0], stats[0].get("mappers_tried")
     assert stats[0]["model_sizes"] == [41] and len(cams[0]) == 41
     for c in cams[1:]:
         assert_same_model(cams[0], c)
+
+
+@pytest.mark.slow
+def test_each_step_of_a_real_walk_is_checked_against_its_own_matches(fast_turn_runs):
+    """Every step between consecutive frames of the fast turn's model fits the frames' own verified matches (the
+    stage records 40 steps checked and none refuted); the same model with one frame tilted and rolled by 5 deg is
+    refuted at that frame's two steps, and the warning names them (the blurred walk's wrong model, the cut's fold:
+    docs/investigations/sfm.md#steps-their-matches-refute)."""
+    from curate.sfm.continuity import unexplained_steps
+    from curate.sfm.warn import step_warning
+    from research.path_check import kept_records
+    root, _, stats = fast_turn_runs
+    part = stats[0]["parts"][0]
+    assert part["steps_checked"] == 40 and "unexplained_steps" not in part, part
+    assert step_warning(stats[0]) is None
+    run = root / "run0"
+    rec = pycolmap.Reconstruction(run / "sfm" / "sparse" / "0")
+    kept = kept_records(run)
+    assert unexplained_steps(rec, kept, run / "sfm" / "database.db") == {"walk.mp4": {"checked": 40, "unexplained": []}}
+    by_name = sorted((im.name, im) for im in rec.images.values())
+    name, im = by_name[20]
+    axis = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)     # tilted and rolled: a pan alone, along a sideways step's
+    turn = pycolmap.Rotation3d(np.r_[axis * np.sin(np.radians(2.5)), np.cos(np.radians(2.5))])   # epipolar lines, hides
+    pose = im.cam_from_world()
+    rec.frame(im.frame_id).set_cam_from_world(im.camera_id, pycolmap.Rigid3d(turn * pose.rotation, pose.translation))
+    bad = unexplained_steps(rec, kept, run / "sfm" / "database.db")["walk.mp4"]
+    assert bad["checked"] == 40
+    assert [(b["from"], b["to"]) for b in bad["unexplained"]] == [(by_name[19][0], name), (name, by_name[21][0])]
+    assert all(b["fit"] < 0.5 and b["inliers"] >= 15 for b in bad["unexplained"])
+    w = step_warning({"parts": [{**part, "unexplained_steps": {"walk.mp4": bad["unexplained"]}}]})
+    assert w.startswith("video walk.mp4: 2 of 40 steps between consecutive frames are not what the frames' own "), w
 
 
 @pytest.mark.slow

@@ -146,10 +146,10 @@ def _title(run: _Run) -> str:
 
 def _warnings(run: _Run) -> list[str]:
     """What the user must know before reading any figure (each a sentence)."""
-    from curate.sfm.warn import path_warning, split_warning
+    from curate.sfm.warn import path_warning, split_warning, step_warning
     r = run.rep
     each = ((r.get("config") or {}).get("sfm") or {}).get("on_split") == "each"
-    out = [w for w in (split_warning(run.dir, each=each), path_warning(run.sfm_stats),
+    out = [w for w in (split_warning(run.dir, each=each), path_warning(run.sfm_stats), step_warning(run.sfm_stats),
                        (read_json(RunPaths(run.dir).record("export")) or {}).get("warning")) if w]
     stale = r.get("stale") or {}
     if "export" in stale:

@@ -40,7 +40,7 @@ from curate.core.cameras import Cameras
 from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage
 from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
-from curate.sfm.continuity import drop_off_path, jumps_along
+from curate.sfm.continuity import drop_off_path, jumps_along, unexplained_steps
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.matching import match, pair_counts, rematch_left_out, weak_first
@@ -178,6 +178,13 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     for part, r in zip(stats["parts"][1:], others):   # --on-split each curates them: a fold there is named too
         if j := jumps_along(r, kept):
             part["path_jumps"] = j
+    t = time.perf_counter()
+    for part, r in zip(stats["parts"], [best] + others):   # each step against its frames' own matches
+        steps = unexplained_steps(r, kept, db)
+        part["steps_checked"] = sum(v["checked"] for v in steps.values())
+        if bad := {tk: v["unexplained"] for tk, v in steps.items() if v["unexplained"]}:
+            part["unexplained_steps"] = bad
+    timings["step_check"] = round(time.perf_counter() - t, 2)
     shutil.rmtree(out / "mapper", ignore_errors=True)
     in_model = {best.image(i).name for i in best.reg_image_ids()}
     in_others = {r.image(i).name for r in models.values() if r is not best for i in r.reg_image_ids()}

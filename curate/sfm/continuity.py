@@ -20,6 +20,11 @@ frame, and the frames on each side agree with their neighbours; which side is wr
 say, so nothing is left out: the user is told (``curate.sfm.warn.path_warning``).
 
 :func:`drop_off_path` and :func:`jumps_along` apply both to the takes of a mapper's models.
+
+:func:`unexplained_steps` asks each step of a take in the model whether the two frames' own verified matches
+agree with it: a model whose relative pose between consecutive frames fits under half of their matches was not
+built from them (a blurred walk mapped into a wrong model keeps every frame near its neighbours, so the path
+cannot see it; its steps' own matches can).
 """
 
 from __future__ import annotations
@@ -48,6 +53,22 @@ around a step from above). 20 sits above every sound capture measured, under the
 
 JUMP_WINDOW = 10
 """Steps on each side of a step that :func:`path_jumps` compares it with (a second at 10 candidates a second)."""
+
+
+STEP_MAX_ERROR_PX = 4.0
+"""A verified match of two consecutive frames fits the model's step between them when its Sampson distance under
+the model's relative pose is at most this many pixels (COLMAP verifies matches at 4 px)."""
+
+
+STEP_MIN_SHARE = 0.5
+"""A step is unexplained when under this share of its frames' verified matches fit it. Measured
+(research/step_check.py, docs/investigations/sfm.md#steps-their-matches-refute): every step of the sound models of
+office.mp4 and its harder versions keeps at least 0.51 and 95% of them at least 0.92; the blurred walk's wrong model
+has 7 of its 49 steps under 0.5."""
+
+
+STEP_MIN_INLIERS = 15
+"""Steps whose frames share fewer verified matches are not checked (too few to say)."""
 
 
 def speeds(t: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -184,4 +205,77 @@ def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
         for i, r in path_jumps(*times_and_centres(frames)):
             out.setdefault(tk, []).append({"from": frames[i - 1][1].name, "to": frames[i][1].name,
                                            "x_around": round(r, 1) if np.isfinite(r) else None})
+    return out
+
+
+def step_errors_px(xa: np.ndarray, xb: np.ndarray, cam_b_from_cam_a: np.ndarray, focal: float) -> np.ndarray:
+    """[n] how far, in pixels, each match (``xa[i]`` in frame a, ``xb[i]`` in frame b; [n, 2] normalised image
+    coordinates, ``Camera.cam_from_img``) is from agreeing with the relative pose ``cam_b_from_cam_a`` ([3, 4],
+    OpenCV): its Sampson distance to the epipolar geometry, or, for a pose with no translation, its distance
+    to the rotated point. ``focal`` (pixels) scales normalised units to pixels. Never NaN: a match the pose
+    cannot place (behind the camera under a pure rotation, non-finite input) is infinitely far."""
+    xa, xb = np.asarray(xa, np.float64).reshape(-1, 2), np.asarray(xb, np.float64).reshape(-1, 2)
+    P = np.asarray(cam_b_from_cam_a, np.float64)
+    R, t = P[:3, :3], P[:3, 3]
+    pa, pb = np.c_[xa, np.ones(len(xa))], np.c_[xb, np.ones(len(xb))]
+    if not np.isfinite(P).all():
+        return np.full(len(xa), np.inf)
+    norm = float(np.linalg.norm(t))
+    with np.errstate(all="ignore"):
+        if norm > 1e-12:
+            tn = t / norm
+            E = np.array([[0, -tn[2], tn[1]], [tn[2], 0, -tn[0]], [-tn[1], tn[0], 0]]) @ R
+            ea, eb = pa @ E.T, pb @ E          # epipolar lines of a's points in b, and of b's in a
+            num = np.sum(pb * ea, axis=1) ** 2
+            den = ea[:, 0] ** 2 + ea[:, 1] ** 2 + eb[:, 0] ** 2 + eb[:, 1] ** 2
+            d = np.sqrt(num / np.maximum(den, 1e-30))
+        else:
+            q = pa @ R.T
+            d = np.linalg.norm(q[:, :2] / q[:, 2:3] - xb, axis=1)
+            d[q[:, 2] <= 0] = np.inf
+        d = d * float(focal)
+    return np.where(np.isfinite(d), d, np.inf)
+
+
+def unexplained_steps(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_ERROR_PX,
+                      min_share: float = STEP_MIN_SHARE, min_inliers: int = STEP_MIN_INLIERS) -> dict[str, dict]:
+    """{take: {"checked": steps checked, "unexplained": [{"from", "to", "inliers", "fit"}]}} of every take of
+    the model ``rec`` that has an order in time (video frames, numbered photos: :func:`frame_times`): each step
+    between consecutive registered frames that share ``min_inliers`` verified matches or more in the database
+    ``db`` is checked, and it is unexplained when under ``min_share`` of those matches are within
+    ``max_error_px`` of the model's relative pose (:func:`step_errors_px`; ``fit``: that share)."""
+    from curate.sfm.native import load as load_pycolmap
+    pycolmap = load_pycolmap()
+    takes = video_takes(rec, frame_times(kept, numbered=True))
+    out: dict[str, dict] = {}
+    if not takes:
+        return out
+    with pycolmap.Database.open(Path(db)) as d:
+        ids = {im.name: im.image_id for im in d.read_all_images()}
+        keypoints: dict[int, np.ndarray] = {}
+
+        def kp(i: int) -> np.ndarray:
+            if i not in keypoints:
+                keypoints[i] = np.asarray(d.read_keypoints(i), np.float64)[:, :2]
+            return keypoints[i]
+
+        for tk, frames in takes.items():
+            checked, bad = 0, []
+            for (_, a), (_, b) in zip(frames[:-1], frames[1:]):
+                ia, ib = ids.get(a.name), ids.get(b.name)
+                if ia is None or ib is None or not d.exists_two_view_geometry(ia, ib):
+                    continue
+                m = d.read_two_view_geometry(ia, ib).inlier_matches
+                if len(m) < min_inliers:
+                    continue
+                ca, cb = rec.cameras[a.camera_id], rec.cameras[b.camera_id]
+                xa, xb = ca.cam_from_img(kp(ia)[m[:, 0]]), cb.cam_from_img(kp(ib)[m[:, 1]])
+                rel = (b.cam_from_world() * a.cam_from_world().inverse()).matrix()
+                focal = float(ca.focal_length_x * ca.focal_length_y * cb.focal_length_x * cb.focal_length_y) ** 0.25
+                fit = float(np.mean(step_errors_px(xa, xb, rel, focal) <= max_error_px))
+                checked += 1
+                if fit < min_share:
+                    bad.append({"from": a.name, "to": b.name, "inliers": int(len(m)), "fit": round(fit, 2)})
+            if checked:
+                out[tk] = {"checked": checked, "unexplained": bad}
     return out

@@ -27,7 +27,7 @@ def reconstruct(ctx: "RunContext") -> StageResult:
     from curate.core.stage import read_stage
     from curate.sfm.colmap import sfm_in_claimed
     from curate.sfm.pose_import import import_in_claimed
-    from curate.sfm.warn import import_warning, path_warning, split_warning
+    from curate.sfm.warn import import_warning, path_warning, split_warning, step_warning
     t0 = time.perf_counter()
     cfg, run_dir, photos, poses = ctx.cfg, ctx.run_dir, ctx.photos, ctx.poses
     if poses:
@@ -45,10 +45,10 @@ def reconstruct(ctx: "RunContext") -> StageResult:
             raise ValueError(f"{warn} (stopped: --on-split stop; --on-split largest goes on with the largest part, "
                              "--on-split each curates every part)")
         log.warning("sfm: %s", warn)
-    fold = path_warning(st)              # imported poses carry no path_jumps: curate does not check them
-    if fold is not None:
-        log.warning("sfm: %s", fold)
-        warn = fold if warn is None else f"{warn}; {fold}"
+    for said in (path_warning(st), step_warning(st)):   # imported poses carry neither: curate does not check them
+        if said is not None:
+            log.warning("sfm: %s", said)
+            warn = said if warn is None else f"{warn}; {said}"
     summary = f"{n} cameras registered"
     if poses:
         tri = st.get("triangulation") or {}

@@ -1,6 +1,7 @@
 """What the user must be told about the SfM result: a capture that split or left photos out, takes that did not
-join, a camera path that jumps and does not come back, an import whose poses and photos do not match. Read from the
-SfM stage's record (``RUN/sfm/stage.json``) by the SfM stage, the export and the report alike.
+join, a camera path that jumps and does not come back, steps between frames their own matches refute, an import
+whose poses and photos do not match. Read from the SfM stage's record (``RUN/sfm/stage.json``) by the SfM stage,
+the export and the report alike.
 """
 
 from __future__ import annotations
@@ -132,6 +133,30 @@ def path_warning(stats: dict) -> str | None:
     return ("; ".join(each) + ": SfM may have folded the model there, the cameras on one side of the jump then "
             "being wrong. Look at the cameras (the export's sparse/0 in COLMAP's GUI, or transforms.json in "
             "nerfstudio's viewer) before training on them" + other)
+
+
+def step_warning(stats: dict) -> str | None:
+    """A warning for each take (a video, numbered photos) of the model curate uses, and of each other part, with
+    steps between consecutive frames that their own verified matches refute: under half of the matches fit the
+    model's relative pose (``parts[k].unexplained_steps``: :func:`curate.sfm.continuity.unexplained_steps`). The
+    cameras there are wrong, and where many steps are, the whole model may be (a blurred walk); None where every
+    step checked fits."""
+    kinds = {t["take"]: t["kind"] for t in stats.get("takes") or []}
+    each = []
+    for k, part in enumerate(stats.get("parts") or []):
+        prefix = "" if k == 0 else f"in the other model of {part['n_registered']} photos, "
+        for take, bad in sorted((part.get("unexplained_steps") or {}).items()):
+            worst = min(bad, key=lambda x: x["fit"])
+            what = f"{take} (in name order)" if kinds.get(take) == "photos" else f"video {take}"
+            more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
+            each.append(f"{prefix}{what}: {len(bad)} of {part.get('steps_checked', len(bad))} steps between "
+                        f"consecutive frames are not what the frames' own matches say ({worst['from']} to "
+                        f"{worst['to']} fits {worst['fit']:.0%} of their {worst['inliers']} verified matches{more})")
+    if not each:
+        return None
+    return ("; ".join(each) + ": SfM placed the cameras there wrongly, and where many steps disagree the whole model "
+            "may be wrong (blur, a fast turn). Look at the cameras (the export's sparse/0 in COLMAP's GUI, or "
+            "transforms.json in nerfstudio's viewer) before training on them")
 
 
 def import_warning(run_dir: Path) -> str | None:
