@@ -283,13 +283,14 @@ def test_steps_their_matches_refute_are_named_in_a_warning():
     from curate.sfm.warn import step_warning
     bad = [{"from": "walk_000019.900.jpg", "to": "walk_000020.000.jpg", "inliers": 317, "fit": 0.18},
            {"from": "walk_000020.000.jpg", "to": "walk_000020.100.jpg", "inliers": 308, "fit": 0.44}]
-    parts = [{"model": "sparse/0", "n_registered": 50, "steps_checked": 44, "unexplained_steps": {"walk.mp4": bad}}]
+    parts = [{"model": "sparse/0", "n_registered": 50, "steps_checked": {"walk.mp4": 44, "b.mp4": 300},
+              "unexplained_steps": {"walk.mp4": bad}}]
     w = step_warning({"parts": parts})
     assert w.startswith("video walk.mp4: 2 of 44 steps between consecutive frames are not what the frames' own "
                         "matches say (walk_000019.900.jpg to walk_000020.000.jpg fits 18% of their 317 verified "
                         "matches and 1 more): SfM placed the cameras there wrongly"), w
-    other = [{"model": "sparse/0", "n_registered": 300, "steps_checked": 299},
-             {"model": "sparse/1", "n_registered": 40, "steps_checked": 39,
+    other = [{"model": "sparse/0", "n_registered": 300, "steps_checked": {"walk.mp4": 299}},
+             {"model": "sparse/1", "n_registered": 40, "steps_checked": {"frames": 39},
               "unexplained_steps": {"frames": bad[:1]}}]
     w = step_warning({"parts": other, "takes": [{"take": "frames", "kind": "photos"}]})
     assert w.startswith("in the other model of 40 photos, frames (in name order): 1 of 39 steps "), w

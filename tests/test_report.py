@@ -192,7 +192,8 @@ def test_steps_their_own_matches_refute_are_boxed_at_the_top(tmp_path):
     bad = [{"from": "walk_000002.200.jpg", "to": "walk_000002.300.jpg", "inliers": 303, "fit": 0.17},
            {"from": "walk_000002.700.jpg", "to": "walk_000002.800.jpg", "inliers": 544, "fit": 0.22}]
     (run / "sfm" / "stage.json").write_text(json.dumps({"stats": {"parts": [
-        {"model": "sparse/0", "n_registered": 26, "steps_checked": 22, "unexplained_steps": {"walk.mp4": bad}}]}}))
+        {"model": "sparse/0", "n_registered": 26, "steps_checked": {"walk.mp4": 22},
+         "unexplained_steps": {"walk.mp4": bad}}]}}))
     body = write_html(run).read_text()
     body = body[body.index("<body"):]
     assert body.count('class="warnbox"') == 1

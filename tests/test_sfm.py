@@ -1055,7 +1055,7 @@ def test_each_step_of_a_real_walk_is_checked_against_its_own_matches(fast_turn_r
     from research.path_check import kept_records
     root, _, stats = fast_turn_runs
     part = stats[0]["parts"][0]
-    assert part["steps_checked"] == 40 and "unexplained_steps" not in part, part
+    assert part["steps_checked"] == {"walk.mp4": 40} and "unexplained_steps" not in part, part
     assert step_warning(stats[0]) is None
     run = root / "run0"
     rec = pycolmap.Reconstruction(run / "sfm" / "sparse" / "0")

@@ -181,7 +181,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     t = time.perf_counter()
     for part, r in zip(stats["parts"], [best] + others):   # each step against its frames' own matches
         steps = unexplained_steps(r, kept, db)
-        part["steps_checked"] = sum(v["checked"] for v in steps.values())
+        part["steps_checked"] = {tk: v["checked"] for tk, v in steps.items()}
         if bad := {tk: v["unexplained"] for tk, v in steps.items() if v["unexplained"]}:
             part["unexplained_steps"] = bad
     timings["step_check"] = round(time.perf_counter() - t, 2)

@@ -138,7 +138,8 @@ def path_warning(stats: dict) -> str | None:
 def step_warning(stats: dict) -> str | None:
     """A warning for each take (a video, numbered photos) of the model curate uses, and of each other part, with
     steps between consecutive frames that their own verified matches refute: under half of the matches fit the
-    model's relative pose (``parts[k].unexplained_steps``: :func:`curate.sfm.continuity.unexplained_steps`). The
+    model's relative pose (``parts[k].unexplained_steps``: :func:`curate.sfm.continuity.unexplained_steps`, and
+    ``parts[k].steps_checked``: {take: steps checked}). The
     cameras there are wrong, and where many steps are, the whole model may be (a blurred walk); None where every
     step checked fits."""
     kinds = {t["take"]: t["kind"] for t in stats.get("takes") or []}
@@ -149,7 +150,8 @@ def step_warning(stats: dict) -> str | None:
             worst = min(bad, key=lambda x: x["fit"])
             what = f"{take} (in name order)" if kinds.get(take) == "photos" else f"video {take}"
             more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
-            each.append(f"{prefix}{what}: {len(bad)} of {part.get('steps_checked', len(bad))} steps between "
+            checked = (part.get("steps_checked") or {}).get(take, len(bad))
+            each.append(f"{prefix}{what}: {len(bad)} of {checked} steps between "
                         f"consecutive frames are not what the frames' own matches say ({worst['from']} to "
                         f"{worst['to']} fits {worst['fit']:.0%} of their {worst['inliers']} verified matches{more})")
     if not each:
