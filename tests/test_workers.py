@@ -115,12 +115,21 @@ def session_left(sid: int) -> list[str]:
     return out
 
 
+def _as_from_a_terminal() -> None:
+    """The child starts with SIGINT and SIGHUP as a command typed at a terminal has them: a test suite started in
+    the background (``nohup pytest &``) ignores both, its children inherit that, and curate rightly keeps a signal
+    ignored that was ignored when it started (``curate.core.signals.install``)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 def run_script(tmp_path: Path, paths: dict, sig: int | None = None, sleep: float = 0.4) -> tuple:
     script = tmp_path / "evaluate_paths.py"
     script.write_text(SCRIPT)
     env = {**os.environ, "PYTHONPATH": str(ROOT), "SLEEP": str(sleep), "OMP_NUM_THREADS": "1"}
     p = subprocess.Popen([sys.executable, str(script), str(tmp_path / "run"), json.dumps(paths)], env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, cwd=tmp_path)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, cwd=tmp_path,
+                         preexec_fn=_as_from_a_terminal)
     if sig is not None:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and len(session_left(p.pid)) < 3:   # the two workers have started
