@@ -64,8 +64,8 @@ STEP_MIN_SHARE = 0.5
 """A step is unexplained when under this share of its frames' verified matches fit it (the majority rule of
 research/model_check.py, set on the cut before these rows). Measured (research/step_fit.py,
 docs/investigations/sfm.md#steps-their-matches-refute): the blurred walk's wrong models have 5 of 44 and 6 of 15
-steps under it, the folded cut its fold at 0.00; of 18 sound models one step falls under it, at a frame 6.9 deg off
-the truth, and every step under 0.7 lies at a frame 4.3 deg or more off."""
+steps under it, the folded cut its fold at 0.00; of 12 other models kept, one has a step under it, at a frame 6.9
+deg off the truth, and every step under 0.7 lies at a frame 4.3 deg or more off."""
 
 
 STEP_MIN_INLIERS = 15
