@@ -1063,8 +1063,9 @@ def test_each_step_of_a_real_walk_is_checked_against_its_own_matches(fast_turn_r
     assert unexplained_steps(rec, kept, run / "sfm" / "database.db") == {"walk.mp4": {"checked": 40, "unexplained": []}}
     by_name = sorted((im.name, im) for im in rec.images.values())
     name, im = by_name[20]
-    axis = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)     # tilted and rolled: a pan alone, along a sideways step's
-    turn = pycolmap.Rotation3d(np.r_[axis * np.sin(np.radians(2.5)), np.cos(np.radians(2.5))])   # epipolar lines, hides
+    # tilted and rolled by 5 deg: a pan alone would move the points along a sideways step's epipolar lines, unseen
+    axis = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)
+    turn = pycolmap.Rotation3d(np.r_[axis * np.sin(np.radians(2.5)), np.cos(np.radians(2.5))])
     pose = im.cam_from_world()
     rec.frame(im.frame_id).set_cam_from_world(im.camera_id, pycolmap.Rigid3d(turn * pose.rotation, pose.translation))
     bad = unexplained_steps(rec, kept, run / "sfm" / "database.db")["walk.mp4"]
