@@ -1,7 +1,7 @@
 """A video's frames registered in the order of the walk: the run's matches mapped again by curate's step-by-step
-incremental mapper (`curate.sfm.mapping.incremental_mapping`) with COLMAP's next images reordered so that a frame
-with a registered neighbour in its take (within ``--reach`` frames) comes before one without, against the same loop
-in COLMAP's order; each model's frames against the truth. Prints JSON.
+incremental mapper (`curate.sfm.mapping.incremental_mapping`) with COLMAP's next images reordered
+(:func:`mapping_with`) so that a frame with a registered neighbour in its take (within ``--reach`` frames) comes
+before one without, against the same loop in COLMAP's order; each model's frames against the truth. Prints JSON.
 
     python -m research.neighbour_first RUN CASE.truth.json --office ../shared/data/office --work W [--reach 2]
 """
@@ -50,6 +50,33 @@ def neighbour_rank(kept: list, db: Path, reach: int, entry: bool = False):
     return rank
 
 
+def mapping_with(rank):
+    """A context in which :func:`curate.sfm.mapping.incremental_mapping` tries COLMAP's next images in the order
+    ``rank(ids, rec)`` gives (None: COLMAP's order): its loop reads pycolmap through ``load_pycolmap``, here a view
+    of pycolmap whose IncrementalMapper reorders ``find_next_images``. The reordering is this experiment's, not
+    curate's (measured, not adopted: docs/investigations/sfm.md#registration-order)."""
+    import contextlib
+    from unittest import mock
+
+    import pycolmap
+
+    from curate.sfm import mapping
+    if rank is None:
+        return contextlib.nullcontext()
+
+    class Mapper(pycolmap.IncrementalMapper):
+        def find_next_images(self, options, structure_less=False):
+            return rank(list(super().find_next_images(options, structure_less=structure_less)), self.reconstruction)
+
+    class View:
+        IncrementalMapper = Mapper
+
+        def __getattr__(self, name):
+            return getattr(pycolmap, name)
+
+    return mock.patch.object(mapping, "load_pycolmap", lambda: View())
+
+
 def main(argv=None) -> dict:
     from curate.sfm.config import SfmConfig
     from curate.sfm.mapping import incremental_mapping
@@ -86,7 +113,8 @@ def main(argv=None) -> dict:
                                                   else pycolmap.ImageSelectionMethod.MAX_VISIBLE_POINTS_NUM)
         rank = neighbour_rank(kept, db, a.reach, entry=v == "entry") if v in ("neighbours", "entry") else None
         t = time.process_time()
-        models = incremental_mapping(db, sfm / "images", w / "sparse", opts, rank=rank)
+        with mapping_with(rank):
+            models = incremental_mapping(db, sfm / "images", w / "sparse", opts)
         cpu = time.process_time() - t
         rows = []
         for r in sorted(models.values(), key=lambda r: -r.num_reg_images()):

@@ -111,15 +111,13 @@ class SolverChoice:
 
 def incremental_mapping(database: Path, images: Path, out: Path, options, choice: SolverChoice | None = None,
                         on_pair: Callable[[], None] | None = None,
-                        on_image: Callable[[], None] | None = None, global_ba=None,
-                        rank: Callable[[list, object], list] | None = None) -> dict:
+                        on_image: Callable[[], None] | None = None, global_ba=None) -> dict:
     """{index: pycolmap.Reconstruction} mapped from ``database`` as ``pycolmap.incremental_mapping``
     would with ``options`` (pycolmap.IncrementalPipelineOptions), except that each global bundle
     adjustment's solver is set by ``choice`` (None: as ``global_ba`` has it, by default
     ``options.get_global_bundle_adjustment()``: Ceres' choice, as COLMAP). Models are written to
     ``out``/0, ``out``/1, ... as COLMAP writes them. ``on_pair`` is called when a model's initial pair
-    is registered, ``on_image`` after each further registration. ``rank`` (None: COLMAP's order) reorders the
-    next images COLMAP proposes, given the list of image ids and the model being grown."""
+    is registered, ``on_image`` after each further registration."""
     pycolmap = load_pycolmap()
 
     options.image_path = str(images)
@@ -128,15 +126,14 @@ def incremental_mapping(database: Path, images: Path, out: Path, options, choice
     global_ba = global_ba or options.get_global_bundle_adjustment()
     with pycolmap.Database.open(database) as db:
         pipeline = pycolmap.IncrementalPipeline(options, db, manager)
-        _run(pipeline, _Loop(global_ba, choice, on_pair or (lambda: None), on_image or (lambda: None), rank))
+        _run(pipeline, _Loop(global_ba, choice, on_pair or (lambda: None), on_image or (lambda: None)))
     manager.write(out)
     return {i: manager.get(i) for i in range(manager.size())}
 
 
 class _Loop:
-    def __init__(self, global_ba, choice, on_pair, on_image, rank=None):
+    def __init__(self, global_ba, choice, on_pair, on_image):
         self.global_ba, self.choice, self.on_pair, self.on_image = global_ba, choice, on_pair, on_image
-        self.rank = rank or (lambda ids, rec: ids)
 
     def global_refinement(self, pipeline, mapper, mapper_options) -> None:
         opts = pipeline.options
@@ -236,8 +233,7 @@ def _sub_model(pipeline, mapper, mapper_options, rec, loop: _Loop):
             break
         prev_ok, ok, image_id = ok, False, None
         for structure_less in kinds:
-            nxt = loop.rank(list(mapper.find_next_images(mapper_options, structure_less=structure_less)), rec)
-            for trial, image_id in enumerate(nxt):
+            for trial, image_id in enumerate(mapper.find_next_images(mapper_options, structure_less=structure_less)):
                 ok = (mapper.register_next_structure_less_image(mapper_options, image_id) if structure_less
                       else mapper.register_next_image(mapper_options, image_id))
                 if ok or (trial >= _MIN_INITIAL_TRIALS and rec.num_reg_images() < opts.min_model_size):
