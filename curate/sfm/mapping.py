@@ -15,7 +15,14 @@ each global adjustment solves directly while it stays under ``SfmConfig.direct_b
 ``initialize_reconstruction``; each next image registered, triangulated and refined locally by pycolmap's
 ``IncrementalMapper``; a global refinement when the model has grown by the pipeline's ratios; models,
 retries and the two relaxations of the initial pair's thresholds as COLMAP has them. What is written
-here is only that loop and the choice: every step is pycolmap's.
+here is only that loop, the choice, and one step left out where COLMAP repeats itself
+(``repeat_final_refinement``): every step is pycolmap's.
+
+Where no photo more registers, COLMAP refines the whole model and tries once more; its final refinement at the end
+then runs again, though nothing registered since, because the counts it compares were last set by the refinement
+before (``ReconstructSubModel``: "only run final global BA, if last incremental BA was not global"). Here the
+refinement before the last try counts as global, so the final one runs only where a photo registered after it: on
+office.mp4 the two last refinements cost 17 and 8 s of a 70 s mapping (docs/investigations/sfm.md#final-refinement).
 """
 
 from __future__ import annotations
@@ -111,13 +118,16 @@ class SolverChoice:
 
 def incremental_mapping(database: Path, images: Path, out: Path, options, choice: SolverChoice | None = None,
                         on_pair: Callable[[], None] | None = None,
-                        on_image: Callable[[], None] | None = None, global_ba=None) -> dict:
+                        on_image: Callable[[], None] | None = None, global_ba=None,
+                        repeat_final_refinement: bool = True) -> dict:
     """{index: pycolmap.Reconstruction} mapped from ``database`` as ``pycolmap.incremental_mapping``
     would with ``options`` (pycolmap.IncrementalPipelineOptions), except that each global bundle
     adjustment's solver is set by ``choice`` (None: as ``global_ba`` has it, by default
-    ``options.get_global_bundle_adjustment()``: Ceres' choice, as COLMAP). Models are written to
-    ``out``/0, ``out``/1, ... as COLMAP writes them. ``on_pair`` is called when a model's initial pair
-    is registered, ``on_image`` after each further registration."""
+    ``options.get_global_bundle_adjustment()``: Ceres' choice, as COLMAP) and, with ``repeat_final_refinement``
+    False, a model's final global refinement is left out where the refinement before its last try was the last
+    change (the module's docstring). Models are written to ``out``/0, ``out``/1, ... as COLMAP writes them.
+    ``on_pair`` is called when a model's initial pair is registered, ``on_image`` after each further
+    registration."""
     pycolmap = load_pycolmap()
 
     options.image_path = str(images)
@@ -126,14 +136,16 @@ def incremental_mapping(database: Path, images: Path, out: Path, options, choice
     global_ba = global_ba or options.get_global_bundle_adjustment()
     with pycolmap.Database.open(database) as db:
         pipeline = pycolmap.IncrementalPipeline(options, db, manager)
-        _run(pipeline, _Loop(global_ba, choice, on_pair or (lambda: None), on_image or (lambda: None)))
+        _run(pipeline, _Loop(global_ba, choice, on_pair or (lambda: None), on_image or (lambda: None),
+                             repeat_final_refinement))
     manager.write(out)
     return {i: manager.get(i) for i in range(manager.size())}
 
 
 class _Loop:
-    def __init__(self, global_ba, choice, on_pair, on_image):
+    def __init__(self, global_ba, choice, on_pair, on_image, repeat_final: bool = True):
         self.global_ba, self.choice, self.on_pair, self.on_image = global_ba, choice, on_pair, on_image
+        self.repeat_final = repeat_final
 
     def global_refinement(self, pipeline, mapper, mapper_options) -> None:
         opts = pipeline.options
@@ -257,6 +269,8 @@ def _sub_model(pipeline, mapper, mapper_options, rec, loop: _Loop):
             break
         if not ok and prev_ok:   # nothing registered: one global refinement, then one more try
             loop.global_refinement(pipeline, mapper, mapper_options)
+            if not loop.repeat_final:   # the final refinement only after a photo registers
+                ba_frames, ba_points = rec.num_reg_frames(), rec.num_points3D()
     if pipeline.check_reached_max_runtime():
         return S.INTERRUPTED
     if rec.num_reg_frames() > 0 and rec.num_reg_frames() != ba_frames and rec.num_points3D() != ba_points:

@@ -86,13 +86,13 @@ def incremental_options(cfg: SfmConfig, n_images: int, n_observations: int = 0):
 def map_incremental(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images: int, progress: bool,
          adjustments: list | None = None, schedule: dict | None = None):
     """{id: Reconstruction} of COLMAP's incremental mapper on the matches of ``db``, with curate's options
-    (:func:`incremental_options`). Pools of more photos than Ceres' direct-solve limit (1,000) are mapped by
-    :func:`curate.sfm.mapping.incremental_mapping`, the same steps with each global adjustment's solver chosen
-    from the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
+    (:func:`incremental_options`), run step by step by :func:`curate.sfm.mapping.incremental_mapping`: COLMAP's
+    steps, the final refinement left out where it would repeat the one before (``cfg.repeat_final_refinement``),
+    and in pools of more photos than Ceres' direct-solve limit (1,000) each global adjustment's solver chosen from
+    the model's shape (``cfg.direct_ba_max_fill``); ``adjustments`` (when given) gets one record per
     global adjustment past the limit (photos, fill per photo, solver, seconds); ``schedule`` (when given) the
     observations the matches promise and the growth between global adjustments (``expected_observations``,
     ``global_ba_growth``: COLMAP's or ``cfg.global_ba_growth``)."""
-    pycolmap = load_pycolmap()
     from tqdm import tqdm
 
     from curate.sfm import mapping
@@ -111,16 +111,13 @@ def map_incremental(cfg: SfmConfig, db: Path, images: Path, out: Path, n_images:
         count[0] += k
         bar.update(k)
 
+    choice = mapping.SolverChoice(cfg.direct_ba_max_fill, limit) if n_images > limit and cfg.direct_ba_max_fill > 0 \
+        else None
     try:
-        if n_images > limit and cfg.direct_ba_max_fill > 0:
-            choice = mapping.SolverChoice(cfg.direct_ba_max_fill, limit)
-            models = mapping.incremental_mapping(db, images, out, opts, choice, on_pair=lambda: on_image(2),
-                                                 on_image=on_image)
-            if adjustments is not None:
-                adjustments.extend(choice.record)
-        else:
-            models = pycolmap.incremental_mapping(db, images, out, options=opts, initial_image_pair_callback=
-                                                  lambda: on_image(2), next_image_callback=on_image)
+        models = mapping.incremental_mapping(db, images, out, opts, choice, on_pair=lambda: on_image(2),
+                                             on_image=on_image, repeat_final_refinement=cfg.repeat_final_refinement)
+        if adjustments is not None and choice is not None:
+            adjustments.extend(choice.record)
     finally:
         bar.close()
     return models
