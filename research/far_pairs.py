@@ -1,9 +1,11 @@
 """What a run's far sequential pairs cost and give: the pairs of ``sequential_pairs.txt`` at least ``MIN_OFFSET``
 frames apart (in name order) that are not loop pairs, matched alone on one thread as the stage matches them
 (:func:`curate.sfm.matching._match_file`, guided), and the run's matches mapped without them (the stage's
-incremental mapper). Prints JSON.
+incremental mapper). With a truth file of an office case (and the office folder), the largest model with and
+without them against the truth. Loop pairs are those loop detection ranks from the run's own visual words
+(``visual_words.npz``; ``loop_pairs.txt`` lists only the loop pairs the sequential ones had not matched). Prints JSON.
 
-    python -m research.far_pairs RUN MIN_OFFSET WORK
+    python -m research.far_pairs RUN MIN_OFFSET WORK [CASE.truth.json OFFICE]
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ def main(argv=None) -> dict:
     from curate.sfm import matching
     from curate.sfm.config import SfmConfig
     from curate.sfm.reconstruction import map_incremental
-    run, min_off, work = (lambda a: (Path(a[0]), int(a[1]), Path(a[2])))(argv or sys.argv[1:])
+    args = argv or sys.argv[1:]
+    run, min_off, work = Path(args[0]), int(args[1]), Path(args[2])
+    truth = (Path(args[3]), Path(args[4])) if len(args) >= 5 else None
     work.mkdir(parents=True, exist_ok=True)
     sfm = run / "sfm"
     seq = [ln.split() for ln in (sfm / "sequential_pairs.txt").read_text().splitlines() if ln.strip()]
@@ -32,8 +36,13 @@ def main(argv=None) -> dict:
     loop_file = sfm / "loop_pairs.txt"
     loop = {tuple(sorted(ln.split())) for ln in loop_file.read_text().splitlines() if ln.strip()} \
         if loop_file.is_file() else set()
-    drop = [p for p in seq if abs(idx[p[0]] - idx[p[1]]) >= min_off and tuple(sorted(p)) not in loop]
     cfg = SfmConfig(progress=False)
+    if (sfm / "visual_words.npz").is_file():
+        from curate.sfm.retrieval import load, ranked
+        index = load(sfm / "visual_words.npz")
+        loop |= {tuple(sorted((q, c))) for q, cands in ranked(index, index.names[::cfg.loop_detection_period],
+                                                             k=cfg.loop_detection_num_images) for c in cands}
+    drop = [p for p in seq if abs(idx[p[0]] - idx[p[1]]) >= min_off and tuple(sorted(p)) not in loop]
     db = work / "cost.db"
     shutil.copy2(sfm / "database.db", db)
     with sqlite3.connect(db) as con:
@@ -63,6 +72,18 @@ def main(argv=None) -> dict:
     models = map_incremental(cfg, db2, sfm / "images", work / "sparse", len(ids), False)
     out["models_without"] = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
     out["map_s"] = round(time.perf_counter() - t, 1)
+    if truth:
+        from research.join_shared import summary, truth_errors
+        recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
+        tj = json.loads(truth[0].read_text())
+        best = max(models.values(), key=lambda r: r.num_reg_images())
+        out["truth_without"] = summary(truth_errors(best, recs, tj, truth[1]).values())
+        shutil.copy2(sfm / "database.db", work / "with.db")
+        (work / "sparse_with").mkdir(exist_ok=True)
+        with_ = map_incremental(cfg, work / "with.db", sfm / "images", work / "sparse_with", len(ids), False)
+        out["models_with"] = sorted((int(r.num_reg_images()) for r in with_.values()), reverse=True)
+        best = max(with_.values(), key=lambda r: r.num_reg_images())
+        out["truth_with"] = summary(truth_errors(best, recs, tj, truth[1]).values())
     print(json.dumps(out))
     return out
 
