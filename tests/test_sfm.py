@@ -698,6 +698,25 @@ def test_too_few_photos_is_an_error_with_records(tmp_path):
     assert not (tmp_path / "run" / "sfm" / "stage.json").exists()
 
 
+def test_photos_only_in_a_subfolder_are_named_in_the_error(tmp_path):
+    """A capture's folder whose photos lie in images/ beside its README (the drone set's layout): the error says
+    where they are and how to give them, and curate wrote nothing beside them."""
+    photos = tmp_path / "capture"
+    make_mixed_folder(photos / "images", n_good=3)
+    (photos / "README.md").write_text("a capture\n")
+    before = sorted(p.relative_to(photos) for p in photos.rglob("*"))
+    with pytest.raises(RuntimeError, match="usable photos") as e:
+        run_sfm(small_cfg(), photos, tmp_path / "run")
+    msg = str(e.value)
+    assert "lie in its subfolders (images)" in msg and str(photos / "images") in msg and "--recursive" in msg
+    assert sorted(p.relative_to(photos) for p in photos.rglob("*")) == before
+    flat = make_mixed_folder(tmp_path / "flat", n_good=1)
+    (flat / "extra.png").unlink()
+    with pytest.raises(RuntimeError) as e:   # too few in the folder itself, none below: no such hint
+        run_sfm(small_cfg(), flat, tmp_path / "run2")
+    assert "subfolders" not in str(e.value)
+
+
 @pytest.mark.slow
 def test_curates_mapping_loop_maps_as_colmaps_pipeline_with_either_solver(fox_run, tmp_path, monkeypatch):
     """The fox's matches mapped by COLMAP's pipeline and by curate.sfm.mapping (COLMAP's steps in Python,

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from curate.core.cameras import Cameras
-from curate.core.images import PhotoRecord
+from curate.core.images import IMAGE_EXTS, PhotoRecord
 from curate.sfm.ingest import find_images, ingest, source_root
 from curate.sfm.quality import assess, phash, sharpness
-from curate.sfm.config import SfmConfig
+from curate.sfm.config import VIDEO_EXTS, SfmConfig
 from curate.sfm.io import normalization
 from curate.core.stage import hash_files, stage_key, write_json_atomic
 
@@ -104,8 +104,26 @@ def too_few_message(photos: Path, records: list[PhotoRecord], videos: list[dict]
                 if r.status == "skipped"]
         if why:
             return f"sfm: {photos}: " + "; ".join(why) + f"; see {images_json}"
+    if (below := _in_subfolders(Path(photos), {r.rel for r in records})) is not None:
+        why.append(below)
     return (f"sfm: too few usable photos in {photos} ({n}; SfM needs at least 2)" + "".join(f"; {w}" for w in why)
             + f"; see {images_json}")
+
+
+def _in_subfolders(folder: Path, seen: set[str], limit: int = 100_000) -> str | None:
+    """Where the photos or videos of ``folder`` lie in its subfolders only (a capture's ``images/`` beside its
+    README): what to give instead, or None. Looks at ``limit`` files at most (this is an error's hint)."""
+    from itertools import islice
+    if not folder.is_dir():
+        return None
+    found = [p for p in islice(folder.rglob("*"), limit) if p.suffix.lower() in IMAGE_EXTS | VIDEO_EXTS and p.is_file()
+             and not any(q.startswith(".") for q in p.relative_to(folder).parts)
+             and p.relative_to(folder).as_posix() not in seen]
+    if not found:
+        return None
+    subs = sorted({p.relative_to(folder).parts[0] for p in found})
+    return (f"{len(found)} photos or videos lie in its subfolders ({', '.join(subs[:3])}"
+            f"{', ...' if len(subs) > 3 else ''}): give {folder / subs[0]} instead, or add --recursive")
 
 
 def _trailing_number(name: str) -> tuple[str, int] | None:
