@@ -111,8 +111,9 @@ def too_few_message(photos: Path, records: list[PhotoRecord], videos: list[dict]
 
 
 def _in_subfolders(folder: Path, seen: set[str], limit: int = 100_000) -> str | None:
-    """Where the photos or videos of ``folder`` lie in its subfolders only (a capture's ``images/`` beside its
-    README): what to give instead, or None. Looks at ``limit`` files at most (this is an error's hint)."""
+    """Where photos or videos of ``folder`` lie in subfolders that were not read (``seen``: the relative paths read;
+    a capture's ``images/`` beside its README): what to give instead, or None. Looks at ``limit`` files at most
+    (this is an error's hint)."""
     from itertools import islice
     if not folder.is_dir():
         return None
