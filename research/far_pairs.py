@@ -38,10 +38,8 @@ def main(argv=None) -> dict:
         if loop_file.is_file() else set()
     cfg = SfmConfig(progress=False)
     if (sfm / "visual_words.npz").is_file():
-        from curate.sfm.retrieval import load, ranked
-        index = load(sfm / "visual_words.npz")
-        loop |= {tuple(sorted((q, c))) for q, cands in ranked(index, index.names[::cfg.loop_detection_period],
-                                                             k=cfg.loop_detection_num_images) for c in cands}
+        from curate.sfm.retrieval import load
+        loop |= {tuple(sorted(p)) for p in matching.loop_pairs(cfg, load(sfm / "visual_words.npz"))[1]}
     drop = [p for p in seq if abs(idx[p[0]] - idx[p[1]]) >= min_off and tuple(sorted(p)) not in loop]
     db = work / "cost.db"
     shutil.copy2(sfm / "database.db", db)

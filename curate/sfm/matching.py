@@ -82,8 +82,7 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         index = None
         if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
             index = _index(cfg, db)
-            names = index.names[::cfg.loop_detection_period]
-            pairs = [(q, c) for q, cands in ranked(index, names, k=cfg.loop_detection_num_images) for c in cands]
+            names, pairs = loop_pairs(cfg, index)
             loops = match_pairs(cfg, db, pairs, "loop_pairs.txt", matcher, guided_below)
             if stats is not None:
                 stats["loop_detection"] = {"queries": len(names), **loops}
@@ -102,6 +101,13 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         raise ValueError(f"unknown matcher {matcher!r}")
     if stats is not None:   # the matcher's own pairs (sequential: the neighbours)
         stats["pairs"] = info
+
+
+def loop_pairs(cfg: SfmConfig, index) -> tuple[list[str], list[tuple[str, str]]]:
+    """(the queries, the pairs) of loop detection on ``index`` (:func:`_index`): every
+    ``cfg.loop_detection_period``-th photo with its ``cfg.loop_detection_num_images`` most similar ones."""
+    names = index.names[::cfg.loop_detection_period]
+    return names, [(q, c) for q, cands in ranked(index, names, k=cfg.loop_detection_num_images) for c in cands]
 
 
 def ranked(index, queries, k=None, candidates=None):
