@@ -171,7 +171,8 @@ OPTIONS = [
     (["--export-mode", "move"], "--export-mode"), (["--bins", "99999999999x2"], "--bins"),
     (["--matcher", "magic"], "--matcher"), (["--max-size", "8"], "--max-size"),
     (["--budget", "-5%"], "--budget"), (["--sift-peak-threshold", "-1"], "--sift-peak-threshold"),
-    (["--sift-peak-threshold", "2"], "--sift-peak-threshold"), (["--eval-minutes", "-1"], "--eval-minutes"),
+    (["--sift-peak-threshold", "2"], "--sift-peak-threshold"),
+    (["--sift-upsample-below", "-1"], "--sift-upsample-below"), (["--eval-minutes", "-1"], "--eval-minutes"),
     (["--folds", "-2"], "--folds"), (["--equivalence-db", "0"], "--equivalence-db"),
 ]
 

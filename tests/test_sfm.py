@@ -460,6 +460,57 @@ def test_photo_ids_follow_name_order_whatever_order_extraction_finishes(tmp_path
     assert [r[0] for r in rows] == names and n_kp == n_cameras == len(names)
 
 
+def test_large_photos_skip_sifts_doubled_octave_unless_they_have_too_few_features(tmp_path):
+    """A working copy of 1,000 px or more is read by SIFT as it is (about a quarter of the work of COLMAP's doubled
+    first octave); one that gives too few features that way (a plain photo) is read again doubled, as is every
+    smaller copy, and those get COLMAP's own features (the same points). No file of the first pass is left behind."""
+    import sqlite3
+
+    from PIL import Image, ImageFilter
+
+    from curate.sfm.features import extract
+    src = sorted(need("drone/images").iterdir())[0]
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    im = Image.open(src).convert("RGB")                                    # 1600 x 1200, a textured aerial view
+    im.save(photos / "a_textured.jpg")
+    im.filter(ImageFilter.GaussianBlur(12)).save(photos / "b_plain.jpg")    # large, but few features as it is
+    im.resize((800, 600)).save(photos / "c_small.jpg")
+    names = ["a_textured.jpg", "b_plain.jpg", "c_small.jpg"]
+    cfg = SfmConfig(num_threads=1, progress=False)
+    assert cfg.sift_upsample_below == 1000 and cfg.max_image_size >= 1600
+
+    def keypoints(folder: Path, c: SfmConfig) -> tuple[dict, dict]:
+        folder.mkdir()
+        db = folder / "database.db"
+        counts = extract(c, db, photos, names, False)
+        dbh = pycolmap.Database.open(db)
+        try:
+            # where SIFT found each point, as a set (a point with two orientations is two rows); not the orientation,
+            # which COLMAP's CPU SIFT computes partly from the image the same thread read before, when of one size
+            kp = {im.name: np.unique(np.asarray(dbh.read_keypoints(im.image_id))[:, :2], axis=0)
+                  for im in dbh.read_all_images()}
+        finally:
+            dbh.close()
+        with sqlite3.connect(db) as con:
+            assert [r[0] for r in con.execute("SELECT name FROM images ORDER BY image_id")] == names
+        assert not [p.name for p in folder.iterdir() if not p.name.startswith("database.db")]   # -wal, -shm: SQLite's
+        return counts, kp
+
+    counts, kp = keypoints(tmp_path / "auto", cfg)
+    colmap_counts, colmap = keypoints(tmp_path / "colmap", replace(cfg, sift_upsample_below=cfg.max_image_size + 1))
+    assert colmap_counts == {"doubled": 3, "not_doubled": 0}
+    assert counts == {"doubled": 2, "not_doubled": 1}
+    assert cfg.sift_min_features_undoubled <= len(kp["a_textured.jpg"]) < len(colmap["a_textured.jpg"])
+    for name in ("b_plain.jpg", "c_small.jpg"):
+        assert np.array_equal(kp[name], colmap[name]), name
+    # 0: every photo tried as it is first; the plain one, and the small one (under 1,024 features as it is), still
+    # fall back to the doubled octave
+    counts0, kp0 = keypoints(tmp_path / "never", replace(cfg, sift_upsample_below=0))
+    assert counts0 == {"doubled": 2, "not_doubled": 1}
+    assert all(np.array_equal(kp0[n], colmap[n]) for n in ("b_plain.jpg", "c_small.jpg"))
+
+
 @pytest.fixture(scope="module")
 def fox_features(tmp_path_factory):
     """24 of the fox's photos' SIFT features (320 px) in a COLMAP database, not matched."""

@@ -135,7 +135,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
     with colmap_log(out / "colmap.log"):
         logger.info("sfm: extracting SIFT features (%s camera, %s) ...", stats["camera_mode"], cfg.camera_model)
         t = time.perf_counter()
-        extract(cfg, db, images, names, single)
+        stats["sift"] = extract(cfg, db, images, names, single)
         timings["extract"] = round(time.perf_counter() - t, 2)
         logger.info("sfm: features extracted for %d images in %.1f s", len(names), timings["extract"])
         logger.info("sfm: %s matching ...", matcher)

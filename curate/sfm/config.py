@@ -97,6 +97,15 @@ class SfmConfig:
     """SIFT features per image."""
     sift_peak_threshold: float = 0.02 / 3
     """SIFT's peak threshold (COLMAP's default); lower finds more features."""
+    sift_upsample_below: int = 1000
+    """SIFT starts from the working copy doubled (COLMAP's first octave -1) where its longer side is under this many
+    pixels; a larger copy is first read as it is (first octave 0), and read again doubled where that gives too few
+    features (a plain or dark photo). The doubled octave is about three quarters of the extraction's work, and its
+    many small features most of the matching's. 0: every photo is tried undoubled first; more than --max-size: every
+    photo is doubled, as COLMAP does."""
+    sift_min_features_undoubled: int = 1024
+    """A photo read undoubled (``sift_upsample_below``) keeps those features where it has at least this many; else
+    it is read again doubled (the skull's plain photos: 640 undoubled, 2,632 doubled)."""
     # --- matching
     matcher: Matcher = "auto"
     """Which photo pairs to match: exhaustive (all), sequential (each frame with the next ones, and loops), spatial
@@ -251,6 +260,10 @@ class SfmConfig:
         if not (isinstance(self.sift_peak_threshold, (int, float)) and 0 < self.sift_peak_threshold < 1):
             raise ValueError(f"--sift-peak-threshold must be a number in (0, 1) (COLMAP's default 0.0067; lower "
                              f"finds more features), got {self.sift_peak_threshold!r}")
+        if not isinstance(self.sift_upsample_below, int) or isinstance(self.sift_upsample_below, bool) \
+                or self.sift_upsample_below < 0 or self.sift_min_features_undoubled < 0:
+            raise ValueError(f"--sift-upsample-below must be a whole number of pixels >= 0, got "
+                             f"{self.sift_upsample_below!r} (and SfmConfig.sift_min_features_undoubled >= 0)")
         if not self.max_part_disagreement_deg > 0:
             raise ValueError("SfmConfig.max_part_disagreement_deg must be > 0")
         if not (0 <= self.min_registered_fraction <= 1) or not (0 <= self.min_global_gain <= 1):

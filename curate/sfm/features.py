@@ -15,24 +15,80 @@ from curate.sfm.native import load as load_pycolmap
 logger = logging.getLogger(__name__)
 
 
-def extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: bool) -> None:
+def extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: bool) -> dict[str, int]:
+    """SIFT features of ``names`` (working copies in ``images``) into ``db``.
+
+    COLMAP's SIFT doubles each image first (its first octave -1), about three quarters of the extraction's work. A
+    working copy whose longer side is at least ``cfg.sift_upsample_below`` is first read as it is; where that gives
+    at least ``cfg.sift_min_features_undoubled`` features they are kept, else (a dark or plain photo) the photo is
+    read again doubled, as COLMAP does. Returns ``{"doubled": n, "not_doubled": m}``."""
     pycolmap = load_pycolmap()
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = cfg.camera_model
-    ext = pycolmap.FeatureExtractionOptions()
-    ext.max_image_size = cfg.max_image_size
-    ext.num_threads = cfg.num_threads
-    ext.sift.max_num_features = cfg.max_num_features
-    ext.sift.peak_threshold = cfg.sift_peak_threshold
     mode = pycolmap.CameraMode.SINGLE if single else pycolmap.CameraMode.PER_IMAGE
     # The photos enter the database in name order first, so their ids are too: the extractor's threads
     # finish in any order and number the photos as they finish, and the ids break ties in matching and
     # mapping (office.mp4's same frames, mapped whole in one run and split 357 + 21 in the next).
     pycolmap.Database.open(db).close()
     pycolmap.import_images(db, images, camera_mode=mode, image_names=sorted(names), options=reader)
+    large = sorted(n for n in names if first_octave(cfg, images / n) == 0)
+    kept: set[str] = set()
+    if large:
+        first = db.with_name(db.stem + ".undoubled.db")       # the first pass's own database, removed after
+        leftovers = [first, *(first.with_name(first.name + x) for x in ("-wal", "-shm", "-journal"))]
+        for f in leftovers:
+            f.unlink(missing_ok=True)
+        try:
+            pycolmap.Database.open(first).close()
+            pycolmap.import_images(first, images, camera_mode=mode, image_names=large, options=reader)
+            _extract(pycolmap, cfg, first, images, large, mode, reader, octave=0)
+            src, dst = pycolmap.Database.open(first), pycolmap.Database.open(db)
+            try:
+                ids = {im.name: im.image_id for im in dst.read_all_images()}
+                for im in src.read_all_images():
+                    if src.num_keypoints_for_image(im.image_id) >= cfg.sift_min_features_undoubled:
+                        dst.write_keypoints(ids[im.name], src.read_keypoints(im.image_id))
+                        dst.write_descriptors(ids[im.name], src.read_descriptors(im.image_id))
+                        kept.add(im.name)
+            finally:
+                src.close()
+                dst.close()
+        finally:
+            for f in leftovers:
+                f.unlink(missing_ok=True)
+    rest = [n for n in names if n not in kept]
+    if rest:
+        _extract(pycolmap, cfg, db, images, rest, mode, reader, octave=-1)
+    if large:
+        logger.info("sfm: %d of %d photos read as they are (SIFT's doubled octave left out), %d doubled",
+                    len(kept), len(names), len(rest))
+    return {"doubled": len(rest), "not_doubled": len(kept)}
+
+
+def _extract(pycolmap, cfg: SfmConfig, db: Path, images: Path, names: list[str], mode, reader, octave: int) -> None:
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.max_image_size = cfg.max_image_size
+    ext.num_threads = cfg.num_threads
+    ext.sift.max_num_features = cfg.max_num_features
+    ext.sift.peak_threshold = cfg.sift_peak_threshold
+    ext.sift.first_octave = octave
     pycolmap.extract_features(db, images, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=ext, device=pycolmap.Device.cpu if not pycolmap.has_cuda
                               else pycolmap.Device.auto)
+
+
+def first_octave(cfg: SfmConfig, path: Path) -> int:
+    """The octave SIFT first reads the working copy ``path`` at: -1 (doubled, COLMAP's default) where its longer
+    side, as SIFT reads it (at most ``cfg.max_image_size``), is under ``cfg.sift_upsample_below``, else 0 (as it is;
+    :func:`extract` reads it again doubled where that gives too few features). Reads the image's header only."""
+    if cfg.sift_upsample_below > cfg.max_image_size:
+        return -1
+    if cfg.sift_upsample_below == 0:
+        return 0
+    from PIL import Image
+    with Image.open(path) as im:
+        side = min(max(im.size), cfg.max_image_size)
+    return -1 if side < cfg.sift_upsample_below else 0
 
 
 def tree_sample(per_image, n_images: int, max_descriptors: int, rng) -> np.ndarray:

@@ -119,7 +119,7 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
         pycolmap.set_random_seed(cfg.seed)
         with colmap_log(out / "colmap.log"):
             t = time.perf_counter()
-            extract(cfg, db, images, [names[i] for i in usable], single)
+            stats["sift"] = extract(cfg, db, images, [names[i] for i in usable], single)
             stats["extract_seconds"] = round(time.perf_counter() - t, 2)
             dbh = pycolmap.Database.open(db)
             dbim = {im.name: im for im in dbh.read_all_images()}
