@@ -10,21 +10,29 @@ the photos shrunk to ``--side`` px, the cameras at that size, the sparse points,
     python3 -m pip download --no-deps gsplat==1.5.3 -d .gpu/whl      # gsplat: not on the device image
 
 There (``run`` tool: ``carry: [".gpu"]``), each unit is trained by the evaluation's own worker
-(:func:`curate.evaluate.units.train_unit`) with each trainer, one at a time, and the verdicts are read as the
-evaluation reads them (:func:`curate.evaluate.folds.summarize`, one look at 95%, as ``--folds 2`` does):
+(:func:`curate.evaluate.units.train_unit`) with each trainer, one at a time, fold by fold (each fold of every
+capture under both trainers before the next fold), and the verdicts are read as the evaluation reads them
+(:func:`curate.evaluate.folds.summarize`, one look at 95%, as ``--folds 2`` does):
 
-    python3 -m pip install -q --no-deps --target /tmp/site .gpu/whl/*; export PYTHONPATH=/tmp/site:.
-    PYTHONUNBUFFERED=1 python3 research/gpu_check.py run .gpu --out $OUT --splat-steps 2000 --deadline 480
+    python3 -m pip install -q --no-index --no-deps --target /tmp/site .gpu/whl/*.whl && export PYTHONPATH=/tmp/site:.
+    export TORCH_CUDA_ARCH_LIST=9.0 TQDM_DISABLE=1 PYTHONUNBUFFERED=1
+    python3 research/gpu_check.py run .gpu --out $OUT --splat-steps 2000 --deadline 490
 
 Printed: per capture and trainer, the seconds of each training (median, on the GPU's wall clock), then per
 rival the mean difference, interval and decision under each trainer and whether they agree; ``$OUT/gpu_check.json``
-holds every training. gsplat compiles its CUDA code at its first use (73 s on an H200, 2026-11-28); ``--deadline``
+holds every training. gsplat compiles its CUDA code at its first use (73-77 s on an H200); ``--deadline``
 (seconds) starts no training after it, so the check ends within the device's 10 minutes whatever the machine.
+The same ``run`` with ``--trainers field`` here on the CPU trains the same units on the CPU. ``table`` reads a saved
+GPU run and, optionally, a CPU run of the same bundles, and prints the per-view agreement (the figures of
+docs/evaluation.md#gpu):
+
+    python -m research.gpu_check table docs/evidence/gpu_check_issue59.json
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -94,44 +102,58 @@ def run(root: Path, out: Path, splat_steps: int, deadline: float, trainers: list
     from curate.evaluate.folds import Fold, summarize
     from curate.evaluate.units import Unit, resolved, train_unit
     from curate.field.config import SplatConfig
+    import torch
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
+    print(f"torch {torch.__version__}, "
+          f"{torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'no CUDA device'}", flush=True)
     rows, verdicts = [], []
+    jobs = {}                                     # (capture, trainer) -> its bundle, config, run folder, folds, results
     for bdir in sorted(p.parent for p in root.glob("*/bundle.json")):
         b = json.loads((bdir / "bundle.json").read_text())
-        cams = Cameras.from_dict(b["cameras"])
-        paths = [str(bdir / "images" / f) for f in b["files"]]
-        box = (np.array(b["box"][0]), np.array(b["box"][1]))
         for trainer in trainers:
             ev = EvalConfig(trainer=trainer, splat=SplatConfig(steps=splat_steps, max_side=b["side"]))
             ev = resolved(ev if field_iters is None else replace(ev, iters=field_iters))
-            run_dir = bdir / f"run_{trainer}"
-            _runfolder(bdir / "run", run_dir)
-            folds, results = [], {}
-            for fd in b["folds"]:
-                units = [Unit(u["key"], u["method"], u["seed"], u["subset"], fd["offset"]) for u in fd["units"]]
-                fold = Fold(fd["offset"], fd["holdout"], fd["pool"], fd["budget"], fd["method"], fd["chosen"], units)
-                for u in units:
-                    if time.perf_counter() - t_start > deadline:
-                        print(f"deadline: {b['capture']} {trainer} {u.key} not trained", flush=True)
-                        break
-                    t0 = time.perf_counter()
-                    m = train_unit(str(run_dir), u, ev, cams, paths, fold.holdout, box, f"gpu-check-{trainer}")
-                    wall = time.perf_counter() - t0
-                    results[u.key] = m
-                    rows.append({"capture": b["capture"], "trainer": trainer, "unit": u.key, "n_train": len(u.subset),
-                                 "wall_s": round(wall, 2), "train_s": m["train_seconds"], "psnr": m["psnr"],
-                                 "per_view": [v["psnr"] for v in m["per_view"]]})
-                    print(f"{b['capture']:12s} {trainer:7s} {u.key:18s} {len(u.subset):4d} photos  {wall:6.1f} s  "
-                          f"PSNR {m['psnr']:.2f}", flush=True)
-                if all(u.key in results for u in units):
-                    folds.append(fold)
-            if folds:
-                _, paired, _ = summarize(results, folds, 0.95, 0.3)
-                for k, p in paired.items():
-                    verdicts.append({"capture": b["capture"], "trainer": trainer, "rival": k.split("-", 1)[1],
-                                     "folds": len(folds), "mean": p["mean"], "lo": p["lo"], "hi": p["hi"],
-                                     "decision": decision(p, 0.3)})
+            _runfolder(bdir / "run", bdir / f"run_{trainer}")
+            key = hashlib.sha1(repr(ev.training()).encode()).hexdigest()[:12]  # units reused at this setting only
+            jobs[b["capture"], trainer] = {"b": b, "ev": ev, "run": bdir / f"run_{trainer}", "folds": [], "results": {},
+                                           "key": key,
+                                           "cams": Cameras.from_dict(b["cameras"]),
+                                           "paths": [str(bdir / "images" / f) for f in b["files"]],
+                                           "box": (np.array(b["box"][0]), np.array(b["box"][1]))}
+    # fold-major: each fold of every capture under every trainer before the next fold, so that a deadline
+    # leaves both trainers compared on every capture (on fewer folds) rather than one capture compared on all
+    n_folds = max(len(j["b"]["folds"]) for j in jobs.values()) if jobs else 0
+    for fi in range(n_folds):
+        for (cap, trainer), j in jobs.items():
+            if fi >= len(j["b"]["folds"]):
+                continue
+            fd = j["b"]["folds"][fi]
+            units = [Unit(u["key"], u["method"], u["seed"], u["subset"], fd["offset"]) for u in fd["units"]]
+            fold = Fold(fd["offset"], fd["holdout"], fd["pool"], fd["budget"], fd["method"], fd["chosen"], units)
+            for u in units:
+                if time.perf_counter() - t_start > deadline:
+                    print(f"deadline: {cap} {trainer} {u.key} not trained", flush=True)
+                    break
+                t0 = time.perf_counter()
+                m = train_unit(str(j["run"]), u, j["ev"], j["cams"], j["paths"], fold.holdout, j["box"],
+                               f"gpu-check-{trainer}-{j['key']}")
+                wall = time.perf_counter() - t0
+                j["results"][u.key] = m
+                rows.append({"capture": cap, "trainer": trainer, "fold": fd["offset"], "unit": u.key,
+                             "n_train": len(u.subset), "wall_s": round(wall, 2), "train_s": m["train_seconds"],
+                             "psnr": m["psnr"], "per_view": [v["psnr"] for v in m["per_view"]]})
+                print(f"{cap:12s} {trainer:7s} {u.key:18s} {len(u.subset):4d} photos  {wall:6.1f} s  "
+                      f"PSNR {m['psnr']:.2f}", flush=True)
+            if all(u.key in j["results"] for u in units):
+                j["folds"].append(fold)
+    for (cap, trainer), j in jobs.items():
+        if j["folds"]:
+            _, paired, _ = summarize(j["results"], j["folds"], 0.95, 0.3)
+            for k, p in paired.items():
+                verdicts.append({"capture": cap, "trainer": trainer, "rival": k.split("-", 1)[1],
+                                 "folds": len(j["folds"]), "mean": p["mean"], "lo": p["lo"], "hi": p["hi"],
+                                 "decision": decision(p, 0.3)})
     print("\nseconds per training (median wall, GPU)")
     for cap in sorted({r["capture"] for r in rows}):
         for tr in trainers:
@@ -155,6 +177,38 @@ def run(root: Path, out: Path, splat_steps: int, deadline: float, trainers: list
     res = {"rows": rows, "verdicts": verdicts, "agree": agree, "seconds": round(time.perf_counter() - t_start, 1)}
     (out / "gpu_check.json").write_text(json.dumps(res))
     print(json.dumps({k: v for k, v in res.items() if k != "rows"}))
+    return 0
+
+
+def table(evidence: Path) -> int:
+    """Per capture, rival and fold: the per-view differences (selection - rival) under gsplat against the GPU's
+    field (correlation, same sign), and the GPU's field against the CPU's (largest per-view difference); the
+    seconds per training under each."""
+    e = json.loads(evidence.read_text())
+    gpu, cpu = e["gpu"]["rows"], (e.get("cpu") or {}).get("rows", [])
+    by = {(r["capture"], r["trainer"], r["unit"]): r for r in gpu}
+    on_cpu = {(r["capture"], r["unit"]): r for r in cpu}
+    print("seconds per training: capture, trainer, trainings, median wall s, median training s")
+    for src, rows in (("GPU", gpu), ("CPU", cpu)):
+        for cap, tr in sorted({(r["capture"], r["trainer"]) for r in rows}):
+            w = [r["wall_s"] for r in rows if r["capture"] == cap and r["trainer"] == tr]
+            t = [r["train_s"] for r in rows if r["capture"] == cap and r["trainer"] == tr]
+            print(f"  {src} {cap:12s} {tr:7s} {len(w):2d}  {np.median(w):6.1f}  {np.median(t):6.1f}")
+    if on_cpu:
+        d = [np.abs(np.subtract(r["per_view"], by[c, "field", u]["per_view"])).max() for (c, u), r in on_cpu.items()]
+        print(f"field, GPU against CPU: {len(d)} trainings, largest per-view PSNR difference {max(d):.4f} dB")
+    print("selection - rival, per view: fold, views, field mean, gsplat mean, correlation, same sign")
+    for cap in sorted({r["capture"] for r in gpu}):
+        for rival in ("random_s0", "fvs", "stride", "all"):
+            for fold in sorted({r["unit"].split("_")[0] for r in gpu if r["capture"] == cap}):
+                keys = [(cap, tr, f"{fold}_{m}") for tr in ("field", "gsplat") for m in ("selection", rival)]
+                if not all(k in by for k in keys):
+                    continue
+                a, ar, g, gr = (np.asarray(by[k]["per_view"]) for k in keys)
+                da, dg = a - ar, g - gr
+                r = float(np.corrcoef(da, dg)[0, 1]) if len(da) > 2 and da.std() > 0 and dg.std() > 0 else float("nan")
+                print(f"  {cap:12s} {rival:9s} {fold} {len(da):3d}  {da.mean():+6.2f}  {dg.mean():+6.2f}  {r:+5.2f}  "
+                      f"{int((np.sign(da) == np.sign(dg)).sum())}/{len(da)}")
     return 0
 
 
@@ -182,7 +236,11 @@ def main(argv=None) -> int:
     r.add_argument("--deadline", type=float, default=480.0, help="seconds after which no training starts")
     r.add_argument("--trainers", default="field,gsplat")
     r.add_argument("--field-iters", type=int, default=None, help="the field's iterations (default: the evaluation's)")
+    t = sub.add_parser("table", help="here: the agreement tables from a saved GPU (and CPU) run")
+    t.add_argument("evidence", type=Path, help="JSON: {'gpu': gpu_check.json, 'cpu': gpu_check.json of a CPU run}")
     a = ap.parse_args(argv)
+    if a.cmd == "table":
+        return table(a.evidence)
     if a.cmd == "pack":
         pack(a.runs, a.out, a.folds, a.side)
         return 0
