@@ -31,7 +31,7 @@ def extract(cfg: SfmConfig, db: Path, images: Path, names: list[str], single: bo
     # mapping (office.mp4's same frames, mapped whole in one run and split 357 + 21 in the next).
     pycolmap.Database.open(db).close()
     pycolmap.import_images(db, images, camera_mode=mode, image_names=sorted(names), options=reader)
-    large = sorted(n for n in names if first_octave(cfg, images / n) == 0)
+    large = sorted(n for n, side in _longer_sides(pycolmap, db, names).items() if not doubled(cfg, side))
     kept: set[str] = set()
     if large:
         first = db.with_name(db.stem + ".undoubled.db")       # the first pass's own database, removed after
@@ -77,18 +77,24 @@ def _extract(pycolmap, cfg: SfmConfig, db: Path, images: Path, names: list[str],
                               else pycolmap.Device.auto)
 
 
-def first_octave(cfg: SfmConfig, path: Path) -> int:
-    """The octave SIFT first reads the working copy ``path`` at: -1 (doubled, COLMAP's default) where its longer
-    side, as SIFT reads it (at most ``cfg.max_image_size``), is under ``cfg.sift_upsample_below``, else 0 (as it is;
-    :func:`extract` reads it again doubled where that gives too few features). Reads the image's header only."""
-    if cfg.sift_upsample_below > cfg.max_image_size:
-        return -1
-    if cfg.sift_upsample_below == 0:
-        return 0
-    from PIL import Image
-    with Image.open(path) as im:
-        side = min(max(im.size), cfg.max_image_size)
-    return -1 if side < cfg.sift_upsample_below else 0
+def doubled(cfg: SfmConfig, side: int) -> bool:
+    """Whether SIFT first reads a working copy whose longer side is ``side`` px doubled (its first octave -1,
+    COLMAP's default): where that side, as SIFT reads it (at most ``cfg.max_image_size``), is under
+    ``cfg.sift_upsample_below``. Else it is read as it is, and :func:`extract` reads it again doubled where that
+    gives too few features."""
+    return min(side, cfg.max_image_size) < cfg.sift_upsample_below
+
+
+def _longer_sides(pycolmap, db: Path, names: list[str]) -> dict[str, int]:
+    """Each photo's longer side in px, as the database's cameras record it (``import_images`` has read each
+    working copy's header once; a shared camera has the size of every photo COLMAP imported into it)."""
+    d = pycolmap.Database.open(db)
+    try:
+        cams = {c.camera_id: max(c.width, c.height) for c in d.read_all_cameras()}
+        sides = {im.name: cams[im.camera_id] for im in d.read_all_images()}
+    finally:
+        d.close()
+    return {n: sides.get(n, 0) for n in names}        # one COLMAP did not import: its default, doubled
 
 
 def tree_sample(per_image, n_images: int, max_descriptors: int, rng) -> np.ndarray:
