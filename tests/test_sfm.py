@@ -1170,8 +1170,8 @@ def test_a_stretch_whose_frames_see_few_points_of_the_model_is_registered_not_sp
     2.4.6, pycolmap 4.2.1), the same code (fc6bd94 gives the same figures): an open accuracy question of issue 58, so
     the bound is on the median and on all but the last four frames. Not those packages: with av 18.0.0 or pillow
     12.3.0 the clip is the same bytes and the figures the same, as with numpy 2.4.5; pycolmap 4.2.0 gives 4.1 deg
-    median and the same 20 deg end, 4.1.1 and 4.0.4 split the clip (29 frames kept). The same matches mapped with COLMAP's 30 inliers
-    split, so the clip still tests what it was cut for."""
+    median and the same 20 deg end, 4.1.1 and 4.0.4 split the clip (29 frames kept). The same matches mapped with
+    COLMAP's 30 inliers split, so the clip still tests what it was cut for."""
     from curate.core.cameras import rotation_disagreement
     from curate.sfm import reconstruction
     from research.datasets import load_office
