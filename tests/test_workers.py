@@ -191,7 +191,8 @@ def test_curate_evaluate_leaves_no_process_one_fold_and_after_the_selection_was_
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     ev = ["--folds", "1", "--workers", "2", "--iters", "10", "--eval-size", "16", "--random-seeds", "1"]
     for argv in (["run", str(tmp_path / "cap" / "photos"), "--poses", str(tmp_path / "cap" / "transforms.json"),
-                  "--out", str(run), "--no-evaluate", "--budget", "4", "--res", "8", "--triangulate", "off"],
+                  "--out", str(run), "--no-evaluate", "--budget", "4", "--res", "8", "--triangulate", "off",
+                  "--refine-iters", "40", "--refine-size", "32"],      # the refining field: not what is tested
                  ["evaluate", str(run), *ev], ["select", str(run), "--budget", "5"], ["evaluate", str(run), *ev]):
         p = subprocess.Popen([sys.executable, "-m", "curate", *argv], env=env, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, start_new_session=True)
