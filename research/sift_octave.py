@@ -28,7 +28,7 @@ def features_median(run: Path) -> float:
     pycolmap = load()
     db = pycolmap.Database.open(run / "sfm" / "database.db")
     try:
-        return float(np.median([db.read_keypoints(im.image_id).shape[0] for im in db.read_all_images()]))
+        return float(np.median([db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()]))
     finally:
         db.close()
 
