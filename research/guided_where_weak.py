@@ -8,6 +8,7 @@ CPU seconds, registered frames, pairs guided, and the poses of each auto run aga
 
     python -m research.guided_where_weak PHOTOS --work W [--truth FRAMES --kind object] [--repeat 2]
         [--below 300 100]   # auto's guided_only_below_inliers, one run each (default: the config's)
+        [--above 1500]      # auto's guided_selective_above_features in its runs (default: the config's)
 """
 
 from __future__ import annotations
@@ -18,20 +19,22 @@ import sys
 from pathlib import Path
 
 
-def child(photos: str, run: str, steps: str, below: str, extra: list[str]) -> int:
+def child(photos: str, run: str, steps: str, below: str, above: str, extra: list[str]) -> int:
     """research.bench.bench_mapping's ``curate sfm`` child with auto's ``guided_only_below_inliers`` set to
-    ``below`` ("" leaves the config's)."""
+    ``below`` and its ``guided_selective_above_features`` to ``above`` ("" leaves the config's)."""
     from dataclasses import replace
 
     import curate.sfm.colmap as C
     from research.bench.bench_mapping import sfm_child
-    if below:
+    if below or above:
         weak_first = C.weak_first
-        C.weak_first = lambda cfg, db: weak_first(replace(cfg, guided_only_below_inliers=int(below)), db)
+        set_ = {**({"guided_only_below_inliers": int(below)} if below else {}),
+                **({"guided_selective_above_features": int(above)} if above else {})}
+        C.weak_first = lambda cfg, db: weak_first(replace(cfg, **set_), db)
     return sfm_child(photos, run, steps, extra)
 
 
-def one(work: Path, name: str, photos: Path, extra: list[str], below: str = "") -> dict:
+def one(work: Path, name: str, photos: Path, extra: list[str], below: str = "", above: str = "") -> dict:
     """One ``curate sfm`` in its own process (:func:`child`): its record."""
     import shutil
 
@@ -41,7 +44,7 @@ def one(work: Path, name: str, photos: Path, extra: list[str], below: str = "") 
         shutil.rmtree(run)
     run.parent.mkdir(parents=True, exist_ok=True)
     proc = _timed([sys.executable, "-m", "research.guided_where_weak", "--child", str(photos), str(run), str(steps),
-                   below, *extra], work / f"{name}.log")
+                   below, above, *extra], work / f"{name}.log")
     rec = {"name": name, "options": extra, "process": proc}
     if proc["rc"] == 0:
         st = json.loads((run / "sfm" / "stage.json").read_text())
@@ -60,7 +63,7 @@ def one(work: Path, name: str, photos: Path, extra: list[str], below: str = "") 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--child"]:
-        return child(*argv[1:5], argv[5:])
+        return child(*argv[1:6], argv[6:])
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("photos", type=Path)
     ap.add_argument("--work", type=Path, required=True)
@@ -69,6 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="runs of each setting")
     ap.add_argument("--only", choices=["every", "weak"], help="run one setting only")
     ap.add_argument("--below", nargs="*", default=[""], help="auto's guided_only_below_inliers (one run each)")
+    ap.add_argument("--above", default="", help="auto's guided_selective_above_features in its runs")
     a = ap.parse_args(argv)
     from curate.sfm.io import load_sfm
     from research.bench.bench_mapping import pose_record, truth_cameras
@@ -80,7 +84,7 @@ def main(argv=None) -> int:
             if a.only and label != a.only:
                 continue
             name = f"{label}{below}_{k}" if label == "weak" and below else f"{label}{k}"
-            rec = one(a.work, name, a.photos, extra, below)
+            rec = one(a.work, name, a.photos, extra, below, a.above if label == "weak" else "")
             if rec["process"]["rc"] == 0:
                 cams = load_sfm(a.work / "runs" / name).cameras
                 if truth is not None:
