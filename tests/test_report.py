@@ -108,6 +108,7 @@ def test_report_without_evaluation_and_missing_files(tmp_path):
     (run / "select" / "nodes.npz").unlink()
     page = write_html(run).read_text()
     assert page.count("Not evaluated") == 1 and "nodes.npz missing" in page   # said once, in the verdict
+    assert "curate evaluate" in page and "--eval-minutes" in page   # how, and in what time, to evaluate it
     assert "Held-out photos side by side" not in page and "How the selection compares" not in page
     assert all(s.startswith("data:image/") for s in image_sources(page))
     assert "Not available" not in page

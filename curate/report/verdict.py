@@ -183,7 +183,7 @@ def verdict(rep: dict) -> dict:
         short_line = f"evaluation out of date (refresh: {ev.get('refresh')})"
     else:
         quality = ("Not evaluated: no field was trained to compare this selection with random subsets and FVS"
-                   f" (`{ev.get('refresh', 'curate evaluate RUN')}` does, in a few minutes).")
+                   f" (`{ev.get('refresh', 'curate evaluate RUN')}` does, within its time limit, `--eval-minutes`).")
         short_line = "not evaluated"
     return {"exported": exported, "frames": frames, "coverage": coverage, "quality": quality, "short": short_line,
             "against": against,
