@@ -154,7 +154,7 @@ def run(root: Path, out: Path, splat_steps: int, deadline: float, trainers: list
                 verdicts.append({"capture": cap, "trainer": trainer, "rival": k.split("-", 1)[1],
                                  "folds": len(j["folds"]), "mean": p["mean"], "lo": p["lo"], "hi": p["hi"],
                                  "decision": decision(p, 0.3)})
-    print("\nseconds per training (median wall, GPU)")
+    print(f"\nseconds per training (median wall, {'GPU' if torch.cuda.is_available() else 'CPU'})")
     for cap in sorted({r["capture"] for r in rows}):
         for tr in trainers:
             s = [r["wall_s"] for r in rows if r["capture"] == cap and r["trainer"] == tr]
