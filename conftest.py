@@ -15,9 +15,10 @@ from collections import Counter
 def slow_first(items: list) -> list:
     """``items`` with the files that hold the most tests marked slow first (stable: each file's tests, and files
     of equal count, keep their order)."""
-    slow = Counter(it.nodeid.split("::")[0] for it in items if it.get_closest_marker("slow"))
-    order = {f: i for i, f in enumerate(dict.fromkeys(it.nodeid.split("::")[0] for it in items))}
-    return sorted(items, key=lambda it: (-slow[it.nodeid.split("::")[0]], order[it.nodeid.split("::")[0]]))
+    files = [it.nodeid.split("::")[0] for it in items]
+    slow = Counter(f for f, it in zip(files, items) if it.get_closest_marker("slow"))
+    first = {f: i for i, f in enumerate(dict.fromkeys(files))}
+    return [items[i] for i in sorted(range(len(items)), key=lambda i: (-slow[files[i]], first[files[i]]))]
 
 
 def pytest_collection_modifyitems(config, items):
