@@ -11,6 +11,13 @@ gone, reaped, not left to the system to collect:
 * a signal while the main thread is inside native work (:mod:`curate.core.signals` ends the process itself):
   :func:`end_all` kills and reaps them before ``os._exit``.
 
+Ctrl-C at a terminal sends SIGINT to the whole foreground process group, the workers included. A worker that
+took it would print a ``KeyboardInterrupt`` traceback (one still starting, outside the pool's ``try``), and be
+killed mid-line, so that curate's own last line was glued to a broken one. The workers therefore start with
+SIGINT blocked (a blocked signal is inherited across ``fork`` and ``exec``, and Python does not unblock it):
+the command that started them ends them, as above. SIGTERM and SIGHUP keep their default action, to die
+silently.
+
 A spawned pool also starts multiprocessing's *resource tracker*, a process of its own that, left alone, ends
 only after curate has exited (it reads its pipe until curate's end closes it): at exit (and in :func:`end_all`)
 it is stopped and reaped too (:func:`stop_tracker`).
@@ -19,9 +26,12 @@ it is stopped and reaped too (:func:`stop_tracker`).
 from __future__ import annotations
 
 import atexit
+import contextlib
+import functools
 import gc
 import logging
 import os
+import signal
 import threading
 
 log = logging.getLogger(__name__)
@@ -31,12 +41,40 @@ _mutex = threading.Lock()
 _registered = False
 
 
-def local_pool(workers: int, initializer=None, initargs: tuple = ()):
-    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, ended with the command (module docstring)."""
-    import multiprocessing as mp
+@contextlib.contextmanager
+def sigint_blocked():
+    """SIGINT blocked in the calling thread (a process started meanwhile inherits it blocked). A SIGINT sent to
+    curate meanwhile is not lost: another thread takes it, or it is delivered when the block ends."""
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows has no process groups to signal
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@functools.cache
+def _pool_class():
     from concurrent.futures import ProcessPoolExecutor
+
+    class QuietPool(ProcessPoolExecutor):
+        """Starts its workers (in ``submit``) with SIGINT blocked (module docstring)."""
+
+        def submit(self, fn, /, *args, **kwargs):
+            with sigint_blocked():
+                return super().submit(fn, *args, **kwargs)
+
+    return QuietPool
+
+
+def local_pool(workers: int, initializer=None, initargs: tuple = ()):
+    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes, ended with the command, whose workers ignore
+    Ctrl-C (module docstring)."""
+    import multiprocessing as mp
     global _registered
-    ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=initializer, initargs=initargs)
+    ex = _pool_class()(workers, mp_context=mp.get_context("spawn"), initializer=initializer, initargs=initargs)
     with _mutex:
         _pools.append(ex)
         if not _registered:
