@@ -43,7 +43,9 @@ def _after_pycolmap(body: list[str], first: str = "") -> str:
             "    print('ready', flush=True)\n"
             + "".join(f"    {line}\n" for line in body)
             + "except KeyboardInterrupt as e:\n"
-            "    signals.unwound(); w, c = signals.said(e); print(f'curate test: {w}', file=sys.stderr); sys.exit(c)\n")
+            "    w, c = signals.said(e)\n"
+            "    if signals.unwound(): print(f'curate test: {w}', file=sys.stderr)\n"
+            "    sys.exit(c)\n")
 
 
 @pytest.mark.parametrize("sig, word, code", [(signal.SIGTERM, "terminated", 143),
@@ -115,8 +117,9 @@ def test_a_signal_during_native_work_ends_the_process_after_the_grace(tmp_path):
             "        print('ready', flush=True)\n"                                   # not return: Python's handler
             "        os.read(r, 1)\n"                                                # never gets to run
             "except KeyboardInterrupt as e:\n"      # the signal caught the main thread before it blocked: the same
-            "    signals.unwound(); c = signals.said(e)\n"
-            "    print(f'curate test: {c[0]}', file=sys.stderr); sys.exit(c[1])\n")
+            "    c = signals.said(e)\n"
+            "    if signals.unwound(): print(f'curate test: {c[0]}', file=sys.stderr)\n"
+            "    sys.exit(c[1])\n")
     p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True)
     assert p.stdout.readline().strip() == "ready"
@@ -159,6 +162,32 @@ def _first_frames(dst: Path, n: int) -> Path:
         (dst / f["file_path"]).symlink_to(SAMPLE / f["file_path"])
     (dst / "transforms.json").write_text(json.dumps(meta))
     return dst
+
+
+def test_the_last_line_is_said_once_when_the_main_thread_unwinds_just_after_the_grace():
+    """The main thread unwinds just after the grace ran out (killing the training workers on a loaded machine):
+    the watcher is ending the process and says the line; the main thread does not say it again (before, both
+    did)."""
+    prog = ("import sys, time\n"
+            "from curate.core import pools, signals\n"
+            f"pools.end_all = lambda: time.sleep({signals.GRACE_S})\n"       # the watcher's end takes a while
+            "signals.install('curate test')\n"
+            "try:\n"
+            "    print('ready', flush=True)\n"
+            "    time.sleep(60)\n"
+            "except KeyboardInterrupt as e:\n"
+            f"    time.sleep({signals.GRACE_S} + 1)\n"          # unwinding: past the grace, within the watcher's end
+            "    c = signals.said(e)\n"
+            "    if signals.unwound() is not False:\n"           # as the command does (before, unwound said nothing)
+            "        print(f'curate test: {c[0]}', file=sys.stderr, flush=True)\n"
+            "    time.sleep(60)\n"                                # the watcher's os._exit ends it
+            "    sys.exit(c[1])\n")
+    p = subprocess.Popen([sys.executable, "-c", prog], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    assert p.stdout.readline().strip() == "ready"
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 143 and err.splitlines() == ["curate test: terminated"], err
 
 
 @pytest.mark.slow

@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"curate {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:       # Ctrl-C, or SIGTERM / SIGHUP (curate.core.signals.Terminated)
-        signals.unwound()
         word, code = signals.said(e)
-        print(f"curate {args.command}: {word}", file=sys.stderr)
+        if signals.unwound():            # else curate's watcher says it, ending the process
+            print(f"curate {args.command}: {word}", file=sys.stderr)
         return code
     except OSError as e:
         if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS) and e.filename:

@@ -8,9 +8,9 @@ exit status is 143 (130 for Ctrl-C); a re-run resumes from the stages and traini
 Python runs a signal handler only between bytecodes of the main thread, and COLMAP's extraction, matching and
 mapping are native calls that run for minutes (they release the GIL, but do not return). So every such signal
 also wakes a watcher thread (``signal.set_wakeup_fd``): when the main thread has not finished unwinding
-within :data:`GRACE_S`, the watcher ends the process itself, with the same line: the training workers killed
-and reaped (:func:`curate.core.pools.end_all`), the locks released (:func:`curate.core.runfolder.release_all`),
-then ``os._exit``.
+within :data:`GRACE_S`, the watcher ends the process itself, with the same line (said once, by whichever of the
+two gets there first): the training workers killed and reaped (:func:`curate.core.pools.end_all`), the locks
+released (:func:`curate.core.runfolder.release_all`), then ``os._exit``.
 
 pycolmap installs glog's failure handler for SIGTERM when it is imported (it prints a native stack dump, and
 during mapping it deadlocked holding the lock): :func:`install` is called again after that import
@@ -45,7 +45,10 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
-_state: dict = {"command": "curate", "pipe": None, "done": threading.Event(), "installed": False, "ignored": None}
+_state: dict = {"command": "curate", "pipe": None, "done": threading.Event(), "said": threading.Lock(),
+                "installed": False, "ignored": None}
+"""``said``: taken by whichever says the last line, the main thread (:func:`unwound`) or the watcher (``_force``),
+so that it is said once."""
 
 
 def _raise(signum, frame) -> None:
@@ -92,7 +95,7 @@ def _after_fork_in_child() -> None:
             os.close(fd)
         except OSError:
             pass
-    _state.update(pipe=None, done=threading.Event(), installed=False)
+    _state.update(pipe=None, done=threading.Event(), said=threading.Lock(), installed=False)
 
 
 if hasattr(os, "register_at_fork"):
@@ -109,9 +112,12 @@ def said(exc: BaseException) -> tuple[str, int]:
     return WORD.get(s, "interrupted"), EXIT.get(s, 130)
 
 
-def unwound() -> None:
-    """The main thread has handled the signal (its last line is printed): the watcher leaves the exit to it."""
+def unwound() -> bool:
+    """The main thread has handled the signal: the watcher leaves the exit to it. True: the main thread says the
+    last line; False: the watcher, whose grace ran out just before, is ending the process and says it (the line
+    once, not twice)."""
     _state["done"].set()
+    return _state["said"].acquire(blocking=False)
 
 
 def _watch(r: int) -> None:
@@ -123,8 +129,8 @@ def _watch(r: int) -> None:
         sigs = [s for s in data if s in EXIT]
         if not sigs:
             continue
-        if _state["done"].wait(GRACE_S):
-            return
+        if _state["done"].wait(GRACE_S) or not _state["said"].acquire(blocking=False):
+            return               # the main thread unwound in time, or just now: it says the line
         _force(sigs[-1])
 
 
