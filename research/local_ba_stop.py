@@ -1,11 +1,12 @@
 """When each new photo's local bundle adjustment stops: a run folder's own matches mapped by the product's mapper
 (`curate.sfm.reconstruction.incremental_options`, `curate.sfm.mapping.incremental_mapping`, one thread) with COLMAP's
-local adjustment (``base``: at most 25 Ceres iterations, no function tolerance, so it stops at the iteration cap or
-a small gradient) and with variants set as ``NAME:FIELD=VALUE[,FIELD=VALUE]`` on ``pycolmap.IncrementalPipelineOptions``
-(``ftol6:ba_local_function_tolerance=1e-6``, ``it10:ba_local_max_num_iterations=10``). Prints one JSON row per
-mapping: CPU and wall seconds, the models' sizes, the largest model against the base's (rotation median / max deg,
-centres relative to the extent) and, with a truth, against it (an office case's truth file of `research.flip
-make`, or a rendered capture's frame folder with ``truth.npy``). docs/investigations/sfm.md#local-ba-stop.
+local adjustment (``base``: at most 25 Ceres iterations, no function tolerance, so it stops at the iteration cap or a
+small gradient) and with variants set as ``NAME:FIELD=VALUE[,FIELD=VALUE]`` on ``pycolmap.IncrementalPipelineOptions``
+(``ftol6:ba_local_function_tolerance=1e-6``, ``it10:ba_local_max_num_iterations=10``,
+``img4:mapper.ba_local_num_images=4``). Prints one JSON row per mapping: CPU and wall seconds, the models' sizes, the
+largest model against the base's (rotation median / max deg, centres relative to the extent) and, with a truth,
+against it (an office case's truth file of `research.flip make`, or a rendered capture's frame folder with
+``truth.npy``). docs/investigations/sfm.md#local-ba-stop.
 
     python -m research.local_ba_stop RUN [RUN:CASE.truth.json | RUN=FRAMES ...] \
         --variants ftol6:ba_local_function_tolerance=1e-6 [--office ../shared/data/office] [--work W] [--rows FILE]
@@ -43,8 +44,14 @@ def map_variant(run: Path, work: Path, sets: dict) -> tuple[dict, object]:
     n = sum(1 for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept")
     cfg = SfmConfig()
     opts = incremental_options(cfg, n, expected_observations(db, cfg.min_num_matches))
-    for k, v in sets.items():
-        setattr(opts, k, type(getattr(opts, k))(v))
+    for k, v in sets.items():              # FIELD or SUB.FIELD (mapper.ba_local_num_images)
+        *path, field = k.split(".")
+        obj = opts
+        for part in path:
+            obj = getattr(obj, part)
+        setattr(obj, field, type(getattr(obj, field))(v))
+        if path:
+            setattr(opts, path[0], obj)      # pybind11 returns a copy of a nested options struct
     t, c = time.perf_counter(), time.process_time()
     models = mapping.incremental_mapping(db, sfm / "images", work / "sparse", opts,
                                          repeat_final_refinement=cfg.repeat_final_refinement)
