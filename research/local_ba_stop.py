@@ -51,7 +51,7 @@ def map_variant(run: Path, work: Path, sets: dict) -> tuple[dict, object]:
             obj = getattr(obj, part)
         setattr(obj, field, type(getattr(obj, field))(v))
         if path:
-            setattr(opts, path[0], obj)      # pybind11 returns a copy of a nested options struct
+            setattr(opts, path[0], obj)      # in case the binding handed back a copy of the nested options
     t, c = time.perf_counter(), time.process_time()
     models = mapping.incremental_mapping(db, sfm / "images", work / "sparse", opts,
                                          repeat_final_refinement=cfg.repeat_final_refinement)
