@@ -32,6 +32,7 @@ def main(argv=None) -> int:
     ap.add_argument("--below", type=int, default=0, help="also auto's two passes, guided under this many (0: not run)")
     a = ap.parse_args(argv)
     from curate.sfm.matching import _match_file
+    from research.local_ba_stop import copy_database
     lines = a.pairs.read_text().splitlines()
     sample = lines[::max(1, len(lines) // a.n)][:a.n]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -41,10 +42,7 @@ def main(argv=None) -> int:
     settings = [("guided", True, 0), ("unguided", False, 0)] + ([("two_pass", True, a.below)] if a.below else [])
     for name, guided, below in settings:
         db = a.out / f"{name}.db"
-        src, dst = sqlite3.connect(f"file:{a.db}?mode=ro", uri=True), sqlite3.connect(db)
-        src.backup(dst)   # what a write-ahead log still holds too
-        src.close()
-        dst.close()
+        copy_database(a.db, db)
         with sqlite3.connect(db) as con:
             con.execute("DELETE FROM matches")
             con.execute("DELETE FROM two_view_geometries")

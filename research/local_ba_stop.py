@@ -62,18 +62,9 @@ def map_variant(run: Path, work: Path, sets: dict) -> tuple[dict, object]:
             "points": int(best.num_points3D())}, best
 
 
-def _errors(cams, ref) -> dict:
-    from research.align import pose_errors
-    import numpy as np
-    e = pose_errors(cams, ref)
-    rd = np.asarray(e["rotation_deg"])
-    return {"n": e["n_matched"], "rot_median": round(e["rotation_deg_median"], 4),
-            "rot_max": round(e["rotation_deg_max"], 4), "over_5": int((rd > 5).sum()),
-            "centre_median": round(e["centre_rel_median"], 5), "centre_max": round(e["centre_rel_max"], 5)}
-
-
 def main(argv=None) -> list[dict]:
     from curate.sfm.model import cameras_from_reconstruction
+    from research.bench.bench_mapping import pose_record, truth_cameras
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="RUN, RUN:CASE.truth.json (an office case) or RUN=FRAMES (rendered)")
     ap.add_argument("--variants", nargs="*", default=[], help="NAME:FIELD=VALUE[,FIELD=VALUE]")
@@ -108,12 +99,11 @@ def main(argv=None) -> list[dict]:
                 row["truth"] = summary(truth_errors(best, recs, json.loads(Path(truth_s).read_text()),
                                                     a.office).values())
             elif kind == "frames":
-                from research.bench.bench_mapping import truth_cameras
-                row["truth"] = _errors(cams, truth_cameras(Path(truth_s), a.kind))
+                row["truth"] = pose_record(cams, truth_cameras(Path(truth_s), a.kind), 4)
             if base_cams is None:
                 base_cams = cams
             else:
-                row["against_base"] = _errors(cams, base_cams)
+                row["against_base"] = pose_record(cams, base_cams, 4)
                 row["same_photos_as_base"] = set(cams.names) == set(base_cams.names)
             rows.append(row)
             print(json.dumps(row), flush=True)

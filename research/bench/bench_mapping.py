@@ -515,12 +515,14 @@ def model_record(models: dict, n_kept: int, truth: str, capture: str) -> dict:
     return rec
 
 
-def pose_record(cams, truth) -> dict:
+def pose_record(cams, truth, digits: int = 3) -> dict:
+    """``cams`` against ``truth`` after one similarity: matched, rotation median / max (deg, to ``digits``), frames
+    over 5 deg, centre error median / max relative to the extent."""
     from research.align import pose_errors
     e = pose_errors(cams, truth)
     rd = np.asarray(e["rotation_deg"])
-    return {"n_matched": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], 3),
-            "rotation_deg_max": round(e["rotation_deg_max"], 3), "n_over_5deg": int((rd > 5).sum()),
+    return {"n_matched": e["n_matched"], "rotation_deg_median": round(e["rotation_deg_median"], digits),
+            "rotation_deg_max": round(e["rotation_deg_max"], digits), "n_over_5deg": int((rd > 5).sum()),
             "centre_rel_median": round(e["centre_rel_median"], 5), "centre_rel_max": round(e["centre_rel_max"], 5)}
 
 
