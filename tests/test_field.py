@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from curate.core.cameras import Cameras, look_at
-from curate.field.model import SH_C0, FieldConfig, RadianceField, composite_weights, contract
+from curate.field.model import (SH_C0, FieldConfig, RadianceField, composite_weights, contract, trilinear,
+                                trilinear_corners)
 from curate.field.metrics import camera_rays, psnr, render_image, ssim
 from curate.field.train import train_field
 
@@ -62,6 +63,61 @@ def test_composite_matches_slab(sigma):
     exp = c * (1 - trans) + bg * trans
     assert torch.allclose(col[0], exp, atol=2e-3)
     assert abs((1 - w.sum()).item() - trans) < 2e-3
+
+
+@pytest.mark.parametrize("res, channels", [(2, 1), (7, 1), (9, 3), (5, 12)])
+def test_trilinear_lookup_is_grid_samples_value_and_gradient(res, channels):
+    """Training reads the grids through :func:`trilinear` (an index_add backward); rendering through grid_sample.
+    Both give the same values and gradients, at random points, on the nodes and on the faces of the grid."""
+    gen = torch.Generator().manual_seed(res * 10 + channels)
+    grid = torch.randn(1, channels, res, res, res, generator=gen, dtype=torch.float64)
+    nodes = torch.linspace(-1, 1, res, dtype=torch.float64)
+    pts = torch.cat([torch.rand(500, 3, generator=gen, dtype=torch.float64) * 2 - 1,
+                     nodes[torch.randint(0, res, (60, 3), generator=gen)],            # on nodes, edges and faces
+                     torch.tensor([[-1.0, -1, -1], [1, 1, 1], [1, -1, 0.3]], dtype=torch.float64)])
+    up = torch.randn(channels, len(pts), generator=gen, dtype=torch.float64)   # an upstream gradient
+    values, grads = [], []
+    for use_corners in (False, True):
+        g = grid.clone().requires_grad_(True)
+        if use_corners:
+            out = trilinear(g, trilinear_corners(pts, res))
+        else:
+            out = torch.nn.functional.grid_sample(g, pts.reshape(1, 1, 1, -1, 3), mode="bilinear",
+                                                  align_corners=True).reshape(channels, -1)
+        (out * up).sum().backward()
+        values.append(out.detach())
+        grads.append(g.grad)
+    assert torch.allclose(values[1], values[0], atol=1e-12)
+    assert torch.allclose(grads[1], grads[0], atol=1e-12)
+    cn = trilinear_corners(pts, res)
+    assert cn.idx.min() >= 0 and cn.idx.max() < res ** 3
+    assert torch.allclose(cn.w.sum(0), torch.ones(len(pts), dtype=torch.float64))
+
+
+@pytest.mark.parametrize("trans_thresh", [0.0, 1e-3])
+def test_a_field_trained_is_the_field_rendered(trans_thresh):
+    """The colours, depths and opacities of training's forward pass (with gradients) are rendering's (without),
+    on a field with random grids, an occupancy mask and samples below the colour threshold."""
+    cfg = FieldConfig(res_schedule=(12,), sh_degree=1, n_inner=24, n_outer=12, trans_thresh=trans_thresh,
+                      color_thresh=1e-3)
+    torch.manual_seed(3)
+    f = RadianceField(cfg, [-1, -1, -1], [1, 1, 1])
+    with torch.no_grad():
+        f.density.copy_(torch.randn_like(f.density) * 3)
+        f.color.copy_(torch.randn_like(f.color))
+        f.occ &= torch.rand(f.occ.shape) > 0.3
+    o = torch.randn(300, 3) * 0.3 + torch.tensor([0.0, 0.0, -2.5])
+    d = torch.nn.functional.normalize(torch.randn(300, 3) * 0.3 + torch.tensor([0.0, 0.0, 1.0]), dim=1)
+    trained = f.render_rays(o, d)
+    with torch.no_grad():
+        rendered = f.render_rays(o, d)
+    for k in ("rgb", "depth", "acc"):
+        assert torch.isfinite(trained[k]).all()
+        assert torch.allclose(trained[k].detach(), rendered[k], atol=1e-5), k
+    assert trained["n_color"] == rendered["n_color"] > 0
+    trained["rgb"].sum().backward()
+    assert torch.isfinite(f.density.grad).all() and f.density.grad.abs().sum() > 0
+    assert torch.isfinite(f.color.grad).all() and f.color.grad.abs().sum() > 0
 
 
 def test_field_renders_uniform_medium():

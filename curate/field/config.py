@@ -42,7 +42,8 @@ class FieldConfig:
     alpha_init: float = 1e-3
     """Initial opacity of one inner sample step (sets the density bias)."""
     color_thresh: float = 1e-4
-    """Samples with a rendering weight below this skip the colour lookup."""
+    """Samples with a rendering weight below this add no colour (rendering skips their colour lookup; training
+    looks it up and weights it 0, which costs less than taking their subset)."""
     prune_thresh: float = 2e-3
     """A cell whose opacity across one cell is below this is marked empty at occupancy updates."""
     prune_dilation: int = 2

@@ -24,8 +24,12 @@ Speed
 -----
 * an occupancy mask ``occ`` ([res, res, res] bool, same nodes as the grids) skips
   samples in empty cells before any grid lookup (they get zero density);
-* colour is only evaluated for samples whose rendering weight exceeds
-  ``color_thresh`` (DVGO's "fast colour threshold");
+* only samples whose rendering weight exceeds ``color_thresh`` add their colour (DVGO's "fast
+  colour threshold"): rendering looks colour up for those alone; training for every sample in an
+  active cell, the others weighted 0, which costs less than taking the subset;
+* training reads both grids through each sample's 8 corners (:func:`trilinear_corners`, once per
+  batch), so that a lookup's gradient is an ``index_add``: ``grid_sample``'s CPU backward took 3-7
+  times longer; rendering uses ``grid_sample``, whose forward is faster (docs/speed.md#trilinear);
 * transmittance uses ``exp(-cumsum(sigma * delta))`` with ``sigma * delta`` clamped,
   which is stable for any density.
 """
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -79,6 +84,51 @@ def composite_weights(sigma: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
     tau = (sigma * delta).clamp(min=0, max=MAX_TAU)
     T = torch.exp(-(torch.cumsum(tau, 1) - tau))
     return T * (1 - torch.exp(-tau))
+
+
+class Corners(NamedTuple):
+    """The 8 grid nodes around K points and their trilinear weights (:func:`trilinear_corners`)."""
+
+    idx: torch.Tensor
+    """[8, K] int64 flat node indices into a grid stored [z, y, x]."""
+    w: torch.Tensor
+    """[8, K] weights (each column sums to 1)."""
+
+    def subset(self, k: torch.Tensor) -> "Corners":
+        """The corners of points ``k`` ([K'] int64 indices into the K points)."""
+        return Corners(self.idx[:, k], self.w[:, k])
+
+
+def trilinear_corners(g: torch.Tensor, res: int) -> Corners:
+    """The 8 nodes of a ``res``^3 grid around grid coordinates ``g`` [K, 3] ((x, y, z) in [-1, 1], the first and
+    last node at -1 and 1: ``grid_sample``'s ``align_corners=True``), and their trilinear weights. Coordinates
+    outside [-1, 1] are clamped to it."""
+    p = ((g.t() + 1) * (0.5 * (res - 1))).clamp_(0, res - 1)        # [3, K] in node units
+    p0 = p.floor().clamp_(max=res - 2)
+    f = p - p0
+    i0 = p0.long()
+    base = (i0[2] * res + i0[1]) * res + i0[0]
+    r2 = res * res
+    offs = torch.tensor([0, 1, res, res + 1, r2, r2 + 1, r2 + res, r2 + res + 1], device=g.device)
+    fx, fy, fz = f
+    gx, gy, gz = 1 - f
+    wyx = torch.stack([gy * gx, gy * fx, fy * gx, fy * fx])        # [4, K], in the order of offs
+    return Corners(base[None] + offs[:, None], (torch.stack([gz, fz])[:, None] * wyx[None]).reshape(8, -1))
+
+
+def trilinear(grid: torch.Tensor, cn: Corners) -> torch.Tensor:
+    """A grid [1, C, R, R, R] interpolated at the corners' points -> [C, K].
+
+    What ``grid_sample(mode="bilinear", align_corners=True)`` computes, to float rounding, with gradients to
+    the grid by ``index_add`` instead of its CPU backward, which is 3-7 times slower (docs/speed.md#trilinear)."""
+    c = grid.shape[1]
+    v = grid.reshape(c, -1).index_select(1, cn.idx.reshape(-1)).reshape(c, 8, -1)
+    return (v * cn.w).sum(1)
+
+
+def _subset(at: "torch.Tensor | Corners", k: torch.Tensor) -> "torch.Tensor | Corners":
+    """Points ``k`` of K points [K, 3], or of their :class:`Corners`."""
+    return at.subset(k) if isinstance(at, Corners) else at[k]
 
 
 def ray_box(o: torch.Tensor, d: torch.Tensor, lo: float = -1.0, hi: float = 1.0):
@@ -163,19 +213,24 @@ class RadianceField(torch.nn.Module):
         """Contracted points [..., 3] -> [...] bool, True where the nearest cell is active."""
         return self._occ_lookup_unit(self.to_unit(c))
 
-    def sigma_at(self, c: torch.Tensor, unit: bool = False) -> torch.Tensor:
-        """Density per contracted unit at contracted points [K, 3] (grid coordinates when ``unit``) -> [K]."""
+    def _lookup(self, grid: torch.Tensor, c: "torch.Tensor | Corners", unit: bool) -> torch.Tensor:
+        """``grid`` [1, C, R, R, R] at contracted points [K, 3] (grid coordinates when ``unit``), or at
+        :class:`Corners` of this grid's resolution -> [C, K]."""
+        if isinstance(c, Corners):
+            return trilinear(grid, c)
         g = (c if unit else self.to_unit(c)).reshape(1, 1, 1, -1, 3)
-        raw = F.grid_sample(self.density, g, mode="bilinear", align_corners=True)
-        raw = raw.reshape(-1)
+        return F.grid_sample(grid, g, mode="bilinear", align_corners=True).reshape(grid.shape[1], -1)
+
+    def sigma_at(self, c: "torch.Tensor | Corners", unit: bool = False) -> torch.Tensor:
+        """Density per contracted unit at contracted points [K, 3] (grid coordinates when ``unit``, or their
+        :func:`trilinear_corners`) -> [K]."""
+        raw = self._lookup(self.density, c, unit).reshape(-1)
         return F.softplus(raw.clamp(max=MAX_RAW) + self.bias)
 
-    def rgb_at(self, c: torch.Tensor, d: torch.Tensor, unit: bool = False) -> torch.Tensor:
-        """Colour at contracted points [K, 3] (grid coordinates when ``unit``) seen along unit world
-        directions [K, 3] -> [K, 3]."""
-        g = (c if unit else self.to_unit(c)).reshape(1, 1, 1, -1, 3)
-        coef = F.grid_sample(self.color, g, mode="bilinear", align_corners=True)
-        coef = coef.reshape(3, self.n_sh, -1)  # [3, n_sh, K]
+    def rgb_at(self, c: "torch.Tensor | Corners", d: torch.Tensor, unit: bool = False) -> torch.Tensor:
+        """Colour at contracted points [K, 3] (grid coordinates when ``unit``, or their corners) seen along unit
+        world directions [K, 3] -> [K, 3]."""
+        coef = self._lookup(self.color, c, unit).reshape(3, self.n_sh, -1)  # [3, n_sh, K]
         basis = sh_basis(d, self.cfg.sh_degree).T  # [n_sh, K]
         return torch.sigmoid((coef * basis[None]).sum(1).T)
 
@@ -246,34 +301,46 @@ class RadianceField(torch.nn.Module):
         B = o.shape[0]
         t, c, delta = self.sample(o, d, jitter)
         g = self.to_unit(c).reshape(-1, 3)  # [B*S, 3] grid coordinates
-        keep = self._occ_lookup_unit(g)  # [B*S]
+        fl = self._occ_lookup_unit(g).nonzero().squeeze(1)  # [K0] samples in active cells
+        # training: the corners once for the density and the colour, a lookup's gradient an index_add (grid_sample's
+        # CPU backward is 3-7 times slower); rendering: grid_sample, whose forward is faster (docs/speed.md#trilinear)
+        at = trilinear_corners(g[fl], self.res) if torch.is_grad_enabled() else g[fl]
         S = t.shape[1]
         if torch.is_grad_enabled() and self.cfg.trans_thresh > 0:
             # pass 1 without gradients: drop samples hidden behind opaque ones (T < trans_thresh);
             # they form a suffix of each ray, so the prefix's transmittance stays exact in pass 2
             with torch.no_grad():
-                fl = keep.nonzero().squeeze(1)
-                sg = torch.zeros(B * S, device=o.device).index_put((fl,), self.sigma_at(g[fl], unit=True))
+                sg = torch.zeros(B * S, device=o.device).index_put((fl,), self.sigma_at(at, unit=True))
                 tau0 = (sg.reshape(B, S) * delta).clamp(max=MAX_TAU)
                 T0 = torch.exp(-(torch.cumsum(tau0, 1) - tau0))
-                keep = keep & (T0.reshape(-1) > self.cfg.trans_thresh)
-        flat = keep.nonzero().squeeze(1)  # [K]
-        sig_k = self.sigma_at(g[flat], unit=True)
+                kept = (T0.reshape(-1)[fl] > self.cfg.trans_thresh).nonzero().squeeze(1)
+            flat, at = fl[kept], _subset(at, kept)  # [K]
+        else:
+            flat = fl
+        sig_k = self.sigma_at(at, unit=True)
         sigma = torch.zeros(B * S, device=o.device, dtype=sig_k.dtype).index_put((flat,), sig_k).reshape(B, S)
         w = composite_weights(sigma, delta)  # [B, S]
         acc = w.sum(1)
         tau = (sigma * delta).clamp(max=MAX_TAU)
         sparsity = torch.log1p((tau / 0.05) ** 2).sum(1).mean() if self.cfg.sparsity > 0 else tau.new_zeros(())
         wf = w.reshape(-1)
-        sel = (wf > self.cfg.color_thresh).nonzero().squeeze(1)  # [Kc]
+        wk = wf[flat]
+        lit = wk > self.cfg.color_thresh   # a sample outside flat weighs 0
+        if isinstance(at, Corners):   # training: every sample's colour, the unlit weighted 0 (cheaper than a subset)
+            sel, wk = flat, torch.where(lit, wk, 0.0)
+            n_color = int(lit.sum())
+        else:
+            k = lit.nonzero().squeeze(1)
+            sel, wk, at = flat[k], wk[k], at[k]
+            n_color = int(k.numel())
         ray_idx = torch.div(sel, S, rounding_mode="floor")
-        rgb_k = self.rgb_at(g[sel], d[ray_idx], unit=True)
-        rgb = torch.zeros(B, 3, device=o.device, dtype=rgb_k.dtype).index_add(0, ray_idx, wf[sel, None] * rgb_k)
+        rgb_k = self.rgb_at(at, d[ray_idx], unit=True)
+        rgb = torch.zeros(B, 3, device=o.device, dtype=rgb_k.dtype).index_add(0, ray_idx, wk[:, None] * rgb_k)
         bg = torch.sigmoid(self.bg) if bg_override is None else bg_override
         rgb = rgb + (1 - acc)[:, None].clamp(0, 1) * bg
         depth = (w * t).sum(1) + (1 - acc).clamp(0, 1) * t[:, -1]
         return {"rgb": rgb, "depth": depth, "acc": acc, "sparsity": sparsity, "n_density": int(flat.numel()),
-                "n_color": int(sel.numel())}
+                "n_color": n_color}
 
     # ------------------------------------------------------------------ training helpers
     @torch.no_grad()
