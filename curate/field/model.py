@@ -28,7 +28,7 @@ Speed
   colour threshold"): rendering looks colour up for those alone; training for every sample in an
   active cell, the others weighted 0, which costs less than taking the subset;
 * training reads both grids through each sample's 8 corners (:func:`trilinear_corners`, once per
-  batch), so that a lookup's gradient is an ``index_add``: ``grid_sample``'s CPU backward took 3-7
+  batch), so that a lookup's gradient is an ``index_add``: ``grid_sample``'s CPU backward took 3-6
   times longer; rendering uses ``grid_sample``, whose forward is faster (docs/speed.md#trilinear);
 * transmittance uses ``exp(-cumsum(sigma * delta))`` with ``sigma * delta`` clamped,
   which is stable for any density.
@@ -120,15 +120,10 @@ def trilinear(grid: torch.Tensor, cn: Corners) -> torch.Tensor:
     """A grid [1, C, R, R, R] interpolated at the corners' points -> [C, K].
 
     What ``grid_sample(mode="bilinear", align_corners=True)`` computes, to float rounding, with gradients to
-    the grid by ``index_add`` instead of its CPU backward, which is 3-7 times slower (docs/speed.md#trilinear)."""
+    the grid by ``index_add`` instead of its CPU backward, which is 3-6 times slower (docs/speed.md#trilinear)."""
     c = grid.shape[1]
     v = grid.reshape(c, -1).index_select(1, cn.idx.reshape(-1)).reshape(c, 8, -1)
     return (v * cn.w).sum(1)
-
-
-def _subset(at: "torch.Tensor | Corners", k: torch.Tensor) -> "torch.Tensor | Corners":
-    """Points ``k`` of K points [K, 3], or of their :class:`Corners`."""
-    return at.subset(k) if isinstance(at, Corners) else at[k]
 
 
 def ray_box(o: torch.Tensor, d: torch.Tensor, lo: float = -1.0, hi: float = 1.0):
@@ -303,7 +298,7 @@ class RadianceField(torch.nn.Module):
         g = self.to_unit(c).reshape(-1, 3)  # [B*S, 3] grid coordinates
         fl = self._occ_lookup_unit(g).nonzero().squeeze(1)  # [K0] samples in active cells
         # training: the corners once for the density and the colour, a lookup's gradient an index_add (grid_sample's
-        # CPU backward is 3-7 times slower); rendering: grid_sample, whose forward is faster (docs/speed.md#trilinear)
+        # CPU backward is 3-6 times slower); rendering: grid_sample, whose forward is faster (docs/speed.md#trilinear)
         at = trilinear_corners(g[fl], self.res) if torch.is_grad_enabled() else g[fl]
         S = t.shape[1]
         if torch.is_grad_enabled() and self.cfg.trans_thresh > 0:
@@ -314,7 +309,7 @@ class RadianceField(torch.nn.Module):
                 tau0 = (sg.reshape(B, S) * delta).clamp(max=MAX_TAU)
                 T0 = torch.exp(-(torch.cumsum(tau0, 1) - tau0))
                 kept = (T0.reshape(-1)[fl] > self.cfg.trans_thresh).nonzero().squeeze(1)
-            flat, at = fl[kept], _subset(at, kept)  # [K]
+            flat, at = fl[kept], at.subset(kept)  # [K]; at: Corners, gradients are on
         else:
             flat = fl
         sig_k = self.sigma_at(at, unit=True)
