@@ -2,8 +2,12 @@
 cost, what each scored, and the verdicts.
 
     cp -a RUN RUN_A; cp -a RUN RUN_B
-    PYTHONPATH=BUILD_A python -m curate evaluate RUN_A; PYTHONPATH=BUILD_B python -m curate evaluate RUN_B
+    (cd BUILD_A && python -m curate evaluate RUN_A); (cd BUILD_B && python -m curate evaluate RUN_B)
     python -m research.eval_pair RUN_A RUN_B
+
+Run each build from its own checkout: ``python -m`` puts the working directory first on the path, so
+``PYTHONPATH=BUILD_A python -m curate ...`` run from another checkout imports that checkout's curate (and so do the
+evaluation's spawned workers).
 
 Prints one JSON object: per training both builds made (``RUN/evaluate/<unit>/metrics.json``), its CPU seconds under
 each and the largest difference of a held-out photo's PSNR; the CPU seconds of the trainings in common and of all,
