@@ -102,7 +102,7 @@ from pathlib import Path
 logging.basicConfig(level=logging.WARNING)
 from curate.sfm.config import SfmConfig
 from curate.sfm.colmap import run_sfm
-cfg = SfmConfig(progress=False, num_threads=int(sys.argv[3]))
+cfg = SfmConfig(progress=False, num_threads=int(sys.argv[3]), **json.loads(sys.argv[4]))
 t = time.perf_counter()
 try:
     run_sfm(cfg, sys.argv[1], sys.argv[2])
@@ -112,13 +112,15 @@ except Exception as e:
 """
 
 
-def one_run(capture: Path, run: Path, code: Path, threads: int) -> dict:
-    """The SfM stage on ``capture`` in the fresh run folder ``run`` with the ``curate`` of ``code``."""
+def one_run(capture: Path, run: Path, code: Path, threads: int, settings: dict | None = None) -> dict:
+    """The SfM stage on ``capture`` in the fresh run folder ``run`` with the ``curate`` of ``code`` and the
+    ``SfmConfig`` fields ``settings`` set."""
     shutil.rmtree(run, ignore_errors=True)
     env = dict(os.environ, PYTHONPATH=str(code))
     t = time.perf_counter()
     cpu0 = os.times()
-    p = subprocess.run([sys.executable, "-c", _RUN, str(capture), str(run), str(threads)], env=env, cwd=code,
+    p = subprocess.run([sys.executable, "-c", _RUN, str(capture), str(run), str(threads),
+                        json.dumps(settings or {})], env=env, cwd=code,
                        capture_output=True, text=True)
     cpu1 = os.times()
     res = json.loads(p.stdout.strip().splitlines()[-1]) if p.stdout.strip() else {"ok": False, "error": p.stderr[-500:]}
@@ -227,6 +229,8 @@ def main(argv=None):
     r.add_argument("--office", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/office")
     r.add_argument("--work", type=Path, default=None, help="run folders (default: ROOT/runs)")
     r.add_argument("--keep", action="store_true", help="keep each run folder (default: only the last)")
+    r.add_argument("--set", nargs="*", default=[], metavar="FIELD=JSON",
+                   help="SfmConfig fields for every run, e.g. sequential_quadratic=false sequential_overlap=8")
     t = sub.add_parser("table")
     t.add_argument("logs", type=Path, nargs="+")
     a = ap.parse_args(argv)
@@ -235,14 +239,15 @@ def main(argv=None):
         print(json.dumps(res))
     elif a.cmd == "run":
         work = a.work or a.root / "runs"
+        settings = {k: json.loads(v) for k, v in (x.split("=", 1) for x in a.set)}
         for case in a.cases:
             capture = a.root / case if (a.root / case).exists() else Path(case)
             truth = a.root / f"{case}.truth.json"
             for threads in a.threads:
                 for k in range(a.runs):
                     run = work / a.label / f"{case}_t{threads}_{k}"
-                    res = one_run(capture, run, a.code, threads)
-                    row = {"label": a.label, "case": case, "threads": threads, "k": k, **res}
+                    res = one_run(capture, run, a.code, threads, settings)
+                    row = {"label": a.label, "case": case, "threads": threads, "k": k, "settings": settings, **res}
                     if res.get("ok"):
                         row.update(describe(run, truth, a.office))
                     with open(a.log, "a") as f:

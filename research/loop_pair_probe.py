@@ -4,13 +4,15 @@ the truth's relative pose, and the run's matches mapped again without the loop p
 
     python -m research.loop_pair_probe RUN CASE.truth.json --office ../shared/data/office \\
         --drop 333-347:0-299 --show 336-348 --work W
+    python -m research.loop_pair_probe RUN CASE.truth.json --office ../shared/data/office \\
+        --drop-far-sequential 64 --work W   # the sequential neighbours 64 frames apart or more that loop detection
+                                            # did not list, left out (SfmConfig.sequential_min_verified_share)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,7 @@ def main(argv=None) -> dict:
     from curate.sfm.reconstruction import map_incremental
     from research.datasets import load_office
     from research.join_shared import truth_errors
+    from research.local_ba_stop import copy_database
     from research.takes import truth_of
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
@@ -36,6 +39,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--office", type=Path, required=True)
     ap.add_argument("--drop", default=None, help="A-B:C-D: leave out the loop pairs between these frame ranges")
     ap.add_argument("--drop-planar", action="store_true", help="leave out every planar-or-panoramic loop pair (4-6)")
+    ap.add_argument("--drop-far-sequential", type=int, default=0, metavar="D",
+                    help="leave out the sequential pairs at least D frames apart that are not loop pairs")
     ap.add_argument("--show", default="0-100000", help="frames (truth index) whose errors are printed")
     ap.add_argument("--work", type=Path, required=True)
     a = ap.parse_args(argv)
@@ -63,8 +68,15 @@ def main(argv=None) -> dict:
     out["verified_loop_pairs"] = len(rows)
     out["by_config"] = {str(c): sum(r["config"] == c for r in rows) for c in sorted({r["config"] for r in rows})}
     lo, hi = _span(a.show)
-    if a.drop or a.drop_planar:
-        if a.drop:
+    if a.drop or a.drop_planar or a.drop_far_sequential:
+        if a.drop_far_sequential:
+            order = {n: i for i, n in enumerate(sorted(ids))}
+            listed = {tuple(sorted(p)) for p in loop}
+            seq = [tuple(ln.split()) for ln in (sfm / "sequential_pairs.txt").read_text().splitlines() if ln.strip()]
+            cut = [(x, y) for x, y in seq if abs(order[x] - order[y]) >= a.drop_far_sequential
+                   and tuple(sorted((x, y))) not in listed]
+            out["dropped"] = len(cut)
+        elif a.drop:
             (p0, p1), (q0, q1) = (_span(s) for s in a.drop.split(":"))
             inside = lambda t, s0, s1: s0 <= t <= s1  # noqa: E731
             cut = [(x, y) for x, y in loop if (inside(gt[x], p0, p1) and inside(gt[y], q0, q1))
@@ -77,7 +89,7 @@ def main(argv=None) -> dict:
             out["dropped"] = len(cut)
         a.work.mkdir(parents=True, exist_ok=True)
         db = a.work / "database.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         with pycolmap.Database.open(db) as d:
             for x, y in cut:
                 if d.exists_two_view_geometry(ids[x], ids[y]):
