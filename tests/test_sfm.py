@@ -542,19 +542,17 @@ def _frames_db(path: Path, n: int) -> list[str]:
 @pytest.mark.parametrize("quadratic, want", [(True, [1, 2, 4, 8, 16, 32]), (False, [1, 2, 3, 4, 5, 6])])
 def test_sequential_matching_pairs_each_frame_with_the_neighbours_its_options_name(tmp_path, monkeypatch,
                                                                                     quadratic, want):
-    """What ``SfmConfig.sequential_overlap`` and ``sequential_quadratic`` say a frame is matched with, every
-    distance matched (``sequential_min_verified_share`` 0, as COLMAP): with the quadratic neighbours (the default)
-    frames i + 1, 2, 4, ... 2^(N-1), which replace the next N in COLMAP 4's pairing (they were added to them
-    before); without, the next N. The list is in name order, whatever order the frames were imported in, and holds
-    no other pair (loop detection off)."""
+    """What ``SfmConfig.sequential_overlap`` and ``sequential_quadratic`` say a frame is matched with: with the
+    quadratic neighbours (the default) frames i + 1, 2, 4, ... 2^(N-1), which replace the next N in COLMAP 4's
+    pairing (they were added to them before); without, the next N. The list is in name order, whatever order the
+    frames were imported in, and holds no other pair (loop detection off)."""
     from curate.sfm import matching
     db = tmp_path / "database.db"
     names = _frames_db(db, 40)
     listed: list = []
     monkeypatch.setattr(matching, "processes", lambda cfg, n: 2)   # the list route, not COLMAP's whole matcher
     monkeypatch.setattr(matching, "match_list", lambda cfg, db, pairs, *a, **k: listed.extend(pairs) or {})
-    cfg = small_cfg(sequential_overlap=6, sequential_quadratic=quadratic, loop_detection=False,
-                    sequential_min_verified_share=0)
+    cfg = small_cfg(sequential_overlap=6, sequential_quadratic=quadratic, loop_detection=False)
     matching.match(cfg, db, "sequential")
     index = {n: i for i, n in enumerate(names)}
     got = {}
@@ -563,45 +561,6 @@ def test_sequential_matching_pairs_each_frame_with_the_neighbours_its_options_na
     assert len(listed) == len(set(listed)) and set(got) == set(range(39))
     for i, steps in got.items():
         assert sorted(steps) == [s for s in want if i + s < 40], (i, steps)
-
-
-@pytest.mark.parametrize("share, matched", [
-    ({1: 1.0, 2: 1.0, 4: 0.9, 8: 0.5, 16: 0.05, 32: 1.0, 64: 1.0}, [1, 2, 4, 8, 16]),     # a walk: stops after 16
-    ({1: 1.0, 2: 0.8, 4: 0.3, 8: 0.06, 16: 1.0, 32: 1.0, 64: 1.0}, [1, 2, 4, 8]),          # at a third of the rate
-    ({1: 1.0, 2: 1.0, 4: 1.0, 8: 1.0, 16: 1.0, 32: 0.85, 64: 0.6}, [1, 2, 4, 8, 16, 32, 64]),   # around an object
-    ({1: 0.0, 2: 0.0, 4: 0.0, 8: 0.0, 16: 0.0, 32: 0.0, 64: 0.0}, [1, 2, 4, 8])])
-def test_sequential_neighbours_past_eight_frames_are_matched_while_the_distance_before_verified(
-        tmp_path, monkeypatch, share, matched):
-    """The neighbours up to ``sequential_match_within`` (8) frames apart are matched at once; each further distance
-    (16, 32, 64) only while at least ``sequential_min_verified_share`` (10%) of the pairs at the distance before
-    verified, in one list each; a distance not matched is in the stage's record as skipped with its pairs, and the
-    run folder's ``sequential_pairs.txt`` lists every pair matched, each once. Verification is faked by distance."""
-    from curate.sfm import matching
-    db = tmp_path / "database.db"
-    names = _frames_db(db, 100)
-    index = {n: i for i, n in enumerate(names)}
-    rounds: list = []
-
-    def fake_list(cfg, db, pairs, *a, **k):
-        rounds.append(sorted({index[b] - index[a] for a, b in pairs}))
-        return {"pairs": len(pairs), "new_pairs": len(pairs), "verified": 0, "unlisted": 0, "processes": 2,
-                "guided_pairs": 0, "seconds": 0.0}
-
-    def fake_verified(db, by, dists, min_num_matches):
-        return {d: int(share[d] * len(by[d])) for d in dists}
-
-    monkeypatch.setattr(matching, "match_list", fake_list)
-    monkeypatch.setattr(matching, "_verified", fake_verified)
-    stats: dict = {}
-    matching.match(small_cfg(loop_detection=False), db, "sequential", None, stats)
-    assert rounds[0] == [1, 2, 4, 8] and rounds[1:] == [[d] for d in matched[4:]], rounds
-    rec = {r["distance"]: r for r in stats["pairs"]["by_distance"]}
-    assert sorted(rec) == [1, 2, 4, 8, 16, 32, 64]
-    assert [d for d in rec if not rec[d].get("skipped")] == matched
-    assert all(rec[d]["pairs"] == 100 - d for d in rec)
-    listed = [tuple(line.split()) for line in (tmp_path / "sequential_pairs.txt").read_text().splitlines()]
-    assert len(listed) == len(set(listed)) == sum(100 - d for d in matched)
-    assert {index[b] - index[a] for a, b in listed} == set(matched)
 
 
 @pytest.mark.slow

@@ -127,16 +127,8 @@ class SfmConfig:
     sequential_quadratic: bool = True
     """Sequential: the neighbours at i + 2^k rather than the next ``sequential_overlap`` frames. office.mp4 at half
     its frame rate split more with the next 8 frames (160 of 187 in its largest model, against 175 with these);
-    docs/investigations/sfm.md#sequential-neighbours."""
-    sequential_match_within: int = 8
-    """Sequential: neighbours up to this many frames apart are all matched; the further ones
-    (``sequential_min_verified_share``) one distance at a time."""
-    sequential_min_verified_share: float = 0.1
-    """Sequential: the neighbours past ``sequential_match_within`` frames are matched one distance at a time
-    (16, then 32, ...) while at least this share of the pairs at the distance before verified. Along a walk they
-    stop after 8-32 frames (office.mp4: 20% of the pairs 16 frames apart verified, 5% at 32, 4 of 665 further);
-    around an object every distance is matched (the rendered orbit: 57-100%). 0: every neighbour matched, as COLMAP
-    does (docs/investigations/sfm.md#sequential-neighbours)."""
+    along a walk the far ones seldom verify, and skipping them saved no time
+    (docs/investigations/sfm.md#sequential-neighbours)."""
     loop_detection: bool = True
     """Sequential: find loops with visual words learned from the capture itself (office: without it the walk
     splits into 6 models at fast turns)."""
@@ -290,8 +282,6 @@ class SfmConfig:
                              f"three), got {self.register_min_inliers}")
         if not self.direct_ba_max_fill >= 0:
             raise ValueError("SfmConfig.direct_ba_max_fill must be >= 0")
-        if self.sequential_match_within < 1 or not 0 <= self.sequential_min_verified_share <= 1:
-            raise ValueError("SfmConfig.sequential_match_within must be >= 1, sequential_min_verified_share in [0, 1]")
         if self.guided_only_below_inliers < 0 or self.guided_selective_above_features < 0:
             raise ValueError("SfmConfig.guided_only_below_inliers and guided_selective_above_features must be >= 0")
         if self.retrieval_num_images < 1 or self.retrieval_rematch_num_images < 1:

@@ -77,7 +77,8 @@ def match(cfg: SfmConfig, db: Path, matcher: str, takes: dict[str, list[str]] | 
         po.overlap = cfg.sequential_overlap
         po.quadratic_overlap = cfg.sequential_quadratic
         po.loop_detection = False
-        info = _sequential(cfg, db, po, matcher, guided_below)
+        info = generated(cfg, db, pycolmap.SequentialPairGenerator, po, matcher, pycolmap.match_sequential,
+                         guided_below)
         index = None
         if cfg.loop_detection:   # the capture's own words: offline, and the same pairs every run
             index = _index(cfg, db)
@@ -192,63 +193,6 @@ def generated(cfg: SfmConfig, db: Path, generator, options, matcher: str, whole,
     return match_list(cfg, db, pairs, f"{matcher}_pairs.txt", matcher, guided_below)
 
 
-def _sequential(cfg: SfmConfig, db: Path, options, matcher: str, guided_below: int = 0) -> dict:
-    """Sequential matching of COLMAP's neighbours (``options``: frames i + 1, 2, 4, ... in name order) by their
-    distance: every pair up to ``cfg.sequential_match_within`` frames apart at once, then each further distance in
-    turn while at least ``cfg.sequential_min_verified_share`` of the pairs at the distance before verified. Along a
-    walk the far neighbours seldom see the same scene (office.mp4: 3 of the 665 pairs 64 frames apart or more
-    verified) and a revisit is loop detection's; around an object most do, and all are matched. A pair's rows do
-    not depend on the others': the pairs matched hold what matching all of them writes. Returns
-    :func:`match_list`'s record, summed, with ``by_distance`` (pairs, verified; ``skipped`` where not matched). Names
-    with spaces: COLMAP's own matcher, every pair (:func:`generated`)."""
-    pycolmap = load_pycolmap()
-    with pycolmap.Database.open(db) as dbh:
-        name = {im.image_id: im.name for im in dbh.read_all_images()}
-        pairs = [(name[a], name[b]) for a, b in pycolmap.SequentialPairGenerator(options, dbh).all_pairs()]
-    if cfg.sequential_min_verified_share <= 0 or any(c.isspace() for n in name.values() for c in n):
-        return generated(cfg, db, pycolmap.SequentialPairGenerator, options, matcher, pycolmap.match_sequential,
-                         guided_below)
-    order = {n: i for i, n in enumerate(sorted(name.values()))}   # COLMAP's: by name
-    by: dict[int, list] = {}
-    for a, b in pairs:
-        by.setdefault(abs(order[b] - order[a]), []).append((a, b))
-    near = [p for p in pairs if abs(order[p[1]] - order[p[0]]) <= cfg.sequential_match_within]
-    far = sorted(d for d in by if d > cfg.sequential_match_within)
-    rounds = [(near, [d for d in by if d <= cfg.sequential_match_within])] + [(by[d], [d]) for d in far]
-    info: dict = {"pairs": 0, "new_pairs": 0, "verified": 0, "unlisted": 0, "processes": 0, "guided_pairs": 0,
-                  "seconds": 0.0, "by_distance": []}
-    done: list = []
-    for k, (todo, dists) in enumerate(rounds):
-        last = info["by_distance"][-1] if info["by_distance"] else None
-        if k >= 1 and last is not None and last["verified"] < cfg.sequential_min_verified_share * last["pairs"]:
-            info["by_distance"] += [{"distance": d, "pairs": len(by[d]), "skipped": True} for d in far[k - 1:]]
-            break
-        # a further distance: pairs of one cost, most failing fast, in one piece per process (a piece costs
-        # about 2.5 CPU s to start: a process, a copy of the database)
-        r = match_list(cfg, db, todo, "sequential_pairs.txt", matcher, guided_below,
-                       PIECES_PER_PROCESS if k == 0 else 1)
-        done += todo
-        for key in ("pairs", "new_pairs", "verified", "unlisted", "guided_pairs", "seconds"):
-            info[key] += r[key]
-        info["processes"] = max(info["processes"], r["processes"])
-        info["pieces_cpu_s"] = info.get("pieces_cpu_s", []) + r.get("pieces_cpu_s", [])
-        counts = _verified(db, by, dists, cfg.min_num_matches)
-        info["by_distance"] += [{"distance": d, "pairs": len(by[d]), "verified": counts[d]} for d in sorted(dists)]
-    (db.parent / "sequential_pairs.txt").write_text("".join(f"{a} {b}\n" for a, b in done))
-    info["seconds"] = round(info["seconds"], 2)
-    return info
-
-
-def _verified(db: Path, by: dict, dists, min_num_matches: int) -> dict[int, int]:
-    """{distance: pairs of ``by[distance]`` with at least ``min_num_matches`` verified matches in ``db``}."""
-    pycolmap = load_pycolmap()
-    with pycolmap.Database.open(db) as dbh:
-        ids = {im.name: im.image_id for im in dbh.read_all_images()}
-        return {d: sum(1 for a, b in by[d] if dbh.exists_two_view_geometry(ids[a], ids[b])
-                       and len(dbh.read_two_view_geometry(ids[a], ids[b]).inlier_matches) >= min_num_matches)
-                for d in dists}
-
-
 def processes(cfg: SfmConfig, n_pairs: int) -> int:
     """How many processes match ``n_pairs`` pairs (:data:`MATCHING_PROCESSES`, :data:`MIN_PAIRS_PER_PROCESS`);
     1 with CUDA, where COLMAP matches on the GPU."""
@@ -258,8 +202,7 @@ def processes(cfg: SfmConfig, n_pairs: int) -> int:
     return max(1, min(int(want), n_pairs // MIN_PAIRS_PER_PROCESS))
 
 
-def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, guided_below: int = 0,
-               pieces_per_process: int = PIECES_PER_PROCESS) -> dict:
+def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, guided_below: int = 0) -> dict:
     """Match and verify ``pairs`` ((name, name), each matched in the order given) not matched yet in ``db``:
     COLMAP's ``match_image_pairs`` on one thread, in :func:`processes` processes at once, each on a piece of the
     list and its own copy of the database (``python -m curate.sfm.matching``), whose new matches and two-view
@@ -293,8 +236,7 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, gu
         if n_proc == 1:
             n_guided = _match_file(db, path, cfg.seed, cfg.min_num_matches, guided(cfg, matcher), guided_below)
         else:
-            pieces_cpu, n_guided = _match_in_pieces(cfg, db, listed, n_proc, matcher, guided_below,
-                                                    pieces_per_process)
+            pieces_cpu, n_guided = _match_in_pieces(cfg, db, listed, n_proc, matcher, guided_below)
     info = {"pairs": len(uniq), "new_pairs": len(new),
             "verified": pair_counts(db, cfg.min_num_matches)[1] - before, "unlisted": len(new) - len(listed),
             "processes": n_proc, "guided_pairs": n_guided, "seconds": round(time.perf_counter() - t0, 2),
@@ -305,9 +247,8 @@ def match_list(cfg: SfmConfig, db: Path, pairs, list_name: str, matcher: str, gu
 
 
 def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher: str,
-                     guided_below: int = 0,
-                     pieces_per_process: int = PIECES_PER_PROCESS) -> tuple[list[float | None], int]:
-    """``pairs`` cut into ``n_proc`` x ``pieces_per_process`` pieces in their order, each matched by a process of
+                     guided_below: int = 0) -> tuple[list[float | None], int]:
+    """``pairs`` cut into ``n_proc`` x :data:`PIECES_PER_PROCESS` pieces in their order, each matched by a process of
     its own (``python -m curate.sfm.matching``, one thread) on a copy of ``db``, ``n_proc`` at a time; each piece's
     rows are copied into ``db`` as it ends (rows by pair id: the order they end in changes nothing) and its copy
     removed. COLMAP's log of each piece goes to COLMAP's log here. Returns (each piece's CPU seconds, in the order
@@ -317,7 +258,7 @@ def _match_in_pieces(cfg: SfmConfig, db: Path, pairs: list, n_proc: int, matcher
     import sys
 
     pycolmap = load_pycolmap()
-    k = min(len(pairs), n_proc * pieces_per_process)
+    k = min(len(pairs), n_proc * PIECES_PER_PROCESS)
     pieces = [pairs[len(pairs) * i // k: len(pairs) * (i + 1) // k] for i in range(k)]
     code = str(Path(__file__).resolve().parents[2])   # this curate, whatever the caller's path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([code, *filter(None, [os.environ.get("PYTHONPATH")])]),

@@ -134,11 +134,9 @@ def triangulate_known_poses(cfg: SfmConfig, cams: Cameras, originals: list[str],
             t = time.perf_counter()
             # one thread, COLMAP's own matcher, as before the pieces (the pieces were not measured on this path);
             # guided matching only when asked (its "auto" is for SfM, where a sequence that splits loses frames:
-            # with known poses nothing can split); every sequential neighbour, as before SfM's distance rule (the
-            # rendered room's far neighbours verify at 9-36% up to 128 frames: its points, and the figures resting
-            # on them, are those of every pair)
-            match(replace(cfg, num_threads=1, guided_matching="on" if cfg.guided_matching == "on" else "off",
-                          sequential_min_verified_share=0), db, matcher)
+            # with known poses nothing can split)
+            match(replace(cfg, num_threads=1, guided_matching="on" if cfg.guided_matching == "on" else "off"),
+                  db, matcher)
             stats["match_seconds"] = round(time.perf_counter() - t, 2)
             stats["n_pairs_verified"] = pair_counts(db, cfg.min_num_matches)[1]
             sub = cams[kept]
