@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def _cams(models):
@@ -52,7 +53,7 @@ def map_once(run: Path, overrides: dict) -> dict:
     tmp = Path(tempfile.mkdtemp())
     try:
         db = tmp / "d.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         n = len(list((sfm / "images").iterdir()))
         cfg = SfmConfig(progress=False, **overrides)
         pycolmap.set_random_seed(cfg.seed)

@@ -36,6 +36,7 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def refinements_from_log(log: Path) -> list[list[float]]:
@@ -112,7 +113,7 @@ def main(argv: list[str]) -> dict:
     cfg = SfmConfig(progress=False, **sfm_config_overrides([a for a in pairs if a.split("=", 1)[0] in fields]))
     tmp = Path(tempfile.mkdtemp())
     db = tmp / "d.db"
-    shutil.copy2(sfm / "database.db", db)
+    copy_database(sfm / "database.db", db)
     names = sorted(p.name for p in (sfm / "images").iterdir())[:first]
 
     orig = C.incremental_options

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def geometry_hash(db: Path) -> tuple[str, dict]:
@@ -132,7 +133,7 @@ def main(argv=None) -> list[dict]:
                 runs = []
                 for k in range(a.repeat):
                     db = tmp / f"match{k}.db"
-                    shutil.copy2(db0, db)
+                    copy_database(db0, db)
                     strip_matches(db)
                     kept = kept_records(sfm)
                     t = time.perf_counter()
@@ -147,7 +148,7 @@ def main(argv=None) -> list[dict]:
                 runs = []
                 for k in range(a.repeat):
                     db = tmp / f"map{k}.db"
-                    shutil.copy2(db0, db)
+                    copy_database(db0, db)
                     stats: dict = {}
                     pycolmap.set_random_seed(cfg.seed)
                     t = time.perf_counter()

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import json
 import resource
-import shutil
 import sqlite3
 import sys
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 
 def main(argv=None) -> dict:
@@ -42,7 +42,7 @@ def main(argv=None) -> dict:
         loop |= {tuple(sorted(p)) for p in matching.loop_pairs(cfg, load(sfm / "visual_words.npz"))[1]}
     drop = [p for p in seq if abs(idx[p[0]] - idx[p[1]]) >= min_off and tuple(sorted(p)) not in loop]
     db = work / "cost.db"
-    shutil.copy2(sfm / "database.db", db)
+    copy_database(sfm / "database.db", db)
     with sqlite3.connect(db) as con:
         con.execute("DELETE FROM matches")
         con.execute("DELETE FROM two_view_geometries")
@@ -55,7 +55,7 @@ def main(argv=None) -> dict:
            "match_wall_s": round(time.perf_counter() - t, 1),
            "match_cpu_s": round(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime, 1)}
     db2 = work / "without.db"
-    shutil.copy2(sfm / "database.db", db2)
+    copy_database(sfm / "database.db", db2)
     with pycolmap.Database.open(db2) as d:
         ids = {im.name: im.image_id for im in d.read_all_images()}
         out["verified"] = sum(d.exists_two_view_geometry(ids[a], ids[b]) and
@@ -76,7 +76,7 @@ def main(argv=None) -> dict:
         tj = json.loads(truth[0].read_text())
         best = max(models.values(), key=lambda r: r.num_reg_images())
         out["truth_without"] = summary(truth_errors(best, recs, tj, truth[1]).values())
-        shutil.copy2(sfm / "database.db", work / "with.db")
+        copy_database(sfm / "database.db", work / "with.db")
         (work / "sparse_with").mkdir(exist_ok=True)
         with_ = map_incremental(cfg, work / "with.db", sfm / "images", work / "sparse_with", len(ids), False)
         out["models_with"] = sorted((int(r.num_reg_images()) for r in with_.values()), reverse=True)

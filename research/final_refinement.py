@@ -14,6 +14,7 @@ import json
 import shutil
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 
 def map_once(run: Path, work: Path, repeat: bool) -> tuple[dict, object]:
@@ -25,7 +26,7 @@ def map_once(run: Path, work: Path, repeat: bool) -> tuple[dict, object]:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     db = work / "database.db"
-    shutil.copy(sfm / "database.db", db)
+    copy_database(sfm / "database.db", db)
     n = sum(1 for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept")
     cfg = SfmConfig()
     opts = incremental_options(cfg, n, expected_observations(db, cfg.min_num_matches))

@@ -17,6 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 
 def main(argv: list[str]) -> dict:
@@ -39,7 +40,7 @@ def main(argv: list[str]) -> dict:
         "photos": int(best.num_reg_images()), "jumps": jumps_along(best, kept),
         **pose_record(cameras_from_reconstruction(best, warn=False)[0], truth)}}
     tmp = Path(tempfile.mkdtemp())
-    shutil.copy2(sfm / "database.db", tmp / "g.db")
+    copy_database(sfm / "database.db", tmp / "g.db")
     t = time.perf_counter()
     with colmap_log(tmp / "colmap.log"):
         glob = without_contained(map_global(SfmConfig(progress=False), tmp / "g.db", sfm / "images", tmp / "g"))

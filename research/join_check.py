@@ -27,6 +27,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
 MAX_IMAGE_ID = 2147483647   # COLMAP's pair_id = id1 * MAX_IMAGE_ID + id2
@@ -51,7 +52,7 @@ def make_capture(folder: Path, walk2: tuple[int, int]) -> None:
 
 def without_photo(db: Path, out: Path, image_id: int) -> Path:
     """A copy of ``db`` without the matches and two-view geometries of one photo."""
-    shutil.copy2(db, out)
+    copy_database(db, out)
     con = sqlite3.connect(out)
     pairs = [p for (p,) in con.execute("select pair_id from two_view_geometries")
              if image_id in (p // MAX_IMAGE_ID, p % MAX_IMAGE_ID)]
@@ -108,13 +109,13 @@ def main(argv=None) -> None:
     for d in [-1, *range(start, min(stop, len(ids)), step)]:
         shutil.rmtree(var, ignore_errors=True)
         var.mkdir(parents=True)
-        db = without_photo(sfm / "database.db", var / "g.db", ids[d]) if d >= 0 else shutil.copy2(
+        db = without_photo(sfm / "database.db", var / "g.db", ids[d]) if d >= 0 else copy_database(
             sfm / "database.db", var / "g.db")
         inc = map_incremental(cfg, Path(db), sfm / "images", var / "inc", len(recs), False)
-        glob = map_global(cfg, Path(shutil.copy2(db, var / "g2.db")), sfm / "images", var / "glob")
+        glob = map_global(cfg, Path(copy_database(db, var / "g2.db")), sfm / "images", var / "glob")
         gbest = max(glob.values(), key=lambda r: r.num_reg_images())
         stats: dict = {}
-        models = map_capture(cfg, Path(shutil.copy2(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
+        models = map_capture(cfg, Path(copy_database(db, var / "a.db")), sfm / "images", var / "auto", len(recs),
                                stats)
         g = stats.get("mappers_tried", {}).get("global", {})
         seams = []          # per incremental part: the global model's points it shares with the rest

@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def verify_part(rec, names: list[str], max_rot_deg: float, trusted: set[str]) -> dict:
@@ -118,9 +118,9 @@ def measure(run: Path, truth: Path | None, office: Path | None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         t0 = time.perf_counter()
-        inc = map_incremental(cfg, Path(shutil.copy2(sfm / "database.db", t / "i.db")), sfm / "images", t / "inc", n,
+        inc = map_incremental(cfg, Path(copy_database(sfm / "database.db", t / "i.db")), sfm / "images", t / "inc", n,
                               False)
-        glob = map_global(cfg, Path(shutil.copy2(sfm / "database.db", t / "g.db")), sfm / "images", t / "glob")
+        glob = map_global(cfg, Path(copy_database(sfm / "database.db", t / "g.db")), sfm / "images", t / "glob")
         seconds = time.perf_counter() - t0
     best = max(glob.values(), key=lambda r: r.num_reg_images())
     placed = {im.name for im in best.images.values() if im.has_pose}

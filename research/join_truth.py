@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 RIGHT_MAX_OVER_5 = 0.05
 """A model is right when at most this share of its frames is over 5 deg from the truth."""
@@ -70,7 +70,7 @@ def one(run: Path, truth_json: Path, office: Path) -> dict:
     cfg = SfmConfig(progress=False)
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "database.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         recon.map_incremental, recon.map_global = inc, glob
         stats: dict = {}
         t = time.perf_counter()

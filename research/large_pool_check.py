@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def main(argv=None) -> dict:
@@ -67,7 +67,7 @@ def main(argv=None) -> dict:
     sub = names[::k]                                                      # matching pairs frames 2^j apart
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "d.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         c0, t = time.process_time(), time.perf_counter()
         with colmap_log(Path(tmp) / "colmap.log"):
             parts = map_subset(db, sfm / "images", Path(tmp) / "m", sub)

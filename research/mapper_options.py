@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def parse_variant(s: str) -> tuple[str, dict]:
@@ -76,7 +76,7 @@ def main(argv=None) -> list[dict]:
             apply(opts, kv)
             with tempfile.TemporaryDirectory() as tmp:
                 db = Path(tmp) / "db.db"
-                shutil.copy2(sfm / "database.db", db)
+                copy_database(sfm / "database.db", db)
                 pycolmap.set_random_seed(cfg.seed)
                 t = time.perf_counter()
                 models = pycolmap.incremental_mapping(db, sfm / "images", Path(tmp) / "out", options=opts)

@@ -16,6 +16,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 STEPS = ("find_next_images", "register_next_image", "triangulate_image", "iterative_local_refinement",
          "iterative_global_refinement", "filter_frames")
@@ -64,7 +65,7 @@ def main(argv: list[str]) -> dict:
     plain_mapper = pycolmap.IncrementalMapper
     try:
         db = tmp / "d.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         opts = C.incremental_options(cfg, pool)
         opts.image_names = sorted(p.name for p in (sfm / "images").iterdir())[:pool]
         pycolmap.IncrementalMapper = Timed

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -138,12 +138,12 @@ def main(argv=None):
         cfg = SfmConfig(progress=False, num_threads=1)
         if a.parts:
             db = tmp / "inc.db"
-            shutil.copy2(sfm / "database.db", db)
+            copy_database(sfm / "database.db", db)
             for k, r in map_incremental(cfg, db, sfm / "images", tmp / "inc", len(recs), False).items():
                 models[f"part{k}"] = r
         if a.glob:
             db = tmp / "g.db"
-            shutil.copy2(sfm / "database.db", db)
+            copy_database(sfm / "database.db", db)
             g = map_global(cfg, db, sfm / "images", tmp / "g")
             models["global"] = max(g.values(), key=lambda r: r.num_reg_images())
         for name, rec in models.items():

@@ -13,6 +13,7 @@ import json
 import shutil
 import time
 from pathlib import Path
+from research.local_ba_stop import copy_database
 
 
 def neighbour_rank(kept: list, db: Path, reach: int, entry: bool = False):
@@ -105,7 +106,7 @@ def main(argv=None) -> dict:
         shutil.rmtree(w, ignore_errors=True)
         w.mkdir(parents=True)
         db = w / "database.db"
-        shutil.copy(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         opts = incremental_options(cfg, len(kept), expected_observations(db, cfg.min_num_matches))
         if v in ("ratio", "count"):   # COLMAP's other next-image choices, in COLMAP's order otherwise
             import pycolmap

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:
@@ -109,7 +110,6 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | 
     """A copy of ``db`` in ``tmp`` matched again by curate's matching step with SfmConfig
     ``overrides`` (FIELD=VALUE); the matcher and seconds go into ``out``. ``takes`` ({take: image
     names}, from images.json) lets the step match across takes, as ``curate sfm`` does."""
-    import shutil
 
     import pycolmap
 
@@ -118,7 +118,7 @@ def rematch(db: Path, tmp: Path, overrides: list[str], out: dict, takes: dict | 
     over = sfm_config_overrides(overrides)
     cfg = SfmConfig(**over)
     new = tmp / "rematched.db"
-    shutil.copy2(db, new)
+    copy_database(db, new)
     h = pycolmap.Database.open(new)
     h.clear_matches()
     h.clear_two_view_geometries()
@@ -207,9 +207,8 @@ def main(argv=None) -> dict:
         kept: dict = {}
         for kind in a.mappers.split(","):
             # each mapper on its own copy of the database (mappers write to it)
-            import shutil
             dbk = Path(tmp) / f"{kind}.db"
-            shutil.copy2(db, dbk)
+            copy_database(db, dbk)
             models, secs = map_with(kind, dbk, sfm / "images", Path(tmp) / kind)
             sizes = sorted((int(r.num_reg_images()) for r in models.values()), reverse=True)
             row = {"model_sizes": sizes, "registered_fraction": round(sizes[0] / n_kept, 4) if sizes else 0.0,

@@ -46,6 +46,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from research.local_ba_stop import copy_database
 
 FPS = 10.0
 EXPOSURE_S = 1 / 120
@@ -460,7 +461,6 @@ def map_hierarchical(cfg, db: Path, images: Path, out: Path, cluster: int = 500)
 def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> int:
     """Map the matches of ``RUN/sfm/database.db`` (a copy) again with ``kind`` ('incremental', 'global',
     'hierarchical', 'auto': curate's map_capture); sizes, seconds and pose errors go to ``out_json``."""
-    import shutil
     import tempfile
 
     import pycolmap
@@ -474,7 +474,7 @@ def map_child(run: str, kind: str, out_json: str, truth: str, capture: str) -> i
     rec: dict = {"mapper": kind, "n_kept": n_kept}
     with tempfile.TemporaryDirectory(dir=str(Path(run).parent)) as tmp:
         db = Path(tmp) / "database.db"
-        shutil.copy2(sfm / "database.db", db)
+        copy_database(sfm / "database.db", db)
         pycolmap.set_random_seed(cfg.seed)
         t0 = _clock()
         with colmap_log(Path(tmp) / "colmap.log"):

@@ -1,0 +1,36 @@
+"""research.local_ba_stop.copy_database: a run's database copied with what its write-ahead log still holds."""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+
+from research.local_ba_stop import copy_database
+
+
+def test_a_copy_holds_the_rows_the_log_has_not_yet_written_back(tmp_path):
+    """A database in WAL mode whose tables and rows are only in its log (a connection still open, nothing
+    checkpointed): a file copy loses them, copy_database keeps them and returns where it wrote."""
+    src = tmp_path / "database.db"
+    con = sqlite3.connect(src)
+    con.execute("PRAGMA journal_mode=WAL")
+    con.execute("PRAGMA wal_autocheckpoint=0")
+    con.execute("CREATE TABLE matches (pair_id INTEGER PRIMARY KEY, rows INTEGER)")
+    con.commit()
+    con.executemany("INSERT INTO matches VALUES (?, ?)", [(i, 10 * i) for i in range(50)])
+    con.commit()                              # in the log only, while con is open
+    assert (tmp_path / "database.db-wal").stat().st_size > 0
+
+    plain = tmp_path / "plain.db"
+    shutil.copy2(src, plain)
+    try:
+        lost = sqlite3.connect(plain).execute("SELECT count(*) FROM matches").fetchone()[0] == 0
+    except sqlite3.OperationalError:          # no such table: the file holds none of it
+        lost = True
+    assert lost
+
+    dst = tmp_path / "copy.db"
+    assert copy_database(src, dst) == dst
+    got = sqlite3.connect(dst).execute("SELECT count(*), sum(rows) FROM matches").fetchone()
+    assert got == (50, 10 * sum(range(50)))
+    con.close()
