@@ -23,6 +23,8 @@ stage times.
 
     python3 -m research.flip make --office ../shared/data/office --fox ../shared/data/fox --out /tmp/flip
     python3 -m research.flip run /tmp/flip --cases half cut --runs 5 --log /tmp/flip/after.jsonl
+    python3 -m research.flip run /tmp/flip --cases half --runs 1 --label lin8 --log L \
+        --set sequential_quadratic=false sequential_overlap=8       # any SfmConfig field, as JSON
     python3 -m research.flip table /tmp/flip/before.jsonl /tmp/flip/after.jsonl
 """
 

@@ -6,7 +6,7 @@ the truth's relative pose, and the run's matches mapped again without the loop p
         --drop 333-347:0-299 --show 336-348 --work W
     python -m research.loop_pair_probe RUN CASE.truth.json --office ../shared/data/office \\
         --drop-far-sequential 64 --work W   # the sequential neighbours 64 frames apart or more that loop detection
-                                            # did not list, left out (SfmConfig.sequential_min_verified_share)
+                                            # did not list, left out (docs/investigations/sfm.md#sequential-neighbours)
 """
 
 from __future__ import annotations
