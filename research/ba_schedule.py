@@ -36,7 +36,7 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def refinements_from_log(log: Path) -> list[list[float]]:

@@ -16,7 +16,7 @@ import sqlite3
 import sys
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def main(argv=None) -> dict:

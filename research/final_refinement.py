@@ -14,7 +14,7 @@ import json
 import shutil
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def map_once(run: Path, work: Path, repeat: bool) -> tuple[dict, object]:

@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def main(argv: list[str]) -> dict:

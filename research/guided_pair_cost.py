@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     ap.add_argument("--below", type=int, default=0, help="also auto's two passes, guided under this many (0: not run)")
     a = ap.parse_args(argv)
     from curate.sfm.matching import _match_file
-    from research.local_ba_stop import copy_database
+    from curate.sfm.matching import copy_database
     lines = a.pairs.read_text().splitlines()
     sample = lines[::max(1, len(lines) // a.n)][:a.n]
     a.out.mkdir(parents=True, exist_ok=True)

@@ -27,7 +27,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data_samples" / "room_walk"
 MAX_IMAGE_ID = 2147483647   # COLMAP's pair_id = id1 * MAX_IMAGE_ID + id2

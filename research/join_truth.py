@@ -25,7 +25,7 @@ import json
 import tempfile
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 RIGHT_MAX_OVER_5 = 0.05
 """A model is right when at most this share of its frames is over 5 deg from the truth."""

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def main(argv=None) -> dict:

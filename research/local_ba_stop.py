@@ -16,24 +16,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sqlite3
 import time
 from pathlib import Path
 
-
-def copy_database(src: Path, dst: Path) -> Path:
-    """``src`` copied to ``dst`` through SQLite's backup (its write-ahead log included, which a file copy leaves
-    behind): ``dst``."""
-    src, dst = Path(src), Path(dst)
-    for f in (dst, dst.with_name(dst.name + "-wal"), dst.with_name(dst.name + "-shm")):   # no stale log either
-        f.unlink(missing_ok=True)
-    a, b = sqlite3.connect(f"file:{src}?mode=ro", uri=True), sqlite3.connect(dst)
-    try:
-        a.backup(b)
-    finally:
-        b.close()
-        a.close()
-    return dst
+from curate.sfm.matching import copy_database
 
 
 def map_variant(run: Path, work: Path, sets: dict) -> tuple[dict, object]:

@@ -31,7 +31,7 @@ def main(argv=None) -> dict:
     from curate.sfm.reconstruction import map_incremental
     from research.datasets import load_office
     from research.join_shared import truth_errors
-    from research.local_ba_stop import copy_database
+    from curate.sfm.matching import copy_database
     from research.takes import truth_of
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)

@@ -16,7 +16,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 STEPS = ("find_next_images", "register_next_image", "triangulate_image", "iterative_local_refinement",
          "iterative_global_refinement", "filter_frames")

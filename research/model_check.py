@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

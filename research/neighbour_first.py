@@ -13,7 +13,7 @@ import json
 import shutil
 import time
 from pathlib import Path
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def neighbour_rank(kept: list, db: Path, reach: int, entry: bool = False):

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def map_with(kind: str, db: Path, images: Path, out: Path, seed: int = 0) -> tuple[dict, float]:

@@ -311,17 +311,26 @@ def _wait_any(running: dict) -> int:
         time.sleep(0.05)
 
 
+def copy_database(src: Path, dst: Path) -> Path:
+    """``src`` (a COLMAP database) copied to ``dst`` through SQLite's backup, with what its write-ahead log holds
+    and a file copy would leave behind; a log beside ``dst`` from an earlier copy is removed first. Returns ``dst``."""
+    src, dst = Path(src), Path(dst)
+    for f in (dst, dst.with_name(dst.name + "-wal"), dst.with_name(dst.name + "-shm")):
+        f.unlink(missing_ok=True)
+    a, b = sqlite3.connect(f"file:{src}?mode=ro", uri=True), sqlite3.connect(dst)
+    try:
+        a.backup(b)
+    finally:
+        b.close()
+        a.close()
+    return dst
+
+
 def _match_piece(job: dict) -> None:
     """One piece of :func:`_match_in_pieces` (in its own process): ``job["db"]`` copied to ``job["copy"]``, the
     pairs of ``job["list"]`` matched and verified there on one thread, COLMAP's log beside the copy (.log)."""
     from curate.sfm.native import colmap_log
-    src = sqlite3.connect(f"file:{job['db']}?mode=ro", uri=True)
-    dst = sqlite3.connect(job["copy"])
-    try:
-        src.backup(dst)
-    finally:
-        dst.close()
-        src.close()
+    copy_database(Path(job["db"]), Path(job["copy"]))
     with colmap_log(Path(job["copy"]).with_suffix(".log")):
         n = _match_file(Path(job["copy"]), Path(job["list"]), job["seed"], job["min_num_matches"], job["guided"],
                         job["guided_below"])

@@ -46,7 +46,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 FPS = 10.0
 EXPOSURE_S = 1 / 120

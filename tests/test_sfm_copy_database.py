@@ -1,11 +1,11 @@
-"""research.local_ba_stop.copy_database: a run's database copied with what its write-ahead log still holds."""
+"""curate.sfm.matching.copy_database: a run's database copied with what its write-ahead log still holds."""
 
 from __future__ import annotations
 
 import shutil
 import sqlite3
 
-from research.local_ba_stop import copy_database
+from curate.sfm.matching import copy_database
 
 
 def test_a_copy_holds_the_rows_the_log_has_not_yet_written_back(tmp_path):
