@@ -127,7 +127,7 @@ class SfmConfig:
     sequential_quadratic: bool = True
     """Sequential: the neighbours at i + 2^k rather than the next ``sequential_overlap`` frames. office.mp4 at half
     its frame rate split more with the next 8 frames (160 of 187 in its largest model, against 175 with these);
-    along a walk the far ones seldom verify, and skipping them saved no time
+    along a walk the far ones seldom verify, and skipping them showed no time saved
     (docs/investigations/sfm.md#sequential-neighbours)."""
     loop_detection: bool = True
     """Sequential: find loops with visual words learned from the capture itself (office: without it the walk
