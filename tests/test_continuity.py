@@ -295,3 +295,38 @@ def test_steps_their_matches_refute_are_named_in_a_warning():
     w = step_warning({"parts": other, "takes": [{"take": "frames", "kind": "photos"}]})
     assert w.startswith("in the other model of 40 photos, frames (in name order): 1 of 39 steps "), w
     assert step_warning({"parts": other[:1]}) is None and step_warning({}) is None
+
+
+def test_a_frame_only_its_refuted_steps_touch_is_blamed_and_a_fold_or_a_wrong_stretch_is_not():
+    """``lone_refuted``: a frame is blamed when every checked step it has is refuted and the frame at the other end
+    of each has a step that fits (a frame turned off its neighbours; a frame whose next frames are not registered,
+    half of office.mp4's frame rate at 17.4 s, 78 deg off); a fold (one refuted step between two stretches that
+    fit) and a stretch of several refuted steps cannot say which side is wrong: nothing is blamed."""
+    from curate.sfm.continuity import STEP_MIN_SHARE, lone_refuted
+
+    def walk(fits):                        # frames f0, f1, ...: step k from f{k} to f{k+1}
+        return [(f"f{k}", f"f{k + 1}", 100, fit) for k, fit in enumerate(fits)]
+    assert lone_refuted(walk([0.9, 0.9, 0.1, 0.2, 0.9])) == ["f3"]          # turned off both neighbours
+    assert lone_refuted(walk([0.9, 0.9, 0.1, 0.9])) == []                   # a fold: which side?
+    assert lone_refuted(walk([0.9, 0.1, 0.1, 0.1, 0.9])) == []              # a wrong stretch: said, not cut
+    assert lone_refuted(walk([0.1, 0.9, 0.9])) == ["f0"]                     # the first frame, refuted by its step
+    assert lone_refuted(walk([0.1])) == []                                  # two frames: either may be wrong
+    assert lone_refuted(walk([0.9] * 5)) == [] and lone_refuted([]) == []
+    gap = [("a", "b", 90, 0.95), ("c", "d", 95, 0.05), ("d", "e", 80, 0.9)]   # b -> c not checked (few matches)
+    assert lone_refuted(gap) == ["c"]
+    edge = walk([0.9, STEP_MIN_SHARE, 0.9])                               # at the bar a step fits
+    assert lone_refuted(edge) == [] and lone_refuted(walk([0.9, 0.1, 0.1, 0.9])) == ["f2"]
+
+
+def test_frames_left_out_for_refuted_steps_are_said_in_the_split_warning(tmp_path):
+    import json
+
+    from curate.sfm.warn import split_warning
+    (tmp_path / "sfm").mkdir()
+    stats = {"model_sizes": [174], "n_kept": 175, "n_registered": 174, "unregistered": ["walk_000017.400.jpg"],
+             "refuted_frames": {"walk.mp4": ["walk_000017.400.jpg"]}}
+    (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
+    w = split_warning(tmp_path)
+    assert w == ("SfM placed some frames where their own matches with the next frames refute them: curate uses the "
+                 "largest, 174 of 175 photos; 1 is left out of the selection, the export and the evaluation (1 "
+                 "placed where their own matches with the next frames refute them): walk_000017.400.jpg"), w

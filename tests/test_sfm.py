@@ -1194,7 +1194,7 @@ def test_each_step_of_a_real_walk_is_checked_against_its_own_matches(fast_turn_r
     """Every step between consecutive frames of the fast turn's model fits the frames' own verified matches (the
     stage records 27 steps checked and none refuted); the same model with one frame tilted and rolled by 5 deg is
     refuted at that frame's two steps, and the warning names them (the blurred walk's wrong model, the cut's fold:
-    docs/investigations/sfm.md#steps-their-matches-refute)."""
+    docs/investigations/sfm.md#steps-their-matches-refute); the stage would leave that frame out."""
     from curate.sfm.continuity import unexplained_steps
     from curate.sfm.warn import step_warning
     from research.path_check import kept_records
@@ -1222,6 +1222,12 @@ def test_each_step_of_a_real_walk_is_checked_against_its_own_matches(fast_turn_r
     w = step_warning({"parts": [{**part, "unexplained_steps": {"walk.mp4": bad["unexplained"]}}]})
     assert w.startswith(f"video walk.mp4: 2 of {steps} steps between consecutive frames are not what the frames' "
                         "own "), w
+    # the stage leaves that frame out (its two steps refuted, each neighbour's other step fitting), and the model
+    # that is left has a step from frame 19 to 21 that fits
+    from curate.sfm.continuity import drop_refuted
+    assert drop_refuted({0: rec}, kept, run / "sfm" / "database.db") == {"walk.mp4": [name]}
+    assert not rec.image(im.image_id).has_pose and rec.num_reg_images() == steps
+    assert unexplained_steps(rec, kept, run / "sfm" / "database.db")["walk.mp4"]["unexplained"] == []
 
 
 @pytest.mark.slow

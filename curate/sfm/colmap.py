@@ -40,7 +40,7 @@ from curate.core.cameras import Cameras
 from curate.core.graph import BY_NAME
 from curate.core.stage import begin_stage, finish_stage
 from curate.sfm.config import RETRIEVAL_REMATCH_BELOW, TAKE_MIN_FRACTION, SfmConfig
-from curate.sfm.continuity import drop_off_path, jumps_along, unexplained_steps
+from curate.sfm.continuity import drop_off_path, drop_refuted, jumps_along, unexplained_steps
 from curate.sfm.features import extract
 from curate.sfm.io import sfm_dir as _sfm_dir
 from curate.sfm.matching import match, pair_counts, rematch_left_out, weak_first
@@ -162,6 +162,15 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
                        "left out: %s", sum(map(len, off.values())),
                        "; ".join(f"{tk}: {len(n)} ({n[0]}..{n[-1]})" if len(n) > 1 else f"{tk}: {n[0]}"
                                  for tk, n in off.items()))
+    t = time.perf_counter()
+    refuted = drop_refuted(models, kept, db)
+    timings["step_check"] = round(time.perf_counter() - t, 2)
+    if refuted:
+        stats["refuted_frames"] = refuted
+        k = sum(map(len, refuted.values()))
+        logger.warning("sfm: %s placed where %s own matches with the next frames refute %s, left out: %s",
+                       "1 frame was" if k == 1 else f"{k} frames were", "its" if k == 1 else "their",
+                       "it" if k == 1 else "them", "; ".join(f"{tk}: {', '.join(n)}" for tk, n in refuted.items()))
     best = max(models.values(), key=lambda r: r.num_reg_images())
     jumps = jumps_along(best, kept)
     if jumps:
@@ -184,7 +193,7 @@ def sfm_in_claimed(cfg: SfmConfig, photos: str | Path, run_dir: str | Path, forc
         part["steps_checked"] = {tk: v["checked"] for tk, v in steps.items()}
         if bad := {tk: v["unexplained"] for tk, v in steps.items() if v["unexplained"]}:
             part["unexplained_steps"] = bad
-    timings["step_check"] = round(time.perf_counter() - t, 2)
+    timings["step_check"] = round(timings["step_check"] + time.perf_counter() - t, 2)
     shutil.rmtree(out / "mapper", ignore_errors=True)
     in_model = {best.image(i).name for i in best.reg_image_ids()}
     in_others = {r.image(i).name for r in models.values() if r is not best for i in r.reg_image_ids()}

@@ -195,6 +195,21 @@ def drop_off_path(models: dict, kept: list) -> dict[str, list[str]]:
     return out
 
 
+def drop_refuted(models: dict, kept: list, db: Path) -> dict[str, list[str]]:
+    """Deregister, in every model ({id: Reconstruction}), the frames of a take in time order (video frames,
+    numbered photos) that the steps their own matches refute blame (:func:`step_fits`, :func:`lone_refuted`): a
+    frame every checked step of which is refuted, between neighbours whose other steps fit. ``kept``: the
+    PhotoRecords; ``db``: the matches. Returns {take: [names]} of the frames left out."""
+    out: dict[str, list[str]] = {}
+    for rec in models.values():
+        by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+        for tk, steps in step_fits(rec, kept, db).items():
+            for name in lone_refuted(steps):
+                rec.deregister_frame(by_name[name].frame_id)
+                out.setdefault(tk, []).append(name)
+    return out
+
+
 def jumps_along(rec, kept: list) -> dict[str, list[dict]]:
     """{take: [{"from", "to", "x_around"}]}: the one-way jumps (:func:`path_jumps`)
     of every video take in the model ``rec``, and of every take of numbered photos (in name order:
@@ -238,17 +253,17 @@ def step_errors_px(xa: np.ndarray, xb: np.ndarray, cam_b_from_cam_a: np.ndarray,
     return np.where(np.isfinite(d), d, np.inf)
 
 
-def unexplained_steps(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_ERROR_PX,
-                      min_share: float = STEP_MIN_SHARE, min_inliers: int = STEP_MIN_INLIERS) -> dict[str, dict]:
-    """{take: {"checked": steps checked, "unexplained": [{"from", "to", "inliers", "fit"}]}} of every take of
-    the model ``rec`` that has an order in time (video frames, numbered photos: :func:`frame_times`): each step
-    between consecutive registered frames that share ``min_inliers`` verified matches or more in the database
-    ``db`` is checked, and it is unexplained when under ``min_share`` of those matches are within
-    ``max_error_px`` of the model's relative pose (:func:`step_errors_px`; ``fit``: that share)."""
+def step_fits(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_ERROR_PX,
+              min_inliers: int = STEP_MIN_INLIERS) -> dict[str, list[tuple[str, str, int, float]]]:
+    """{take: [(from, to, inliers, fit)]} of every take of the model ``rec`` that has an order in time (video
+    frames, numbered photos: :func:`frame_times`): each step between consecutive registered frames that share
+    ``min_inliers`` verified matches or more in the database ``db``, in time order, with the share of those
+    matches within ``max_error_px`` of the model's relative pose (:func:`step_errors_px`). Takes with no step
+    checked are left out."""
     from curate.sfm.native import load as load_pycolmap
     pycolmap = load_pycolmap()
     takes = video_takes(rec, frame_times(kept, numbered=True))
-    out: dict[str, dict] = {}
+    out: dict[str, list] = {}
     if not takes:
         return out
     with pycolmap.Database.open(Path(db)) as d:
@@ -261,7 +276,7 @@ def unexplained_steps(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_
             return keypoints[i]
 
         for tk, frames in takes.items():
-            checked, bad = 0, []
+            steps = []
             for (_, a), (_, b) in zip(frames[:-1], frames[1:]):
                 ia, ib = ids.get(a.name), ids.get(b.name)
                 if ia is None or ib is None or not d.exists_two_view_geometry(ia, ib):
@@ -274,9 +289,44 @@ def unexplained_steps(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_
                 rel = (b.cam_from_world() * a.cam_from_world().inverse()).matrix()
                 focal = float(ca.focal_length_x * ca.focal_length_y * cb.focal_length_x * cb.focal_length_y) ** 0.25
                 fit = float(np.mean(step_errors_px(xa, xb, rel, focal) <= max_error_px))
-                checked += 1
-                if fit < min_share:
-                    bad.append({"from": a.name, "to": b.name, "inliers": int(len(m)), "fit": round(fit, 2)})
-            if checked:
-                out[tk] = {"checked": checked, "unexplained": bad}
+                steps.append((a.name, b.name, int(len(m)), fit))
+            if steps:
+                out[tk] = steps
+    return out
+
+
+def unexplained_steps(rec, kept: list, db: Path, max_error_px: float = STEP_MAX_ERROR_PX,
+                      min_share: float = STEP_MIN_SHARE, min_inliers: int = STEP_MIN_INLIERS) -> dict[str, dict]:
+    """{take: {"checked": steps checked, "unexplained": [{"from", "to", "inliers", "fit"}]}} of every take of
+    the model ``rec`` that has an order in time (:func:`step_fits`): a step is unexplained when under
+    ``min_share`` of its frames' verified matches are within ``max_error_px`` of the model's relative pose
+    (``fit``: that share, rounded)."""
+    return {tk: {"checked": len(steps),
+                 "unexplained": [{"from": a, "to": b, "inliers": n, "fit": round(f, 2)}
+                                 for a, b, n, f in steps if f < min_share]}
+            for tk, steps in step_fits(rec, kept, db, max_error_px, min_inliers).items()}
+
+
+def lone_refuted(steps: list[tuple[str, str, int, float]], min_share: float = STEP_MIN_SHARE) -> list[str]:
+    """The frames of one take that its checked steps (:func:`step_fits`, in time order) blame: every checked step
+    of the frame is refuted (fit under ``min_share``), it has one at least, and the frame at the other end of each
+    of them has a step that fits. A frame turned off its neighbours is refuted on both sides, each neighbour
+    confirmed on its other side; a frame at the end of what was checked (the next frames not registered) has one
+    step. A fold (one refuted step between two stretches that fit) and a stretch of refuted steps (a wrong
+    model) blame no frame: the steps cannot say which side is wrong."""
+    bad: dict[str, int] = {}
+    good: set[str] = set()
+    for a, b, _, fit in steps:
+        for f in (a, b):
+            if fit < min_share:
+                bad[f] = bad.get(f, 0) + 1
+            else:
+                good.add(f)
+    out = []
+    for f in bad:
+        if f in good:
+            continue
+        others = [b if a == f else a for a, b, _, fit in steps if f in (a, b)]
+        if all(o in good for o in others):
+            out.append(f)
     return out
