@@ -329,4 +329,10 @@ def test_frames_left_out_for_refuted_steps_are_said_in_the_split_warning(tmp_pat
     w = split_warning(tmp_path)
     assert w == ("SfM placed some frames where their own matches with the next frames refute them: curate uses the "
                  "largest, 174 of 175 photos; 1 is left out of the selection, the export and the evaluation (1 "
-                 "placed where their own matches with the next frames refute them): walk_000017.400.jpg"), w
+                 "placed where their own matches with the next frames refute them: walk_000017.400.jpg): "
+                 "walk_000017.400.jpg"), w
+    lost = [f"walk_{t:010.3f}.jpg" for t in (8.7, 8.8, 8.9, 9.0, 9.1, 16.6, 16.7, 17.4)]   # among others: named
+    stats.update(model_sizes=[174, 10], n_kept=187, unregistered=lost)
+    (tmp_path / "sfm" / "stage.json").write_text(json.dumps({"stats": stats}))
+    w = split_warning(tmp_path)
+    assert "(1 placed where their own matches with the next frames refute them: walk_000017.400.jpg): " in w, w

@@ -46,7 +46,7 @@ def assert_same_model(a: Cameras, b: Cameras) -> None:
 def fox_cfg(**kw) -> SfmConfig:
     """The fox's SfM in the tests: 320 px working copies (1600 px photos), where 480 px cost 2.7 times the wall time
     (108 s against 40 s on the 2-core machine; both register 67 of 67 photos, 0.58 and 0.63 deg from the published
-    poses at the median: docs/results.md#test-time)."""
+    poses at the median: docs/results.md#test-time, ``research.fox_sizes``)."""
     return small_cfg(**{"max_image_size": 320, **kw})
 
 

@@ -100,9 +100,10 @@ def _split_text(st: dict, run_dir: Path, each: bool) -> str | None:
     else:
         how = "SfM could not register every photo"
     off = sum(len(v) for v in (st.get("off_path") or {}).values())
-    refuted = sum(len(v) for v in (st.get("refuted_frames") or {}).values())
+    refuted = sorted(n for v in (st.get("refuted_frames") or {}).values() for n in v)
     why = [f"{off} of them placed off their video's path, a stretch that jumped away and back"] if off else []
-    why += [f"{refuted} placed where their own matches with the next frames refute them"] if refuted else []
+    why += [f"{len(refuted)} placed where their own matches with the next frames refute them: "
+            f"{name_ranges(refuted)}"] if refuted else []
     return (f"{how}: curate uses the largest, {st.get('n_registered', kept - len(lost))} of {kept} photos; "
             f"{len(lost)} {'is' if len(lost) == 1 else 'are'} left out of the selection, the export and the evaluation"
             + (f" ({'; '.join(why)})" if why else "") + f": {name_ranges(lost)}")
