@@ -177,6 +177,32 @@ def test_curate_sfm_on_a_video(tmp_path):
     assert sha(v) == before
 
 
+@pytest.mark.slow
+def test_the_sfm_stage_leaves_out_a_frame_its_steps_blame_and_says_so(tmp_path, monkeypatch):
+    """The stage's wiring of the step rule (``curate.sfm.continuity.lone_refuted``, its own test in
+    tests/test_continuity.py; a real blamed frame: docs/investigations/sfm.md#refuted-frame): a frame the rule
+    blames is not in the model curate uses, ``stats.refuted_frames`` names it and the split warning says why."""
+    from curate import cli
+    from curate.sfm import continuity
+    from curate.sfm.warn import split_warning
+    v = write_video(tmp_path / "walk.mp4", walk_frames(24, 0))
+    blamed: list = []
+
+    def blame_one(steps, *a, **k):          # the frame in the middle of the first take's checked steps
+        if not blamed and len(steps) >= 3:
+            blamed.append(steps[len(steps) // 2][0])
+        return [n for n in blamed if any(n in st[:2] for st in steps)]
+    monkeypatch.setattr(continuity, "lone_refuted", blame_one)
+    assert cli.main(["sfm", str(v), "--out", str(tmp_path / "run")]) == 0
+    assert len(blamed) == 1
+    st = json.loads((tmp_path / "run" / "sfm" / "stage.json").read_text())["stats"]
+    assert st["refuted_frames"] == {"walk.mp4": blamed}
+    cams = json.loads((tmp_path / "run" / "sfm" / "cameras.json").read_text())["cameras"]
+    assert blamed[0] not in {c["name"] for c in cams} and blamed[0] in st["unregistered"]
+    w = split_warning(tmp_path / "run")
+    assert f"1 placed where their own matches with the next frames refute them: {blamed[0]})" in w, w
+
+
 def write_audio_only(path: Path, seconds: float = 0.5) -> Path:
     """A file holding one AAC audio stream (silence) and no video stream."""
     out = av.open(str(path), "w")
