@@ -6,7 +6,7 @@ folders already mapped, and how far those frames are from the truth.
 Each model of the run folder (``sfm/sparse/K``) is checked step by step (``step_fits``, as the stage checks it); a
 row per model: frames, steps checked and refuted, the frames blamed and, with a truth (``research.flip make``'s
 ``CASE.truth.json``), each blamed frame's orientation error and the model's frames over 5 deg after one similarity
-(``research.takes.truth_of``; office cases need ``--office``).
+of the centres (``research.join_shared.truth_errors``; office cases need ``--office``).
 """
 
 from __future__ import annotations
@@ -18,28 +18,12 @@ from pathlib import Path
 
 
 
-def per_frame_errors(cams, recs: list, tj: dict, office: Path | None) -> dict[str, float]:
-    """{working name: orientation error (deg)} of a model's cameras against the case's truth (one rotation
-    fitted to all)."""
-    from curate.core.cameras import Cameras, rotation_disagreement
-    from research.datasets import load_office
-    from research.takes import truth_of
-    truth = Cameras.load(tj["cameras"]) if tj.get("cameras") else load_office(office)
-    of = truth_of(recs, tj)
-    names = [n for n in cams.names if n in of]
-    if len(names) < 3:
-        return {}
-    idx = [cams.names.index(n) for n in names]
-    err = rotation_disagreement(truth.rotations[[of[n] for n in names]], cams.rotations[idx])
-    return dict(zip(names, map(float, err)))
-
-
 def blame(run: Path, truth: Path | None, office: Path | None) -> list[dict]:
     import pycolmap
 
     from curate.sfm.continuity import STEP_MIN_SHARE, lone_refuted, step_fits
     from curate.sfm.matching import copy_database
-    from curate.sfm.model import cameras_from_reconstruction
+    from research.join_shared import truth_errors
     from research.path_check import kept_records
     kept = kept_records(run)
     recs = [r for r in json.loads((run / "sfm" / "images.json").read_text())["photos"] if r["status"] == "kept"]
@@ -58,7 +42,7 @@ def blame(run: Path, truth: Path | None, office: Path | None) -> list[dict]:
                "refuted": sum(f < STEP_MIN_SHARE for s in fits.values() for *_, f in s),
                "blamed": sorted(n for v in blamed.values() for n in v)}
         if tj is not None:
-            err = per_frame_errors(cameras_from_reconstruction(rec, warn=False)[0], recs, tj, office)
+            err = truth_errors(rec, recs, tj, office)
             if err:
                 row["blamed_deg"] = [round(err[n], 2) if n in err else None for n in row["blamed"]]
                 row["over_5"] = sum(e > 5 for e in err.values())
