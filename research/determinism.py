@@ -106,11 +106,11 @@ def main(argv=None) -> list[dict]:
     sfm = a.run / "sfm"
     st = json.loads((sfm / "stage.json").read_text())
     matcher = st["stats"]["matcher"]
-    db0 = sfm / "database.db"
-    n = len(pycolmap.Database.open(db0).read_all_images())
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        db0 = copy_database(sfm / "database.db", tmp / "run.db")   # opening the run's own would rewrite it
+        n = len(pycolmap.Database.open(db0).read_all_images())
         for threads in a.threads:
             kw = {"mapper": a.mapper} if a.mapper else {}
             if "guided_matching" in st["stats"]:          # as the stage resolved it

@@ -147,11 +147,9 @@ def capture_figures(run: Path) -> dict:
     import pycolmap
     sfm = run / "sfm"
     rec = pycolmap.Reconstruction(str(sfm / "sparse" / "0"))
-    db = pycolmap.Database.open(sfm / "database.db")
-    try:
+    from research.rundb import database_copy
+    with database_copy(sfm / "database.db") as copy, pycolmap.Database.open(copy) as db:
         n_img, n_kp = db.num_images(), db.num_keypoints()
-    finally:
-        db.close()
     return {"features_per_image": round(n_kp / max(n_img, 1), 1), "points": int(rec.num_points3D()),
             "mean_track_length": round(float(rec.compute_mean_track_length()), 2),
             "observations_per_image": round(float(rec.compute_mean_observations_per_reg_image()), 1)}

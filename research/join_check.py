@@ -102,7 +102,9 @@ def main(argv=None) -> None:
                 "over_5_deg": int(sum(x > 5 for x in e["rotation_deg"])),
                 "takes": {t: f"{have[t]}/{n}" for t, n in sorted(Counter(v[0] for v in of.values()).items())}}
 
-    name_of = dict(sqlite3.connect(sfm / "database.db").execute("select image_id, name from images"))
+    ro = sqlite3.connect(f"file:{sfm / 'database.db'}?mode=ro", uri=True)
+    name_of = dict(ro.execute("select image_id, name from images"))
+    ro.close()
     ids = sorted(name_of)
     start, stop, step = (int(v) for v in a.drops.split(":"))
     var = a.out / "variants"

@@ -52,7 +52,8 @@ def main(argv=None) -> dict:
     loop = [tuple(ln.split()) for ln in (sfm / "loop_pairs.txt").read_text().splitlines() if ln.strip()]
     out: dict = {"run": str(a.run), "drop": a.drop}
     rows = []
-    with pycolmap.Database.open(sfm / "database.db") as d:
+    from research.rundb import database_copy
+    with database_copy(sfm / "database.db") as copy, pycolmap.Database.open(copy) as d:
         ids = {im.name: im.image_id for im in d.read_all_images()}
         for x, y in loop:
             if not d.exists_two_view_geometry(ids[x], ids[y]):

@@ -58,7 +58,8 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     recs = [r for r in json.loads((a.run / "sfm/images.json").read_text())["photos"] if r["status"] == "kept"]
     names = {t: n for n, t in truth_of(recs, json.loads(a.truth.read_text())).items()}
-    with pycolmap.Database.open(a.run / "sfm/database.db") as db:
+    from research.rundb import database_copy
+    with database_copy(a.run / "sfm/database.db") as copy, pycolmap.Database.open(copy) as db:
         ids = {im.name: im.image_id for im in db.read_all_images()}
         for p in a.pairs:
             ta, tb = map(int, p.split(","))

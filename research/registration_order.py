@@ -25,7 +25,8 @@ def main(argv=None) -> dict:
     sfm = a.run / "sfm"
     recs = [r for r in json.loads((sfm / "images.json").read_text())["photos"] if r["status"] == "kept"]
     gt = truth_of(recs, json.loads(a.truth.read_text()))
-    with pycolmap.Database.open(sfm / "database.db") as d:
+    from research.rundb import database_copy
+    with database_copy(sfm / "database.db") as copy, pycolmap.Database.open(copy) as d:
         truth_of_id = {im.image_id: gt.get(im.name) for im in d.read_all_images()}
     first: dict[int, list[int]] = {}
     rank = 0

@@ -26,11 +26,9 @@ def features_median(run: Path) -> float:
     """The median number of SIFT keypoints of the photos in ``run``'s database."""
     from curate.sfm.native import load
     pycolmap = load()
-    db = pycolmap.Database.open(run / "sfm" / "database.db")
-    try:
+    from research.rundb import database_copy
+    with database_copy(run / "sfm" / "database.db") as copy, pycolmap.Database.open(copy) as db:
         return float(np.median([db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()]))
-    finally:
-        db.close()
 
 
 def one(work: Path, photos: Path, below: int, extra: list[str], reuse: bool = False) -> dict:

@@ -30,27 +30,30 @@ def step_disagreements(run: Path, min_inliers: int = 30, seed: int = 0) -> list[
     opt = pycolmap.RANSACOptions()
     opt.max_error, opt.random_seed = 2.0, seed
     out = []
-    db = pycolmap.Database.open(run / "sfm" / "database.db")
-    try:
-        for na, nb in zip(names, names[1:]):
-            a, b = by[na], by[nb]
-            if not db.exists_two_view_geometry(a.image_id, b.image_id):
-                continue
-            g = db.read_two_view_geometry(a.image_id, b.image_id).inlier_matches
-            m = np.zeros((0, 2), int) if g is None else np.asarray(g)
-            if len(m) < min_inliers:
-                continue
-            k1 = np.asarray(db.read_keypoints(a.image_id))[m[:, 0], :2].astype(np.float64)
-            k2 = np.asarray(db.read_keypoints(b.image_id))[m[:, 1], :2].astype(np.float64)
-            r = pycolmap.estimate_relative_pose(rec.camera(a.camera_id), k1, rec.camera(b.camera_id), k2, opt)
-            if r is None:
-                continue
-            Rm = np.asarray((b.cam_from_world() * a.cam_from_world().inverse()).rotation.matrix())
-            Re = np.asarray(r["cam2_from_cam1"].rotation.matrix())
-            out.append({"a": na, "b": nb, "inliers": int(len(m)), "model_turn_deg": round(rotation_angle_deg(Rm), 2),
-                        "disagreement_deg": round(rotation_angle_deg(Re @ Rm.T), 2)})
-    finally:
-        db.close()
+    from research.rundb import database_copy
+    with database_copy(run / "sfm" / "database.db") as copy:
+        db = pycolmap.Database.open(copy)
+        try:
+            for na, nb in zip(names, names[1:]):
+                a, b = by[na], by[nb]
+                if not db.exists_two_view_geometry(a.image_id, b.image_id):
+                    continue
+                g = db.read_two_view_geometry(a.image_id, b.image_id).inlier_matches
+                m = np.zeros((0, 2), int) if g is None else np.asarray(g)
+                if len(m) < min_inliers:
+                    continue
+                k1 = np.asarray(db.read_keypoints(a.image_id))[m[:, 0], :2].astype(np.float64)
+                k2 = np.asarray(db.read_keypoints(b.image_id))[m[:, 1], :2].astype(np.float64)
+                r = pycolmap.estimate_relative_pose(rec.camera(a.camera_id), k1, rec.camera(b.camera_id), k2, opt)
+                if r is None:
+                    continue
+                Rm = np.asarray((b.cam_from_world() * a.cam_from_world().inverse()).rotation.matrix())
+                Re = np.asarray(r["cam2_from_cam1"].rotation.matrix())
+                out.append({"a": na, "b": nb, "inliers": int(len(m)),
+                            "model_turn_deg": round(rotation_angle_deg(Rm), 2),
+                            "disagreement_deg": round(rotation_angle_deg(Re @ Rm.T), 2)})
+        finally:
+            db.close()
     return out
 
 

@@ -32,12 +32,14 @@ def check(run: Path, truth: Path | None, office: Path | None) -> list[dict]:
     from curate.sfm.continuity import STEP_MIN_SHARE, unexplained_steps
     from research.join_shared import truth_errors
     from research.path_check import kept_records
+    from research.rundb import database_copy
     kept = kept_records(run)
     recs = [r for r in json.loads((run / "sfm/images.json").read_text())["photos"] if r["status"] == "kept"]
     rows = []
     for sp in sorted(p for p in (run / "sfm/sparse").iterdir() if p.is_dir()):
         rec = pycolmap.Reconstruction(str(sp))
-        steps = unexplained_steps(rec, kept, run / "sfm/database.db", min_share=1.01)   # every step, with its fit
+        with database_copy(run / "sfm/database.db") as db:
+            steps = unexplained_steps(rec, kept, db, min_share=1.01)   # every step, with its fit
         err = truth_errors(rec, recs, json.loads(truth.read_text()), office) if truth else {}
         e = np.array(list(err.values()), float)
         for take, st in steps.items():

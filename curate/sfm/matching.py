@@ -313,11 +313,17 @@ def _wait_any(running: dict) -> int:
 
 def copy_database(src: Path, dst: Path) -> Path:
     """``src`` (a COLMAP database) copied to ``dst`` through SQLite's backup, with what its write-ahead log holds
-    and a file copy would leave behind; a log beside ``dst`` from an earlier copy is removed first. Returns ``dst``."""
+    and a file copy would leave behind; a log beside ``dst`` from an earlier copy is removed first. Returns ``dst``.
+
+    Nothing is written beside ``src``: with no log there (no connection holds it open), it is read as immutable; a
+    read-only reader of a database in WAL mode would otherwise leave an empty log and its index beside it, files
+    a finished run folder's record does not list (``curate sfm --force`` then refused to clear the folder)."""
     src, dst = Path(src), Path(dst)
     for f in (dst, dst.with_name(dst.name + "-wal"), dst.with_name(dst.name + "-shm")):
         f.unlink(missing_ok=True)
-    a, b = sqlite3.connect(f"file:{src}?mode=ro", uri=True), sqlite3.connect(dst)
+    logged = src.with_name(src.name + "-wal").exists()
+    a = sqlite3.connect(f"file:{src}?{'mode=ro' if logged else 'immutable=1'}", uri=True)
+    b = sqlite3.connect(dst)
     try:
         a.backup(b)
     finally:
