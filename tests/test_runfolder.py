@@ -294,6 +294,48 @@ def test_clear_tree_rules(tmp_path):
     assert (run / "export" / "photo.jpg").read_bytes() == b"4"
 
 
+def test_what_sqlite_leaves_beside_a_database_only_read_is_cleared_and_a_log_of_writes_is_kept(tmp_path):
+    """A look into a finished run's database with a read-only SQLite reader leaves an empty write-ahead log and
+    its index beside it: a re-run clears them (it refused to, naming database.db-wal). A log that holds writes
+    is the user's change: refused, and kept."""
+    import sqlite3
+    from curate.core.stage import begin_stage, finish_stage
+    run = rf.claim(tmp_path / "run")
+    d = run / "sfm"
+    owns = ("database.db", "database.db-*")
+    assert begin_stage(d, "k1", owns=owns) is False
+    con = sqlite3.connect(d / "database.db")
+    con.execute("PRAGMA journal_mode=WAL")
+    con.execute("CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT)")
+    con.execute("INSERT INTO images VALUES (1, 'a.jpg')")
+    con.commit()
+    con.close()
+    finish_stage(d, "k1", {}, time.perf_counter(), owns=owns)
+    ro = sqlite3.connect(f"file:{d / 'database.db'}?mode=ro", uri=True)
+    assert ro.execute("SELECT name FROM images").fetchall() == [("a.jpg",)]
+    ro.close()
+    assert sorted(p.name for p in d.iterdir() if p.name.startswith("database")) == [
+        "database.db", "database.db-shm", "database.db-wal"]
+    assert begin_stage(d, "k2", owns=owns) is False           # cleared, not refused
+    assert not any(p.name.startswith("database") for p in d.iterdir())
+
+    con = sqlite3.connect(d / "database.db")                 # a database written again, and recorded
+    con.execute("PRAGMA journal_mode=WAL")
+    con.execute("CREATE TABLE images (image_id INTEGER PRIMARY KEY, name TEXT)")
+    con.commit()
+    con.close()
+    finish_stage(d, "k2", {}, time.perf_counter(), owns=owns)
+    w = sqlite3.connect(d / "database.db")                   # the user writes; the log holds it while open
+    w.execute("PRAGMA wal_autocheckpoint=0")
+    w.execute("INSERT INTO images VALUES (2, 'mine.jpg')")
+    w.commit()
+    assert (d / "database.db-wal").stat().st_size > 0
+    with pytest.raises(rf.RunFolderError, match="database.db-wal"):
+        begin_stage(d, "k3", owns=owns)
+    assert (d / "database.db-wal").stat().st_size > 0
+    w.close()
+
+
 def test_export_into_a_users_folder_never_clears_it(tmp_path):
     from curate.export.subset import export_subset
     from curate.sfm.pose_import import import_poses

@@ -52,5 +52,6 @@ def test_copying_a_finished_runs_database_leaves_its_folder_as_it_was(tmp_path):
     before = {p.name: p.read_bytes() for p in run.iterdir()}
     assert list(before) == ["database.db"]
     dst = copy_database(src, tmp_path / "copy.db")
-    assert sqlite3.connect(dst).execute("SELECT count(*), sum(rows) FROM matches").fetchone() == (20, 3 * sum(range(20)))
+    got = sqlite3.connect(dst).execute("SELECT count(*), sum(rows) FROM matches").fetchone()
+    assert got == (20, 3 * sum(range(20)))
     assert {p.name: p.read_bytes() for p in run.iterdir()} == before

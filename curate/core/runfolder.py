@@ -685,6 +685,8 @@ def sort_files(d: str | Path, owns: Iterable[str] | None = None) -> Sorted:
                 out.blocking.append((p, "changed"))
             else:
                 out.curates.append(p)
+        elif ours and _idle_sqlite_sidecar(p, rel, files):
+            out.curates.append(p)
         elif not ours:
             out.blocking.append((p, "foreign"))
         elif scratch and matches(rel):
@@ -694,6 +696,23 @@ def sort_files(d: str | Path, owns: Iterable[str] | None = None) -> Sorted:
         else:
             out.blocking.append((p, "foreign"))
     return out
+
+
+def _idle_sqlite_sidecar(p: Path, rel: str, files) -> bool:
+    """True for the write-ahead log (``-wal``, empty) or its index (``-shm``) of a database the stage record lists
+    and that is unchanged: SQLite leaves them for whoever reads a database in WAL mode (``sqlite3 -readonly``, a
+    read-only connection) and they hold nothing of the reader's. A log that holds writes is the user's change."""
+    base, _, kind = rel.rpartition("-")
+    if kind not in ("wal", "shm") or not isinstance(files, dict) or not isinstance(files.get(base), dict):
+        return False
+    db = p.with_name(p.name[:-len(kind) - 1])
+    if not db.is_file() or is_changed(db, files[base]):
+        return False
+    log = p.with_name(db.name + "-wal")
+    try:
+        return not log.exists() or log.stat().st_size == 0
+    except OSError:
+        return False
 
 
 def read_stage_marker(d: str | Path) -> dict:
