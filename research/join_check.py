@@ -102,9 +102,11 @@ def main(argv=None) -> None:
                 "over_5_deg": int(sum(x > 5 for x in e["rotation_deg"])),
                 "takes": {t: f"{have[t]}/{n}" for t, n in sorted(Counter(v[0] for v in of.values()).items())}}
 
-    ro = sqlite3.connect(f"file:{sfm / 'database.db'}?mode=ro", uri=True)
-    name_of = dict(ro.execute("select image_id, name from images"))
-    ro.close()
+    from research.rundb import database_copy
+    with database_copy(sfm / "database.db") as copy:
+        con = sqlite3.connect(copy)
+        name_of = dict(con.execute("select image_id, name from images"))
+        con.close()
     ids = sorted(name_of)
     start, stop, step = (int(v) for v in a.drops.split(":"))
     var = a.out / "variants"
