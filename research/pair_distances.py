@@ -20,13 +20,14 @@ PAIR_ID_FACTOR = 2147483647   # COLMAP: pair_id = id1 * 2^31 - 1 + id2, id1 < id
 
 def by_distance(run: Path, min_inliers: int) -> tuple[dict[int, list[int]], list[dict]]:
     """({distance: [inliers of each matched pair]}, [each pair: names, distance, inliers, configuration])."""
-    db = run / "sfm" / "database.db"
-    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
-    try:
-        names = dict(con.execute("SELECT image_id, name FROM images"))
-        rows = con.execute("SELECT pair_id, rows, config FROM two_view_geometries").fetchall()
-    finally:
-        con.close()
+    from research.rundb import database_copy
+    with database_copy(run / "sfm" / "database.db") as db:   # a read-only reader leaves the log's files beside it
+        con = sqlite3.connect(db)
+        try:
+            names = dict(con.execute("SELECT image_id, name FROM images"))
+            rows = con.execute("SELECT pair_id, rows, config FROM two_view_geometries").fetchall()
+        finally:
+            con.close()
     order = {i: k for k, i in enumerate(sorted(names, key=names.get))}
     dist: dict[int, list[int]] = {}
     pairs = []
