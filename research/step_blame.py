@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 from pathlib import Path
 
 
@@ -22,19 +21,17 @@ def blame(run: Path, truth: Path | None, office: Path | None) -> list[dict]:
     import pycolmap
 
     from curate.sfm.continuity import STEP_MIN_SHARE, lone_refuted, step_fits
-    from curate.sfm.matching import copy_database
     from research.join_shared import truth_errors
     from research.path_check import kept_records
+    from research.rundb import database_copy
     kept = kept_records(run)
     recs = [r for r in json.loads((run / "sfm" / "images.json").read_text())["photos"] if r["status"] == "kept"]
     tj = json.loads(truth.read_text()) if truth else None
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:   # opening a database may write it: the run folder's stays as it is
-        db = copy_database(run / "sfm" / "database.db", Path(tmp) / "database.db")
-        fits_of = {m.name: step_fits(pycolmap.Reconstruction(m), kept, db)
-                   for m in sorted((run / "sfm" / "sparse").iterdir())}
-    for model in sorted((run / "sfm" / "sparse").iterdir()):
-        rec = pycolmap.Reconstruction(model)
+    with database_copy(run / "sfm" / "database.db") as db:   # opening the run's own would rewrite it
+        models = [(m, pycolmap.Reconstruction(m)) for m in sorted((run / "sfm" / "sparse").iterdir())]
+        fits_of = {m.name: step_fits(rec, kept, db) for m, rec in models}
+    for model, rec in models:
         fits = fits_of[model.name]
         blamed = {tk: lone_refuted(steps) for tk, steps in fits.items()}
         row = {"run": str(run), "model": model.name, "frames": int(rec.num_reg_images()),

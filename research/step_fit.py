@@ -1,5 +1,5 @@
 """Each step between consecutive frames of a finished SfM run's models against the frames' own verified matches:
-the share of a step's matches its relative pose in the model explains (`curate.sfm.continuity.unexplained_steps`),
+the share of a step's matches its relative pose in the model explains (`curate.sfm.continuity.step_fits`),
 with the frames' orientation errors against a truth where one is given (after one similarity of the centres: a
 short part's errors are those of a poorly fixed similarity). One JSON line per model and take.
 
@@ -29,26 +29,28 @@ def _deg(x) -> float | None:
 def check(run: Path, truth: Path | None, office: Path | None) -> list[dict]:
     import pycolmap
 
-    from curate.sfm.continuity import STEP_MIN_SHARE, unexplained_steps
+    from curate.sfm.continuity import STEP_MIN_SHARE, step_fits
     from research.join_shared import truth_errors
     from research.path_check import kept_records
     from research.rundb import database_copy
     kept = kept_records(run)
     recs = [r for r in json.loads((run / "sfm/images.json").read_text())["photos"] if r["status"] == "kept"]
     rows = []
-    for sp in sorted(p for p in (run / "sfm/sparse").iterdir() if p.is_dir()):
-        rec = pycolmap.Reconstruction(str(sp))
-        with database_copy(run / "sfm/database.db") as db:
-            steps = unexplained_steps(rec, kept, db, min_share=1.01)   # every step, with its fit
+    with database_copy(run / "sfm/database.db") as db:   # one copy for every model
+        models = [(sp, pycolmap.Reconstruction(str(sp)))
+                  for sp in sorted(p for p in (run / "sfm/sparse").iterdir() if p.is_dir())]
+        fits = {sp.name: step_fits(rec, kept, db) for sp, rec in models}
+    for sp, rec in models:
         err = truth_errors(rec, recs, json.loads(truth.read_text()), office) if truth else {}
         e = np.array(list(err.values()), float)
-        for take, st in steps.items():
-            fit = np.array([s["fit"] for s in st["unexplained"]], float)
-            low = [s for s in st["unexplained"] if s["fit"] < STEP_MIN_SHARE]
+        for take, steps in fits[sp.name].items():
+            st = [{"from": a, "to": b, "inliers": n, "fit": round(f, 2)} for a, b, n, f in steps]
+            fit = np.array([s["fit"] for s in st], float)
+            low = [s for s in st if s["fit"] < STEP_MIN_SHARE]
             near = [[s["from"], s["to"], s["fit"], s["inliers"], _deg(err.get(s["from"])), _deg(err.get(s["to"]))]
-                    for s in st["unexplained"] if s["fit"] < NEAR]
+                    for s in st if s["fit"] < NEAR]
             rows.append({"run": str(run), "model": sp.name, "frames": rec.num_reg_images(), "take": take,
-                         "steps": st["checked"], "fit_min": float(fit.min()),
+                         "steps": len(st), "fit_min": float(fit.min()),
                          "fit_p5": round(float(np.percentile(fit, 5)), 3),
                          "fit_median": round(float(np.median(fit)), 3), "unexplained": len(low),
                          "unexplained_steps": [[s["from"], s["to"], s["fit"], s["inliers"]] for s in low],
